@@ -1,0 +1,44 @@
+# hmlvs: one command each for a new user on a fresh Debian/Ubuntu machine.
+#   make demo   install everything, then calibrate a simulated session
+#   make test   install everything, then run the test suite
+#   make bench  install everything, then run the benchmarks and write bench/RESULTS.md
+
+PYTHON ?= python3
+APT_PACKAGES ?= libeigen3-dev libceres-dev
+TEST_APT_PACKAGES ?= chromium
+SUDO := $(shell if [ "$$(id -u)" != 0 ] && command -v sudo >/dev/null 2>&1; then echo sudo; fi)
+
+.PHONY: deps test-deps install demo test bench clean
+
+# Install the Debian packages that are missing (apt-get update + install, as root or via sudo).
+define apt_install
+	@missing=""; for p in $(1); do \
+	  dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q "install ok installed" || missing="$$missing $$p"; \
+	done; \
+	if [ -n "$$missing" ]; then \
+	  echo "Installing Debian packages:$$missing"; \
+	  $(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $$missing; \
+	fi
+endef
+
+deps:
+	$(call apt_install,$(APT_PACKAGES))
+
+test-deps: deps
+	-$(call apt_install,$(TEST_APT_PACKAGES))
+
+install: deps
+	$(PYTHON) -m pip install --quiet ".[test]"
+
+demo: install
+	$(PYTHON) -m hmlvs demo
+
+test: test-deps install
+	$(PYTHON) -m pytest -q
+
+bench: deps
+	$(PYTHON) -m pip install --quiet ".[test]" --config-settings=cmake.define.HMLVS_BUILD_BENCH=ON
+	$(PYTHON) bench/run_bench.py
+
+clean:
+	rm -rf build dist *.egg-info

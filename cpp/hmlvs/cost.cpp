@@ -1,0 +1,36 @@
+#include "hmlvs/cost.h"
+
+#include <ceres/autodiff_cost_function.h>
+
+#include <sstream>
+#include <stdexcept>
+
+namespace hmlvs {
+
+void ResidualJacobian(const Vector14d& q, PixelsRef pixels, PosesRef poses, Points3Ref references,
+                      Eigen::VectorXd* residuals,
+                      Eigen::Matrix<double, Eigen::Dynamic, kNumParams, Eigen::RowMajor>* jacobian) {
+  // Shape, finiteness and the laser-plane check, with the model's error messages.
+  const RowMatX3 e = Residuals(q, pixels, poses, references);
+  const Eigen::Index m = pixels.rows();
+  residuals->resize(3 * m);
+  jacobian->resize(3 * m, kNumParams);
+  for (Eigen::Index i = 0; i < m; ++i) {
+    const double* p = poses.row(i).data();
+    PointResidualFunctor f{pixels(i, 0), pixels(i, 1), Eigen::Matrix3d(), Eigen::Vector3d(),
+                           references.row(i).transpose()};
+    f.base_from_hand_rot << p[0], p[1], p[2], p[4], p[5], p[6], p[8], p[9], p[10];
+    f.base_from_hand_pos << p[3], p[7], p[11];
+    ceres::AutoDiffCostFunction<PointResidualFunctor, 3, kNumParams> cost(
+        new PointResidualFunctor(f));
+    const double* params[] = {q.data()};
+    double* jac[] = {jacobian->data() + 3 * i * kNumParams};
+    if (!cost.Evaluate(params, residuals->data() + 3 * i, jac)) {
+      std::ostringstream msg;
+      msg << "pixel " << i << " has a ray that misses the laser plane";
+      throw std::invalid_argument(msg.str());
+    }
+  }
+}
+
+}  // namespace hmlvs

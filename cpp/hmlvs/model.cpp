@@ -1,0 +1,274 @@
+#include "hmlvs/model.h"
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+namespace hmlvs {
+
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+void RequireSameRows(Eigen::Index a, const char* name_a, Eigen::Index b, const char* name_b) {
+  if (a != b) {
+    std::ostringstream msg;
+    msg << name_a << " has " << a << " rows but " << name_b << " has " << b;
+    throw std::invalid_argument(msg.str());
+  }
+}
+
+void RequireFinite(const double* data, Eigen::Index rows, int cols, const char* name) {
+  for (Eigen::Index i = 0; i < rows; ++i) {
+    for (int j = 0; j < cols; ++j) {
+      if (!std::isfinite(data[i * cols + j])) {
+        std::ostringstream msg;
+        msg << name << " row " << i << " is not finite (NaN or inf in column " << j << ")";
+        throw std::invalid_argument(msg.str());
+      }
+    }
+  }
+}
+
+inline Eigen::Matrix3d PoseRotation(PosesRef poses, Eigen::Index i) {
+  Eigen::Matrix3d r;
+  const double* p = poses.row(i).data();
+  r << p[0], p[1], p[2], p[4], p[5], p[6], p[8], p[9], p[10];
+  return r;
+}
+
+inline Eigen::Vector3d PosePosition(PosesRef poses, Eigen::Index i) {
+  const double* p = poses.row(i).data();
+  return Eigen::Vector3d(p[3], p[7], p[11]);
+}
+
+[[noreturn]] void ThrowMissedPlane(Eigen::Index i, double u, double v, double denom) {
+  std::ostringstream msg;
+  msg << "pixel " << i << " (u=" << u << ", v=" << v
+      << ") has a ray that misses the laser plane: Yu + f tan(theta) = " << denom
+      << " mm <= 0, so it has no measurement";
+  throw std::invalid_argument(msg.str());
+}
+
+}  // namespace
+
+const std::array<std::string, kNumParams>& ParamNames() {
+  static const std::array<std::string, kNumParams> names = {
+      "f", "Su", "Sv", "Cu", "Cv", "k", "H", "theta", "omega", "phi", "varphi", "tx", "ty", "tz"};
+  return names;
+}
+
+int ParamIndexFromName(const std::string& name) {
+  const auto& names = ParamNames();
+  for (int i = 0; i < kNumParams; ++i) {
+    if (names[i] == name) return i;
+  }
+  std::ostringstream msg;
+  msg << "'" << name << "' is not a parameter; the parameters are";
+  for (const auto& n : names) msg << " " << n;
+  throw std::invalid_argument(msg.str());
+}
+
+void ValidateParams(const Vector14d& q) {
+  const auto& names = ParamNames();
+  for (int i = 0; i < kNumParams; ++i) {
+    if (!std::isfinite(q[i])) {
+      throw std::invalid_argument("parameter " + names[i] + " is not finite");
+    }
+  }
+  for (int i : {kF, kSu, kSv, kH}) {
+    if (!(q[i] > 0.0)) {
+      std::ostringstream msg;
+      msg << "parameter " << names[i] << " must be > 0, got " << q[i];
+      throw std::invalid_argument(msg.str());
+    }
+  }
+  if (!(std::abs(q[kTheta]) < M_PI / 2)) {
+    std::ostringstream msg;
+    msg << "parameter theta must lie in (-pi/2, pi/2), got " << q[kTheta];
+    throw std::invalid_argument(msg.str());
+  }
+}
+
+void ValidatePoses(PosesRef poses) {
+  RequireFinite(poses.data(), poses.rows(), 16, "poses");
+  for (Eigen::Index i = 0; i < poses.rows(); ++i) {
+    const double* p = poses.row(i).data();
+    if (p[12] != 0.0 || p[13] != 0.0 || p[14] != 0.0 || p[15] != 1.0) {
+      std::ostringstream msg;
+      msg << "pose " << i << " is not a homogeneous transform: its last row is [" << p[12] << " "
+          << p[13] << " " << p[14] << " " << p[15] << "], expected [0 0 0 1]";
+      throw std::invalid_argument(msg.str());
+    }
+    const Eigen::Matrix3d r = PoseRotation(poses, i);
+    const double err = (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+    if (err > 1e-6 || r.determinant() < 0.0) {
+      std::ostringstream msg;
+      msg << "pose " << i << " has a rotation part that is not a proper rotation (|R^T R - I| = "
+          << err << ", det = " << r.determinant() << "); poses must be base_from_hand transforms";
+      throw std::invalid_argument(msg.str());
+    }
+  }
+}
+
+PointsResult CameraPointsFromPixels(const Vector14d& q, PixelsRef pixels, bool throw_on_invalid) {
+  ValidateParams(q);
+  RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
+  const Eigen::Index m = pixels.rows();
+  PointsResult out;
+  out.points.resize(m, 3);
+  out.valid.resize(m);
+  const double tan_theta = std::tan(q[kTheta]);
+  for (Eigen::Index i = 0; i < m; ++i) {
+    double cp[3];
+    const double u = pixels(i, 0), v = pixels(i, 1);
+    const double denom = PixelToCamera(q.data(), tan_theta, u, v, cp);
+    if (denom > 0.0) {
+      out.points.row(i) << cp[0], cp[1], cp[2];
+      out.valid[i] = 1;
+    } else {
+      if (throw_on_invalid) ThrowMissedPlane(i, u, v, denom);
+      out.points.row(i).setConstant(kNaN);
+      out.valid[i] = 0;
+      ++out.num_invalid;
+    }
+  }
+  return out;
+}
+
+PointsResult BasePointsFromPixels(const Vector14d& q, PixelsRef pixels, PosesRef poses,
+                                  bool throw_on_invalid) {
+  RequireSameRows(pixels.rows(), "pixels", poses.rows(), "poses");
+  ValidatePoses(poses);
+  PointsResult out = CameraPointsFromPixels(q, pixels, throw_on_invalid);
+  const Eigen::Matrix4d hand_from_camera = HandFromCamera(q);
+  for (Eigen::Index i = 0; i < pixels.rows(); ++i) {
+    if (!out.valid[i]) continue;
+    const Eigen::Vector4d cam(out.points(i, 0), out.points(i, 1), out.points(i, 2), 1.0);
+    const Eigen::Vector4d hand = hand_from_camera * cam;
+    const Eigen::Vector3d base =
+        PoseRotation(poses, i) * hand.head<3>() + PosePosition(poses, i);
+    out.points.row(i) = base.transpose();
+  }
+  return out;
+}
+
+RowMatX3 Residuals(const Vector14d& q, PixelsRef pixels, PosesRef poses, Points3Ref references) {
+  RequireSameRows(pixels.rows(), "pixels", references.rows(), "reference points");
+  RequireFinite(references.data(), references.rows(), 3, "reference points");
+  const PointsResult base = BasePointsFromPixels(q, pixels, poses, /*throw_on_invalid=*/true);
+  return references - base.points;
+}
+
+double Objective(const Vector14d& q, PixelsRef pixels, PosesRef poses, Points3Ref references) {
+  RequireSameRows(pixels.rows(), "pixels", references.rows(), "reference points");
+  const PointsResult base = BasePointsFromPixels(q, pixels, poses, /*throw_on_invalid=*/false);
+  if (base.num_invalid > 0) return std::numeric_limits<double>::infinity();
+  return 0.5 * (references - base.points).squaredNorm();
+}
+
+Eigen::Matrix4d HandFromCamera(const Vector14d& q) {
+  Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
+  t.topLeftCorner<3, 3>() = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
+  t.topRightCorner<3, 1>() << q[kTx], q[kTy], q[kTz];
+  return t;
+}
+
+PixelsResult PixelsFromCameraPoints(const Vector14d& q, Points3Ref camera_points) {
+  ValidateParams(q);
+  RequireFinite(camera_points.data(), camera_points.rows(), 3, "camera points");
+  const Eigen::Index m = camera_points.rows();
+  PixelsResult out;
+  out.pixels.resize(m, 2);
+  out.valid.resize(m);
+  const double f = q[kF], k = q[kK];
+  for (Eigen::Index i = 0; i < m; ++i) {
+    const double z = camera_points(i, 2);
+    bool ok = z > 0.0;
+    double xd = 0.0, yd = 0.0;
+    if (ok) {
+      const double xu = f * camera_points(i, 0) / z;
+      const double yu = f * camera_points(i, 1) / z;
+      const double ru = std::hypot(xu, yu);
+      // Division model: ru = rd / (1 + k rd^2)  =>  k ru rd^2 - rd + ru = 0; take the root that
+      // tends to rd = ru as k -> 0: rd = 2 ru / (1 + sqrt(1 - 4 k ru^2)).
+      const double disc = 1.0 - 4.0 * k * ru * ru;
+      if (disc < 0.0) {
+        ok = false;
+      } else {
+        const double scale = 2.0 / (1.0 + std::sqrt(disc));  // rd / ru
+        xd = xu * scale;
+        yd = yu * scale;
+      }
+    }
+    if (ok) {
+      out.pixels(i, 0) = xd / q[kSu] + q[kCu];
+      out.pixels(i, 1) = yd / q[kSv] + q[kCv];
+      out.valid[i] = 1;
+    } else {
+      out.pixels.row(i).setConstant(kNaN);
+      out.valid[i] = 0;
+      ++out.num_invalid;
+    }
+  }
+  return out;
+}
+
+namespace {
+
+RowMatX3 CameraFromBase(const Vector14d& q, Points3Ref base_points, PosesRef poses) {
+  RequireSameRows(base_points.rows(), "points", poses.rows(), "poses");
+  RequireFinite(base_points.data(), base_points.rows(), 3, "points");
+  ValidatePoses(poses);
+  const Eigen::Matrix4d hfc = HandFromCamera(q);
+  const Eigen::Matrix3d rc = hfc.topLeftCorner<3, 3>();
+  const Eigen::Vector3d tc = hfc.topRightCorner<3, 1>();
+  RowMatX3 cam(base_points.rows(), 3);
+  for (Eigen::Index i = 0; i < base_points.rows(); ++i) {
+    const Eigen::Vector3d hand =
+        PoseRotation(poses, i).transpose() * (base_points.row(i).transpose() - PosePosition(poses, i));
+    cam.row(i) = (rc.transpose() * (hand - tc)).transpose();
+  }
+  return cam;
+}
+
+}  // namespace
+
+Eigen::VectorXd LaserPlaneDistance(const Vector14d& q, Points3Ref base_points, PosesRef poses) {
+  ValidateParams(q);
+  const RowMatX3 cam = CameraFromBase(q, base_points, poses);
+  const double t = std::tan(q[kTheta]);
+  const double norm = std::sqrt(1.0 + t * t);
+  Eigen::VectorXd d(cam.rows());
+  for (Eigen::Index i = 0; i < cam.rows(); ++i) {
+    d[i] = (cam(i, 1) + cam(i, 2) * t - q[kH]) / norm;
+  }
+  return d;
+}
+
+PixelsResult PixelsFromBasePoints(const Vector14d& q, Points3Ref base_points, PosesRef poses,
+                                  double plane_tolerance) {
+  ValidateParams(q);
+  if (!(plane_tolerance >= 0.0)) {
+    throw std::invalid_argument("plane_tolerance must be >= 0");
+  }
+  const RowMatX3 cam = CameraFromBase(q, base_points, poses);
+  PixelsResult out = PixelsFromCameraPoints(q, cam);
+  if (std::isfinite(plane_tolerance)) {
+    const double t = std::tan(q[kTheta]);
+    const double norm = std::sqrt(1.0 + t * t);
+    for (Eigen::Index i = 0; i < cam.rows(); ++i) {
+      const double d = (cam(i, 1) + cam(i, 2) * t - q[kH]) / norm;
+      if (out.valid[i] && std::abs(d) > plane_tolerance) {
+        out.valid[i] = 0;
+        out.pixels.row(i).setConstant(kNaN);
+        ++out.num_invalid;
+      }
+    }
+  }
+  return out;
+}
+
+}  // namespace hmlvs

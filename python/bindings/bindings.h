@@ -1,0 +1,12 @@
+#pragma once
+
+#include <pybind11/pybind11.h>
+
+namespace hmlvs::python {
+
+void BindModel(pybind11::module_& m);
+void BindKinematics(pybind11::module_& m);
+void BindSolvers(pybind11::module_& m);
+void BindImage(pybind11::module_& m);
+
+}  // namespace hmlvs::python

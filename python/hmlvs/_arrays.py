@@ -1,0 +1,54 @@
+"""Shape and value checks shared by the public functions (clear ValueErrors, no copies)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .params import NUM_PARAMS, Parameters
+
+
+def as_params(params: Any) -> np.ndarray:
+    """A parameter vector from a :class:`Parameters`, a sequence or a mapping."""
+    if isinstance(params, Parameters):
+        return params.to_array()
+    if isinstance(params, dict):
+        return Parameters.from_dict(params).to_array()
+    arr = np.asarray(params, dtype=float).reshape(-1)
+    if arr.shape != (NUM_PARAMS,):
+        raise ValueError(f"params must have {NUM_PARAMS} values, got {arr.size}")
+    return arr
+
+
+def as_matrix(a: Any, cols: int, name: str, allow_nan: bool = False) -> np.ndarray:
+    """A C-contiguous float64 (m x cols) array; a single row may be given as a vector."""
+    arr = np.asarray(a, dtype=np.float64)
+    if arr.ndim == 1 and arr.shape[0] == cols:
+        arr = arr[None, :]
+    if arr.ndim != 2 or arr.shape[1] != cols:
+        raise ValueError(f"{name} must have shape (m, {cols}), got {arr.shape}")
+    if not allow_nan:
+        bad = ~np.isfinite(arr).all(axis=1)
+        if bad.any():
+            raise ValueError(f"{name} row {int(np.argmax(bad))} is not finite (NaN or inf)")
+    return np.ascontiguousarray(arr)
+
+
+def as_poses(a: Any, name: str = "poses") -> np.ndarray:
+    """base_from_hand poses as a C-contiguous (m, 16) view of an (m, 4, 4) array."""
+    arr = np.asarray(a, dtype=np.float64)
+    if arr.ndim == 2 and arr.shape == (4, 4):
+        arr = arr[None]
+    if arr.ndim != 3 or arr.shape[1:] != (4, 4):
+        raise ValueError(f"{name} must have shape (m, 4, 4), got {arr.shape}")
+    return np.ascontiguousarray(arr).reshape(-1, 16)
+
+
+def same_rows(**arrays: np.ndarray) -> int:
+    items = list(arrays.items())
+    n0, a0 = items[0]
+    for n, a in items[1:]:
+        if a.shape[0] != a0.shape[0]:
+            raise ValueError(f"{n0} has {a0.shape[0]} rows but {n} has {a.shape[0]}")
+    return a0.shape[0]

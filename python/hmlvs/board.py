@@ -1,0 +1,67 @@
+"""The planar checkerboard that provides reference points (paper section 5)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Checkerboard:
+    """A checkerboard lying in the robot's workspace, described in the base frame (mm).
+
+    ``rows`` x ``cols`` inner corners spaced ``square`` mm. Corner (r, c) sits at
+    ``origin + r * square * row_direction + c * square * col_direction``. The default is the
+    paper's set-up: first (left-top) corner at (700, 90, 0) mm, 30 mm squares, the board
+    extending towards the robot (-x) and to its right (-y) on the plane z = 0.
+    """
+
+    rows: int = 6
+    cols: int = 8
+    square: float = 30.0
+    origin: tuple[float, float, float] = (700.0, 90.0, 0.0)
+    row_direction: tuple[float, float, float] = (-1.0, 0.0, 0.0)
+    col_direction: tuple[float, float, float] = (0.0, -1.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if self.rows < 2 or self.cols < 2:
+            raise ValueError(f"a checkerboard needs at least 2 x 2 inner corners, got "
+                             f"{self.rows} x {self.cols}")
+        if not self.square > 0:
+            raise ValueError(f"square size must be > 0 mm, got {self.square}")
+        r = np.asarray(self.row_direction, float)
+        c = np.asarray(self.col_direction, float)
+        if r.shape != (3,) or c.shape != (3,) or abs(np.linalg.norm(r) - 1) > 1e-9 or \
+                abs(np.linalg.norm(c) - 1) > 1e-9 or abs(r @ c) > 1e-9:
+            raise ValueError("row_direction and col_direction must be orthogonal unit 3-vectors")
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Unit normal of the board, pointing to the side the camera looks from."""
+        n = np.cross(self.row_direction, self.col_direction)
+        return n if n[2] >= 0 else -n
+
+    def board_coordinates(self) -> np.ndarray:
+        """(rows*cols, 2) corner coordinates on the board (mm), row-major order."""
+        r, c = np.meshgrid(np.arange(self.rows), np.arange(self.cols), indexing="ij")
+        return np.stack([r.ravel(), c.ravel()], axis=1) * self.square
+
+    def corners(self) -> np.ndarray:
+        """(rows*cols, 3) corner positions in the base frame (mm), row-major order."""
+        rc = self.board_coordinates()
+        return (np.asarray(self.origin, float)
+                + rc[:, :1] * np.asarray(self.row_direction, float)
+                + rc[:, 1:] * np.asarray(self.col_direction, float))
+
+    def corner_ids(self) -> list[str]:
+        return [f"r{r}c{c}" for r in range(self.rows) for c in range(self.cols)]
+
+    def base_from_board(self) -> np.ndarray:
+        """4x4 transform from board coordinates (x along rows, y along columns) to base."""
+        t = np.eye(4)
+        t[:3, 0] = self.row_direction
+        t[:3, 1] = self.col_direction
+        t[:3, 2] = np.cross(self.row_direction, self.col_direction)
+        t[:3, 3] = self.origin
+        return t

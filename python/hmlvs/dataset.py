@@ -1,0 +1,294 @@
+"""Calibration data: stripe pixels, hand poses and reference points, with validation and I/O."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ._arrays import as_matrix, same_rows
+from ._io import atomic_write
+from .model import validate_poses
+
+FORMAT = "hmlvs-dataset"
+FORMAT_VERSION = 1
+_LENGTH_SCALE = {"mm": 1.0, "m": 1000.0}
+_ANGLE_UNITS = ("rad", "deg")
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """m calibration points: stripe pixel, hand pose and reference point of each.
+
+    Attributes
+    ----------
+    pixels : (m, 2) stripe pixels (u = column, v = row), px
+    poses : (m, 4, 4) base_from_hand transforms, mm
+    points : (m, 3) reference points in the robot base frame, mm
+    ids : (m,) point identifiers (strings), unique
+    joints : (m, n) joint readings the poses came from, or None
+    joint_unit : "rad" or "deg"
+    pose_index : (m,) index of the image/pose each point was seen in, or None
+
+    Lengths given in metres (``length_unit="m"``) are converted to mm on construction.
+    """
+
+    pixels: np.ndarray
+    poses: np.ndarray
+    points: np.ndarray
+    ids: np.ndarray | None = None
+    joints: np.ndarray | None = None
+    joint_unit: str = "rad"
+    pose_index: np.ndarray | None = None
+    length_unit: str = "mm"
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.length_unit not in _LENGTH_SCALE:
+            raise ValueError(f"length_unit must be 'mm' or 'm', got {self.length_unit!r}")
+        scale = _LENGTH_SCALE[self.length_unit]
+        px = as_matrix(self.pixels, 2, "pixels").copy()
+        pts = as_matrix(self.points, 3, "reference points") * scale
+        poses = np.asarray(self.poses, dtype=float)
+        if poses.ndim != 3 or poses.shape[1:] != (4, 4):
+            raise ValueError(f"poses must have shape (m, 4, 4), got {poses.shape}")
+        poses = np.ascontiguousarray(poses).copy()
+        poses[:, :3, 3] *= scale
+        m = same_rows(pixels=px, poses=poses, points=pts)
+        validate_poses(poses)
+        if m > 0:
+            self._check_units(poses, pts)
+        ids = np.arange(m).astype(str) if self.ids is None else np.asarray(self.ids).astype(str)
+        if ids.shape != (m,):
+            raise ValueError(f"ids must have {m} entries, got shape {ids.shape}")
+        uniq, counts = np.unique(ids, return_counts=True)
+        if np.any(counts > 1):
+            raise ValueError(f"ids must be unique; {uniq[counts > 1][0]!r} appears "
+                             f"{counts[counts > 1][0]} times")
+        joints = None
+        if self.joints is not None:
+            joints = np.asarray(self.joints, dtype=float)
+            if joints.ndim != 2 or joints.shape[0] != m:
+                raise ValueError(f"joints must have shape ({m}, n), got {joints.shape}")
+            if not np.all(np.isfinite(joints)):
+                raise ValueError(f"joint readings row {int(np.argmin(np.isfinite(joints).all(1)))}"
+                                 " is not finite")
+            if self.joint_unit not in _ANGLE_UNITS:
+                raise ValueError(f"joint_unit must be 'rad' or 'deg', got {self.joint_unit!r}")
+            if self.joint_unit == "rad" and np.abs(joints).max(initial=0) > 4 * math.pi:
+                raise ValueError("joint readings exceed 4 pi rad: they look like degrees; pass "
+                                 "joint_unit='deg'")
+        pose_index = None
+        if self.pose_index is not None:
+            pose_index = np.asarray(self.pose_index)
+            if pose_index.shape != (m,) or not np.issubdtype(pose_index.dtype, np.integer):
+                raise ValueError(f"pose_index must be {m} integers, got {pose_index.shape} "
+                                 f"{pose_index.dtype}")
+        for name, value in (("pixels", px), ("poses", poses), ("points", pts), ("ids", ids),
+                            ("joints", joints), ("pose_index", pose_index)):
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "length_unit", "mm")
+
+    @staticmethod
+    def _check_units(poses: np.ndarray, pts: np.ndarray) -> None:
+        # Reference points and the hand positions reaching them must share a length unit: a
+        # point far beyond the arm's reach by a factor of ~1000 (or vice versa) is a unit slip.
+        reach = float(np.median(np.linalg.norm(poses[:, :3, 3], axis=1)))
+        size = float(np.median(np.linalg.norm(pts, axis=1)))
+        if reach > 10.0 and size > 0.0 and not 1e-2 < size / reach < 1e2:
+            raise ValueError(
+                f"reference points and pose positions do not share a length unit (median "
+                f"distance from the base: points {size:.3g}, hand {reach:.3g}); both must be "
+                "in mm (or pass length_unit='m' for metres)")
+
+    # ------------------------------------------------------------------ views and splits
+    def __len__(self) -> int:
+        return int(self.pixels.shape[0])
+
+    @property
+    def num_poses(self) -> int:
+        if self.pose_index is not None:
+            return int(np.unique(self.pose_index).size)
+        return int(np.unique(self.poses.reshape(len(self), -1), axis=0).shape[0])
+
+    def subset(self, indices: Sequence[int] | np.ndarray) -> "Dataset":
+        idx = np.asarray(indices)
+        if idx.dtype == bool:
+            idx = np.nonzero(idx)[0]
+        if idx.size and (idx.min() < -len(self) or idx.max() >= len(self)):
+            raise ValueError(f"subset index out of range for a data set of {len(self)} points")
+        return Dataset(
+            self.pixels[idx], self.poses[idx], self.points[idx], ids=self.ids[idx],
+            joints=None if self.joints is None else self.joints[idx], joint_unit=self.joint_unit,
+            pose_index=None if self.pose_index is None else self.pose_index[idx],
+            meta=dict(self.meta))
+
+    def split(self, fit: float | int = 0.5, seed: int | None = None,
+              by_pose: bool = False) -> tuple["Dataset", "Dataset"]:
+        """Split into (fit, test) sets.
+
+        ``fit`` is a fraction (0-1) or a number of points. Without ``seed`` the first points
+        are the fit set (the paper's protocol: first 50 of 100); with a seed the split is a
+        seeded random permutation. ``by_pose`` keeps all points of one pose on one side.
+        """
+        m = len(self)
+        if by_pose and self.pose_index is not None:
+            groups = np.unique(self.pose_index)
+            if seed is not None:
+                groups = np.random.default_rng(seed).permutation(groups)
+            n_fit = _split_count(fit, groups.size, "poses")
+            mask = np.isin(self.pose_index, groups[:n_fit])
+            return self.subset(np.nonzero(mask)[0]), self.subset(np.nonzero(~mask)[0])
+        order = np.arange(m) if seed is None else np.random.default_rng(seed).permutation(m)
+        n_fit = _split_count(fit, m, "points")
+        return self.subset(np.sort(order[:n_fit])), self.subset(np.sort(order[n_fit:]))
+
+    def concat(self, other: "Dataset") -> "Dataset":
+        joints = None
+        if self.joints is not None and other.joints is not None:
+            joints = np.vstack([self.joints, other.joints])
+        return Dataset(np.vstack([self.pixels, other.pixels]),
+                       np.concatenate([self.poses, other.poses]),
+                       np.vstack([self.points, other.points]),
+                       ids=np.concatenate([self.ids, other.ids]), joints=joints,
+                       joint_unit=self.joint_unit, meta=dict(self.meta))
+
+    def summary(self) -> str:
+        lo, hi = self.points.min(axis=0), self.points.max(axis=0)
+        lines = [
+            f"{len(self)} points from {self.num_poses} poses",
+            "reference points (mm): " + ", ".join(
+                f"{a} {lo[i]:.1f}..{hi[i]:.1f} (extent {hi[i] - lo[i]:.1f})"
+                for i, a in enumerate("xyz")),
+            f"stripe pixels: u {self.pixels[:, 0].min():.1f}..{self.pixels[:, 0].max():.1f}, "
+            f"v {self.pixels[:, 1].min():.1f}..{self.pixels[:, 1].max():.1f}",
+        ]
+        if self.joints is not None:
+            lines.append(f"joint readings: {self.joints.shape[1]} joints ({self.joint_unit})")
+        return "\n".join(lines)
+
+    # ------------------------------------------------------------------ files
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the data set atomically as ``.npz`` or ``.json`` (by the suffix)."""
+        path = Path(path)
+        if path.suffix == ".npz":
+            arrays = {"pixels": self.pixels, "poses": self.poses, "points": self.points,
+                      "ids": self.ids.astype(str),
+                      "header": np.array(json.dumps(self._header()))}
+            if self.joints is not None:
+                arrays["joints"] = self.joints
+            if self.pose_index is not None:
+                arrays["pose_index"] = self.pose_index
+            with atomic_write(path, "wb") as fh:
+                np.savez_compressed(fh, **arrays)
+        elif path.suffix == ".json":
+            with atomic_write(path, "w") as fh:
+                json.dump(self.to_json_dict(), fh, indent=1)
+        else:
+            raise ValueError(f"{path}: data sets are saved as .npz or .json, not "
+                             f"{path.suffix or 'a file without a suffix'}")
+        return path
+
+    def _header(self) -> dict[str, Any]:
+        return {"format": FORMAT, "version": FORMAT_VERSION, "length_unit": "mm",
+                "joint_unit": self.joint_unit, "meta": self.meta}
+
+    def to_json_dict(self) -> dict[str, Any]:
+        d = self._header()
+        d["points"] = []
+        for i in range(len(self)):
+            e: dict[str, Any] = {"id": str(self.ids[i]), "pixel": self.pixels[i].tolist(),
+                                 "reference": self.points[i].tolist(),
+                                 "base_from_hand": self.poses[i].tolist()}
+            if self.joints is not None:
+                e["joints"] = self.joints[i].tolist()
+            if self.pose_index is not None:
+                e["pose_index"] = int(self.pose_index[i])
+            d["points"].append(e)
+        return d
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "Dataset":
+        """Read a data set written by :meth:`save` (``.npz`` or ``.json``)."""
+        path = Path(path)
+        if not path.is_file():
+            raise ValueError(f"{path}: no such data set file")
+        try:
+            if path.suffix == ".npz":
+                with np.load(path, allow_pickle=False) as z:
+                    header = json.loads(str(z["header"]))
+                    _check_header(header, path)
+                    return cls(z["pixels"], z["poses"], z["points"], ids=z["ids"],
+                               joints=z["joints"] if "joints" in z else None,
+                               joint_unit=header.get("joint_unit", "rad"),
+                               pose_index=z["pose_index"] if "pose_index" in z else None,
+                               meta=header.get("meta", {}))
+            if path.suffix == ".json":
+                with open(path, encoding="utf-8") as fh:
+                    d = json.load(fh)
+                return cls.from_json_dict(d, source=str(path))
+        except (KeyError, OSError, json.JSONDecodeError) as e:  # JSONDecodeError first: a
+            # subclass of ValueError
+            raise ValueError(f"{path}: malformed data set file ({type(e).__name__}: {e})") \
+                from None
+        except ValueError as e:
+            raise ValueError(f"{path}: {e}") from None
+        except Exception as e:  # noqa: BLE001 - numpy raises assorted errors on corrupt files
+            raise ValueError(f"{path}: malformed data set file ({type(e).__name__}: {e})") \
+                from None
+        raise ValueError(f"{path}: data sets are read from .npz or .json files")
+
+    @classmethod
+    def from_json_dict(cls, d: dict[str, Any], source: str = "data set") -> "Dataset":
+        _check_header(d, source)
+        entries = d.get("points")
+        if not isinstance(entries, list):
+            raise ValueError("'points' must be a list of entries")
+        pixels, poses, points, ids, joints, pidx = [], [], [], [], [], []
+        for i, e in enumerate(entries):
+            try:
+                ids.append(str(e["id"]))
+                pixels.append(e["pixel"])
+                points.append(e["reference"])
+                poses.append(e["base_from_hand"])
+                if "joints" in e:
+                    joints.append(e["joints"])
+                if "pose_index" in e:
+                    pidx.append(int(e["pose_index"]))
+            except (KeyError, TypeError) as err:
+                raise ValueError(f"entry {i} (id {e.get('id', '?') if isinstance(e, dict) else '?'})"
+                                 f" lacks field {err}") from None
+        if joints and len(joints) != len(entries):
+            raise ValueError("some entries have joint readings and some do not")
+        return cls(np.array(pixels, float).reshape(-1, 2), np.array(poses, float).reshape(-1, 4, 4),
+                   np.array(points, float).reshape(-1, 3), ids=np.array(ids),
+                   joints=np.array(joints, float) if joints else None,
+                   joint_unit=d.get("joint_unit", "rad"),
+                   pose_index=np.array(pidx, dtype=np.int64) if len(pidx) == len(entries) and pidx
+                   else None, length_unit=d.get("length_unit", "mm"), meta=d.get("meta", {}))
+
+
+def _check_header(d: dict[str, Any], source: Any) -> None:
+    if not isinstance(d, dict) or d.get("format") != FORMAT:
+        raise ValueError(f"{source}: not an hmlvs data set (format field is "
+                         f"{d.get('format') if isinstance(d, dict) else None!r})")
+    if int(d.get("version", 0)) > FORMAT_VERSION:
+        raise ValueError(f"{source}: data set format version {d.get('version')} is newer than "
+                         f"this hmlvs understands ({FORMAT_VERSION})")
+
+
+def _split_count(fit: float | int, total: int, what: str) -> int:
+    if isinstance(fit, float) or (isinstance(fit, int) and 0 < fit < 1):
+        if not 0 < fit < 1:
+            raise ValueError(f"a fit fraction must lie in (0, 1), got {fit}")
+        n = int(round(fit * total))
+    else:
+        n = int(fit)
+    if not 0 < n < total:
+        raise ValueError(f"cannot split {total} {what} into {n} to fit and {total - n} to test")
+    return n

@@ -1,0 +1,290 @@
+"""Simulated data: the paper's random-pixel protocol (section 4) and a calibration session.
+
+``hmlvs.simulate(...)`` is this module called as a function (random pixels and poses);
+``hmlvs.simulate.session(...)`` simulates the paper's checkerboard data acquisition.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import sys
+import types
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ._arrays import as_params
+from .board import Checkerboard
+from .dataset import Dataset
+from .model import hand_from_camera, laser_plane_distance, points_in_base, project
+from .params import Parameters
+from .robot import Robot
+
+DEFAULT_IMAGE_SIZE = (640, 480)
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """Simulated data with its ground truth: ``fit`` and ``test`` sets and all points."""
+
+    truth: Parameters
+    dataset: Dataset
+    fit: Dataset
+    test: Dataset
+    pixel_noise: float
+    point_noise: float
+
+
+def _random_valid_pixels(q: np.ndarray, n: int, image_size: tuple[int, int],
+                         rng: np.random.Generator) -> np.ndarray:
+    w, h = image_size
+    out = np.empty((0, 2))
+    for _ in range(100):
+        cand = rng.uniform([0, 0], [w - 1, h - 1], size=(2 * n, 2))
+        from .model import points_in_camera
+        _, ok = points_in_camera(q, cand, on_invalid="mask")
+        out = np.vstack([out, cand[ok]])
+        if len(out) >= n:
+            return out[:n]
+    raise ValueError("the laser plane is not visible in the image for these parameters "
+                     "(no pixel's ray meets it)")
+
+
+def random_joints(robot: Robot, n: int, rng: np.random.Generator,
+                  fraction: float = 0.5) -> np.ndarray:
+    """n joint readings drawn uniformly from the middle ``fraction`` of each joint's range."""
+    lim = robot.joint_limits if robot.joint_limits is not None else np.tile([-np.pi, np.pi],
+                                                                            (robot.dof, 1))
+    mid, half = lim.mean(axis=1), (lim[:, 1] - lim[:, 0]) / 2 * fraction
+    return rng.uniform(mid - half, mid + half, size=(n, robot.dof))
+
+
+def simulate(params: Any = None, n: int = 100, *, robot: Robot | None = None,
+             poses: Any = None, image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE,
+             pixel_noise: float = 0.0, point_noise: float = 0.0, seed: int = 0,
+             fit: float | int = 0.5) -> Simulation:
+    """Paper section 4: random stripe pixels and robot poses -> reference points.
+
+    Parameters
+    ----------
+    params : true sensor parameters (default: Table 2 nominal values)
+    n : number of points (default 100, the first half to fit, the second to test)
+    robot : arm whose random joint readings give the poses (default SCORBOT ER-VII)
+    poses : (n, 4, 4) base_from_hand poses to use instead of random ones
+    pixel_noise : standard deviation (px) of Gaussian noise added to the observed pixels
+    point_noise : standard deviation (mm) of Gaussian noise added to the reference points
+    seed : random seed; the same seed gives the same data
+    fit : fraction or number of points in the fit set
+
+    Examples
+    --------
+    >>> sim = hmlvs.simulate(seed=1, pixel_noise=0.1)
+    >>> len(sim.fit), len(sim.test)
+    (50, 50)
+    """
+    q = as_params(Parameters.nominal() if params is None else params)
+    if n < 2:
+        raise ValueError(f"simulate needs n >= 2 points, got {n}")
+    if pixel_noise < 0 or point_noise < 0:
+        raise ValueError("noise levels must be >= 0")
+    rng = np.random.default_rng(seed)
+    robot = Robot.scorbot_er7() if robot is None else robot
+    joints = None
+    if poses is None:
+        joints = random_joints(robot, n, rng)
+        poses = robot.poses(joints)
+    poses = np.asarray(poses, dtype=float)
+    if poses.shape != (n, 4, 4):
+        raise ValueError(f"poses must have shape ({n}, 4, 4), got {poses.shape}")
+    pixels = _random_valid_pixels(q, n, image_size, rng)
+    points, _ = points_in_base(q, pixels, poses)
+    observed = pixels + rng.normal(0.0, pixel_noise, pixels.shape) if pixel_noise else pixels
+    refs = points + rng.normal(0.0, point_noise, points.shape) if point_noise else points
+    ds = Dataset(observed, poses, refs, joints=joints,
+                 meta={"simulated": True, "seed": seed, "pixel_noise": pixel_noise,
+                       "point_noise": point_noise, "image_size": list(image_size)})
+    fit_set, test_set = ds.split(fit)
+    return Simulation(Parameters.from_array(q), ds, fit_set, test_set, pixel_noise, point_noise)
+
+
+# ------------------------------------------------------------------------------------------
+# A simulated calibration session (paper section 5)
+
+
+@dataclass(frozen=True)
+class Session:
+    """A simulated checkerboard session: the data set (with joint readings) and its truth."""
+
+    truth: Parameters
+    dataset: Dataset
+    robot: Robot
+    board: Checkerboard
+    joints: np.ndarray  # (num_poses, dof), rad: one reading per pose
+    image_size: tuple[int, int]
+
+    def summary(self) -> str:
+        return (f"simulated session: {self.robot.name}, {self.joints.shape[0]} poses, "
+                f"{self.board.rows}x{self.board.cols} corners of {self.board.square:g} mm\n"
+                + self.dataset.summary())
+
+
+def _camera_pose(robot: Robot, hfc: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    return robot.poses(joints)[0] @ hfc
+
+
+def _ik_look_at(robot: Robot, hfc: np.ndarray, cam_pos: np.ndarray, cam_axis: np.ndarray,
+                seeds: list[np.ndarray]) -> np.ndarray | None:
+    """Joint readings putting the camera at ``cam_pos`` looking along ``cam_axis``."""
+    lim = robot.joint_limits
+
+    def res(j: np.ndarray) -> np.ndarray:
+        t = _camera_pose(robot, hfc, j)
+        return np.concatenate([t[:3, 3] - cam_pos, 300.0 * (t[:3, 2] - cam_axis)])
+
+    best = None
+    for s in seeds:
+        r = least_squares(res, s, bounds=(lim[:, 0], lim[:, 1]) if lim is not None else
+                          (-np.inf, np.inf), xtol=1e-10, ftol=1e-10)
+        if best is None or r.cost < best.cost:
+            best = r
+    if best is None or np.sqrt(2 * best.cost) > 20.0:
+        return None
+    return best.x
+
+
+def _snap(robot: Robot, q: np.ndarray, joints: np.ndarray, targets: np.ndarray,
+          free: list[int]) -> np.ndarray | None:
+    """Move the ``free`` joints so that every target point lies exactly on the laser plane."""
+    def res(x: np.ndarray) -> np.ndarray:
+        j = joints.copy()
+        j[free] = x
+        poses = np.repeat(robot.poses(j), len(targets), axis=0)
+        return laser_plane_distance(q, targets, poses)
+
+    r = least_squares(res, joints[free], xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    if np.max(np.abs(r.fun)) > 1e-9:
+        return None
+    out = joints.copy()
+    out[free] = r.x
+    lim = robot.joint_limits
+    if lim is not None and (np.any(out < lim[:, 0]) or np.any(out > lim[:, 1])):
+        return None
+    return out
+
+
+def session(params: Any = None, *, robot: Robot | None = None,
+            board: Checkerboard | None = None, num_poses: int = 30,
+            image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE, standoff: tuple[float, float] = (
+                230.0, 330.0), max_tilt_deg: float = 20.0, row_fraction: float = 0.5,
+            pixel_noise: float = 0.0, point_noise: float = 0.0, seed: int = 0) -> Session:
+    """Simulate the paper's data acquisition (section 5) on a checkerboard.
+
+    For each pose the robot is placed (by inverse kinematics) so that the camera looks at the
+    board from ``standoff`` mm with a tilt up to ``max_tilt_deg``; then joints are adjusted
+    until the laser stripe passes exactly through board corners: a whole row of corners
+    (fraction ``row_fraction`` of the poses, the paper's "horizontal line overlaps the corner
+    points") or a single corner. The data set stores the joint readings, the poses computed
+    from them by forward kinematics, the corners' stripe pixels (optionally with Gaussian
+    noise in px) and the corners' base-frame coordinates (optionally with noise in mm).
+    """
+    q = as_params(Parameters.nominal() if params is None else params)
+    robot = Robot.scorbot_er7() if robot is None else robot
+    board = Checkerboard() if board is None else board
+    if num_poses < 1:
+        raise ValueError(f"num_poses must be >= 1, got {num_poses}")
+    rng = np.random.default_rng(seed)
+    hfc = hand_from_camera(q)
+    corners = board.corners()
+    ids = board.corner_ids()
+    n_rc = np.array([(r, c) for r in range(board.rows) for c in range(board.cols)])
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    normal = board.normal
+    w, h = image_size
+    dof = robot.dof
+    seed_joints = [np.zeros(dof), np.array([0.1, -0.8, 1.2, 0.0, 0.0][:dof] + [0.0] * (dof - 5)),
+                   np.array([0.1, -1.2, 1.6, 0.4, 0.0][:dof] + [0.0] * (dof - 5))]
+
+    all_joints, px_list, pt_list, id_list, pidx = [], [], [], [], []
+    attempts = 0
+    while len(all_joints) < num_poses:
+        attempts += 1
+        if attempts > 50 * num_poses:
+            raise ValueError(f"could place only {len(all_joints)} of {num_poses} poses on the "
+                             "board: is it within the robot's reach?")
+        target = rng.uniform(lo, hi)
+        tilt = np.radians(rng.uniform(0, max_tilt_deg))
+        az = rng.uniform(0, 2 * np.pi)
+        e1 = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(normal, e1)
+        view = -(np.cos(tilt) * normal + np.sin(tilt) * (np.cos(az) * e1 + np.sin(az) * e2))
+        dist = rng.uniform(*standoff)
+        joints = _ik_look_at(robot, hfc, target - dist * view, view, seed_joints)
+        if joints is None:
+            continue
+        joints[-1] += rng.uniform(-np.pi, np.pi) if rng.random() < 0.5 else 0.0
+        pose = robot.poses(joints)
+        rep = np.repeat(pose, len(corners), axis=0)
+        pix, vis = project(q, corners, rep)
+        inside = vis & (pix[:, 0] >= 0) & (pix[:, 0] <= w - 1) & (pix[:, 1] >= 0) & \
+            (pix[:, 1] <= h - 1)
+        if inside.sum() < 2:
+            continue
+        d = np.abs(laser_plane_distance(q, corners, rep))
+        d[~inside] = np.inf
+        nearest = int(np.argmin(d))
+        if rng.random() < row_fraction:
+            # a whole row or column of corners on the stripe: two of them fix the line
+            r0, c0 = n_rc[nearest]
+            line = np.nonzero(inside & ((n_rc[:, 0] == r0) if rng.random() < 0.5 else
+                                        (n_rc[:, 1] == c0)))[0]
+            if line.size < 2:
+                continue
+            targets = corners[[line[0], line[-1]]]
+            new = _snap(robot, q, joints, targets, free=[0, dof - 1])
+        else:
+            new = _snap(robot, q, joints, corners[[nearest]], free=[dof - 1])
+        if new is None:
+            continue
+        pose = robot.poses(new)
+        rep = np.repeat(pose, len(corners), axis=0)
+        on = np.abs(laser_plane_distance(q, corners, rep)) < 1e-7
+        pix, vis = project(q, corners, rep)
+        keep = on & vis & (pix[:, 0] >= 0) & (pix[:, 0] <= w - 1) & (pix[:, 1] >= 0) & \
+            (pix[:, 1] <= h - 1)
+        if not keep.any():
+            continue
+        p = len(all_joints)
+        all_joints.append(new)
+        for i in np.nonzero(keep)[0]:
+            px_list.append(pix[i])
+            pt_list.append(corners[i])
+            id_list.append(f"p{p:03d}:{ids[i]}")
+            pidx.append(p)
+
+    joints_arr = np.array(all_joints)
+    pidx_arr = np.array(pidx, dtype=np.int64)
+    pixels = np.array(px_list)
+    points = np.array(pt_list)
+    if pixel_noise:
+        pixels = pixels + rng.normal(0.0, pixel_noise, pixels.shape)
+    if point_noise:
+        points = points + rng.normal(0.0, point_noise, points.shape)
+    poses = robot.poses(joints_arr)[pidx_arr]
+    ds = Dataset(pixels, poses, points, ids=np.array(id_list), joints=joints_arr[pidx_arr],
+                 pose_index=pidx_arr,
+                 meta={"simulated": True, "seed": seed, "robot": robot.name,
+                       "pixel_noise": pixel_noise, "point_noise": point_noise,
+                       "image_size": list(image_size)})
+    return Session(Parameters.from_array(q), ds, robot, board, joints_arr, tuple(image_size))
+
+
+class _CallableModule(types.ModuleType):
+    """Lets ``hmlvs.simulate(...)`` call :func:`simulate` while the module keeps its members."""
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Simulation:
+        return simulate(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

@@ -1,0 +1,114 @@
+"""The C++ sensor model against the independent NumPy oracle, its inverse and its Jacobian."""
+
+import numpy as np
+import pytest
+
+import hmlvs
+import reference_model as ref
+from conftest import random_params
+
+
+@pytest.mark.parametrize("trial", range(5))
+def test_base_points_match_numpy_oracle(rng, trial):
+    q = random_params(rng)
+    m = 2000
+    pixels = rng.uniform([0, 0], [640, 480], size=(m, 2))
+    poses = ref.random_poses(rng, m)
+    expected = ref.base_points(q, pixels, poses)
+    _, ok = ref.camera_points(q, pixels)
+    got, valid = hmlvs.points_in_base(q, pixels, poses, on_invalid="mask")
+    np.testing.assert_array_equal(valid, ok)
+    scale = np.abs(expected[ok]).max()
+    assert np.abs(got[ok] - expected[ok]).max() <= 1e-12 * scale
+    assert np.isnan(got[~ok]).all()
+
+
+def test_camera_points_match_numpy_oracle(rng):
+    q = random_params(rng)
+    pixels = rng.uniform([0, 0], [640, 480], size=(5000, 2))
+    expected, ok = ref.camera_points(q, pixels)
+    got, valid = hmlvs.points_in_camera(q, pixels, on_invalid="mask")
+    np.testing.assert_array_equal(valid, ok)
+    rel = np.abs(got[ok] - expected[ok]).max() / np.abs(expected[ok]).max()
+    assert rel <= 1e-12
+
+
+def test_camera_points_lie_on_laser_plane(rng):
+    q = random_params(rng)
+    pts, ok = hmlvs.points_in_camera(q, rng.uniform([0, 0], [640, 480], (500, 2)), "mask")
+    plane = pts[ok, 1] + pts[ok, 2] * np.tan(q[7]) - q[6]
+    assert np.abs(plane).max() < 1e-10 * q[6]
+
+
+def test_residuals_and_objective(rng):
+    q = random_params(rng)
+    pixels = rng.uniform([100, 100], [500, 400], size=(50, 2))
+    poses = ref.random_poses(rng, 50)
+    refs = ref.base_points(q, pixels, poses) + rng.normal(0, 0.5, (50, 3))
+    e = hmlvs.residuals(q, pixels, poses, refs)
+    np.testing.assert_allclose(e, refs - ref.base_points(q, pixels, poses), rtol=0, atol=1e-9)
+    assert hmlvs.objective(q, pixels, poses, refs) == pytest.approx(0.5 * np.sum(e**2), rel=1e-12)
+
+
+def test_inverse_recovers_pixels(rng):
+    q = random_params(rng)
+    m = 1000
+    pixels = rng.uniform([0, 0], [640, 480], size=(m, 2))
+    poses = ref.random_poses(rng, m)
+    pts, ok = hmlvs.points_in_base(q, pixels, poses, on_invalid="mask")
+    back, valid = hmlvs.pixels_from_points(q, pts[ok], poses[ok])
+    assert valid.all()
+    assert np.abs(back - pixels[ok]).max() < 1e-7
+
+
+def test_inverse_rejects_points_off_the_plane(rng):
+    q = hmlvs.Parameters.nominal()
+    pixels = np.array([[320.0, 240.0], [100.0, 300.0]])
+    poses = ref.random_poses(rng, 2)
+    pts, _ = hmlvs.points_in_base(q, pixels, poses)
+    pts[1] += poses[1, :3, :3] @ hmlvs.hand_from_camera(q)[:3, :3] @ np.array([0, 1.0, 0])
+    _, valid = hmlvs.pixels_from_points(q, pts, poses, on_invalid="mask")
+    assert valid.tolist() == [True, False]
+    with pytest.raises(ValueError, match="point 1 .*laser plane"):
+        hmlvs.pixels_from_points(q, pts, poses)
+    # a plain projection accepts any point in front of the camera
+    px, ok = hmlvs.project(q, pts, poses)
+    assert ok.all() and np.abs(px[0] - pixels[0]).max() < 1e-8
+
+
+def test_jacobian_matches_central_differences(rng):
+    q = random_params(rng)
+    m = 30
+    pixels = rng.uniform([50, 50], [590, 430], size=(m, 2))
+    poses = ref.random_poses(rng, m)
+    refs = ref.base_points(q, pixels, poses)
+    _, jac = hmlvs.model.residual_jacobian(q, pixels, poses, refs)
+    for i in range(14):
+        h = 1e-6 * max(1.0, abs(q[i]))
+        qp, qm = q.copy(), q.copy()
+        qp[i] += h
+        qm[i] -= h
+        num = (ref.base_points(qm, pixels, poses) - ref.base_points(qp, pixels, poses)) / (2 * h)
+        scale = max(np.abs(num).max(), 1e-3)
+        assert np.abs(jac[:, :, i] - num).max() < 1e-5 * scale, hmlvs.NAMES[i]
+
+
+def test_hand_from_camera_is_zyz_euler():
+    q = hmlvs.Parameters.nominal().replace(omega=0.1, phi=-0.2, varphi=0.3, tx=1, ty=2, tz=3)
+    t = hmlvs.hand_from_camera(q)
+    np.testing.assert_allclose(t[:3, :3], ref.rot_z(0.1) @ ref.rot_y(-0.2) @ ref.rot_z(0.3),
+                               atol=1e-15)
+    np.testing.assert_allclose(t[:3, 3], [1, 2, 3])
+
+
+def test_one_million_points_evaluate(rng):
+    # Correctness on a large batch (the speed figure is in bench/, not asserted here).
+    q = hmlvs.Parameters.nominal()
+    m = 1_000_000
+    pixels = rng.uniform([0, 0], [640, 480], size=(m, 2))
+    poses = np.tile(np.eye(4), (m, 1, 1))
+    pts, ok = hmlvs.points_in_base(q, pixels, poses)
+    assert ok.all() and pts.shape == (m, 3)
+    i = rng.integers(0, m, 100)
+    np.testing.assert_allclose(pts[i], ref.base_points(q.to_array(), pixels[i], poses[i]),
+                               rtol=1e-12)
