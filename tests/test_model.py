@@ -112,3 +112,15 @@ def test_one_million_points_evaluate(rng):
     i = rng.integers(0, m, 100)
     np.testing.assert_allclose(pts[i], ref.base_points(q.to_array(), pixels[i], poses[i]),
                                rtol=1e-12)
+
+
+def test_rays_pass_through_the_triangulated_points(rng):
+    q = random_params(rng)
+    pixels = rng.uniform([0, 0], [640, 480], size=(300, 2))
+    rays = hmlvs.model.rays_in_camera(q, pixels)
+    pts, ok = hmlvs.points_in_camera(q, pixels, on_invalid="mask")
+    np.testing.assert_allclose(rays[:, 2], q[0])
+    t = pts[ok, 2] / rays[ok, 2]
+    np.testing.assert_allclose(pts[ok], t[:, None] * rays[ok], rtol=1e-12)
+    back, valid = hmlvs.model.pixels_from_points(q, pts[ok], np.tile(np.eye(4), (ok.sum(), 1, 1)))
+    assert np.abs(back - pixels[ok]).max() < 1e-7

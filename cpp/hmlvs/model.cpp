@@ -169,6 +169,19 @@ double Objective(const Vector14d& q, PixelsRef pixels, PosesRef poses, Points3Re
   return 0.5 * (references - base.points).squaredNorm();
 }
 
+RowMatX3 CameraRaysFromPixels(const Vector14d& q, PixelsRef pixels) {
+  ValidateParams(q);
+  RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
+  RowMatX3 rays(pixels.rows(), 3);
+  for (Eigen::Index i = 0; i < pixels.rows(); ++i) {
+    const double xd = q[kSu] * (pixels(i, 0) - q[kCu]);
+    const double yd = q[kSv] * (pixels(i, 1) - q[kCv]);
+    const double inv = 1.0 / (1.0 + q[kK] * (xd * xd + yd * yd));
+    rays.row(i) << xd * inv, yd * inv, q[kF];
+  }
+  return rays;
+}
+
 Eigen::Matrix4d HandFromCamera(const Vector14d& q) {
   Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
   t.topLeftCorner<3, 3>() = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);

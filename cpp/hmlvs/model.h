@@ -191,6 +191,10 @@ PixelsResult PixelsFromBasePoints(const Vector14d& q, Points3Ref base_points,
 Eigen::VectorXd LaserPlaneDistance(const Vector14d& q, Points3Ref base_points,
                                    PosesRef base_from_hand);
 
+/// Pixels -> viewing rays in the camera frame: the undistorted image point (Xu, Yu, f) in mm
+/// (not normalised). Every pixel has a ray; whether it meets the laser plane is separate.
+RowMatX3 CameraRaysFromPixels(const Vector14d& q, PixelsRef pixels);
+
 /// The hand_from_camera transform (4x4) of parameters q.
 Eigen::Matrix4d HandFromCamera(const Vector14d& q);
 

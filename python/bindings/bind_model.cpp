@@ -50,6 +50,7 @@ void BindModel(py::module_& m) {
         return std::make_pair(r, j);
       },
       py::arg("params"), py::arg("pixels"), py::arg("poses"), py::arg("references"), release);
+  m.def("_camera_rays", &CameraRaysFromPixels, py::arg("params"), py::arg("pixels"), release);
   m.def("_hand_from_camera", &HandFromCamera, py::arg("params"));
 }
 

@@ -108,6 +108,14 @@ def laser_plane_distance(params: Any, points: Any, poses: Any) -> np.ndarray:
     return np.asarray(_core._laser_plane_distance(as_params(params), pts, ps))
 
 
+def rays_in_camera(params: Any, pixels: Any) -> np.ndarray:
+    """Pixels -> viewing rays (m, 3) in the camera frame: undistorted (Xu, Yu, f) in mm.
+
+    A ray is not normalised; the camera-frame points along it are ``t * ray`` for t > 0.
+    """
+    return np.asarray(_core._camera_rays(as_params(params), as_matrix(pixels, 2, "pixels")))
+
+
 def hand_from_camera(params: Any) -> np.ndarray:
     """The 4x4 hand_from_camera transform (rotation ZYZ Euler, paper Eq. 5-6)."""
     return np.asarray(_core._hand_from_camera(as_params(params)))
