@@ -122,5 +122,7 @@ def test_rays_pass_through_the_triangulated_points(rng):
     np.testing.assert_allclose(rays[:, 2], q[0])
     t = pts[ok, 2] / rays[ok, 2]
     np.testing.assert_allclose(pts[ok], t[:, None] * rays[ok], rtol=1e-12)
-    back, valid = hmlvs.model.pixels_from_points(q, pts[ok], np.tile(np.eye(4), (ok.sum(), 1, 1)))
+    camera_as_base = np.linalg.inv(hmlvs.hand_from_camera(q))  # base frame == camera frame
+    back, valid = hmlvs.model.pixels_from_points(q, pts[ok],
+                                                 np.tile(camera_as_base, (ok.sum(), 1, 1)))
     assert np.abs(back - pixels[ok]).max() < 1e-7
