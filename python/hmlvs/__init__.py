@@ -5,6 +5,7 @@ base frame."""
 from . import _core
 from . import simulate
 from .board import Checkerboard
+from .identify import CalibrationResult, calibrate, initial_candidates
 from .dataset import Dataset
 from .model import (
     hand_from_camera,
@@ -22,8 +23,8 @@ from .robot import DHLink, Robot
 __version__ = _core.__version__
 
 __all__ = [
-    "Bounds", "Checkerboard", "DHLink", "Dataset", "NAMES", "Parameters", "Robot",
-    "__version__", "hand_from_camera", "laser_plane_distance", "objective",
+    "Bounds", "CalibrationResult", "Checkerboard", "DHLink", "Dataset", "NAMES", "Parameters", "Robot",
+    "__version__", "calibrate", "hand_from_camera", "initial_candidates", "laser_plane_distance", "objective",
     "pixels_from_points", "points_in_base", "points_in_camera", "project", "residuals",
     "simulate",
 ]

@@ -191,21 +191,22 @@ class Bounds:
         return cls(TABLE2_LOWER.copy(), TABLE2_UPPER.copy())
 
     @classmethod
-    def around(cls, center: Parameters | np.ndarray, s: float,
-               zero_spread: np.ndarray | None = None) -> "Bounds":
-        """Bounds of the paper's Eq. 22, q0 (1 +- s/2), for the spread ``s``.
+    def around(cls, center: Parameters | np.ndarray, s: float) -> "Bounds":
+        """The box of the paper's Eq. 22, q0 (1 + (rand - 0.5) s), for the spread ``s``.
 
-        Parameters whose centre is 0 get a manual bound: the Table 2 range scaled by ``s``
-        (half-width s/2 of the Table 2 width) unless ``zero_spread`` gives half-widths.
+        Parameters whose centre is exactly 0 (omega, phi, varphi, ty and k at the nominal
+        values) would get an empty box; as MODEL.md suggests they get the Table 2 bounds
+        scaled by ``s`` instead, e.g. k in [0, 0.1 s] and omega in [-pi/16 s, pi/16 s].
         """
         q0 = center.to_array() if isinstance(center, Parameters) else np.asarray(center, float)
         if not s > 0:
             raise ValueError(f"the spread s must be > 0, got {s}")
         half = np.abs(q0) * s / 2
+        lo, hi = q0 - half, q0 + half
         zero = q0 == 0
-        manual = (TABLE2_UPPER - TABLE2_LOWER) * s / 2 if zero_spread is None else zero_spread
-        half[zero] = np.asarray(manual)[zero]
-        return cls(q0 - half, q0 + half)
+        lo[zero] = TABLE2_LOWER[zero] * s
+        hi[zero] = TABLE2_UPPER[zero] * s
+        return cls(lo, hi)
 
     def contains(self, params: Parameters | np.ndarray) -> bool:
         q = params.to_array() if isinstance(params, Parameters) else np.asarray(params, float)

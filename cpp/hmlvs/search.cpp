@@ -1,0 +1,304 @@
+#include "hmlvs/search.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+#include "hmlvs/parallel.h"
+#include "hmlvs/random.h"
+
+namespace hmlvs {
+
+namespace {
+
+double Seconds(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+void CheckBounds(const Vector14d& lower, const Vector14d& upper, const char* what) {
+  const auto& names = ParamNames();
+  for (int d = 0; d < kNumParams; ++d) {
+    if (!std::isfinite(lower[d]) || !std::isfinite(upper[d])) {
+      throw std::invalid_argument(std::string(what) + " of " + names[d] + " are not finite");
+    }
+    if (lower[d] > upper[d]) {
+      std::ostringstream msg;
+      msg << what << " of " << names[d] << ": lower " << lower[d] << " > upper " << upper[d];
+      throw std::invalid_argument(msg.str());
+    }
+  }
+}
+
+// One swarm: positions, velocities and personal bests of all particles.
+struct Swarm {
+  int n;
+  std::vector<Vector14d> x, v, pbest;
+  std::vector<double> fit, pbest_fit;
+  std::vector<Rng> rng;
+  Vector14d gbest;
+  double gbest_fit = std::numeric_limits<double>::infinity();
+  explicit Swarm(int size) : n(size), x(size), v(size), pbest(size), fit(size), pbest_fit(size) {}
+};
+
+class PsoRunner {
+ public:
+  PsoRunner(const FitnessData& data, const PsoOptions& o) : data_(data), o_(o) {
+    range_ = o.upper - o.lower;
+    vmax_ = o.vmax * range_;
+    init_lo_ = o.lower;
+    init_hi_ = o.upper;
+    if ((o.init_lower.array() <= o.init_upper.array()).all()) {
+      init_lo_ = o.init_lower.cwiseMax(o.lower);
+      init_hi_ = o.init_upper.cwiseMin(o.upper);
+      for (int d = 0; d < kNumParams; ++d) {
+        if (init_lo_[d] > init_hi_[d]) {
+          throw std::invalid_argument("the initial box of " + ParamNames()[d] +
+                                      " lies outside the search bounds");
+        }
+      }
+    }
+  }
+
+  void Init(Swarm& s, int run, int first, int last) const {
+    for (int i = first; i < last; ++i) {
+      s.rng[i] = Rng(StreamKey(o_.seed, static_cast<std::uint64_t>(run),
+                               static_cast<std::uint64_t>(i)));
+      Rng& r = s.rng[i];
+      for (int d = 0; d < kNumParams; ++d) {
+        s.x[i][d] = init_lo_[d] + r.Uniform() * (init_hi_[d] - init_lo_[d]);
+        s.v[i][d] = (2.0 * r.Uniform() - 1.0) * vmax_[d];
+      }
+      s.fit[i] = data_.Evaluate(s.x[i].data());
+      s.pbest[i] = s.x[i];
+      s.pbest_fit[i] = s.fit[i];
+    }
+  }
+
+  void Step(Swarm& s, int t, int first, int last) const {
+    const double w = o_.w_max - (o_.w_max - o_.w_min) * t / o_.iterations;  // Eq. 20
+    for (int i = first; i < last; ++i) {
+      Rng& r = s.rng[i];
+      Vector14d& x = s.x[i];
+      Vector14d& v = s.v[i];
+      for (int d = 0; d < kNumParams; ++d) {
+        const double r1 = r.Uniform(), r2 = r.Uniform();
+        double vd = w * v[d] + o_.c1 * r1 * (s.pbest[i][d] - x[d]) +
+                    o_.c2 * r2 * (s.gbest[d] - x[d]);  // Eq. 19
+        vd = std::clamp(vd, -vmax_[d], vmax_[d]);
+        double xd = x[d] + vd;  // Eq. 21
+        if (xd < o_.lower[d]) {
+          xd = o_.lower[d];
+          vd = 0.0;
+        } else if (xd > o_.upper[d]) {
+          xd = o_.upper[d];
+          vd = 0.0;
+        }
+        x[d] = xd;
+        v[d] = vd;
+      }
+      s.fit[i] = data_.Evaluate(x.data());
+      if (s.fit[i] < s.pbest_fit[i]) {
+        s.pbest_fit[i] = s.fit[i];
+        s.pbest[i] = x;
+      }
+    }
+  }
+
+  // Global best over personal bests in particle order (ties: lowest index): deterministic.
+  static void UpdateGlobal(Swarm& s) {
+    for (int i = 0; i < s.n; ++i) {
+      if (s.pbest_fit[i] < s.gbest_fit) {
+        s.gbest_fit = s.pbest_fit[i];
+        s.gbest = s.pbest[i];
+      }
+    }
+  }
+
+  // Runs one swarm on `members` threads of a team (member ids [0, members)).
+  void RunSwarm(int run, int member, int members, SpinBarrier* barrier, PsoRun* out,
+                std::atomic<bool>* cancel, const std::function<void(int)>& tick) const {
+    Swarm& s = *swarms_[run];
+    const int chunk = (s.n + members - 1) / members;
+    const int first = std::min(s.n, member * chunk);
+    const int last = std::min(s.n, first + chunk);
+    auto sync = [&] {
+      if (barrier) barrier->Wait();
+    };
+    Init(s, run, first, last);
+    sync();
+    if (member == 0) UpdateGlobal(s);
+    sync();
+    int t = 0;
+    std::string termination = "max_iterations";
+    for (; t < o_.iterations; ++t) {
+      if (s.gbest_fit <= o_.target_fitness) {
+        termination = "target_fitness";
+        break;
+      }
+      if (cancel->load(std::memory_order_relaxed)) {
+        termination = "cancelled";
+        break;
+      }
+      Step(s, t, first, last);
+      sync();
+      if (member == 0) {
+        UpdateGlobal(s);
+        out->history.push_back(s.gbest_fit);
+        tick(t + 1);
+      }
+      sync();
+    }
+    if (member == 0) {
+      out->best = s.gbest;
+      out->best_fitness = s.gbest_fit;
+      out->iterations = t;
+      out->termination = termination;
+    }
+  }
+
+  std::vector<std::unique_ptr<Swarm>> swarms_;
+
+ private:
+  const FitnessData& data_;
+  const PsoOptions& o_;
+  Vector14d range_, vmax_, init_lo_, init_hi_;
+};
+
+}  // namespace
+
+PsoResult RunPso(const FitnessData& data, const PsoOptions& o, const ProgressCallback& progress) {
+  if (data.size() < 1) throw std::invalid_argument("PSO needs at least one calibration point");
+  if (o.swarm_size < 2) throw std::invalid_argument("the swarm needs at least 2 particles");
+  if (o.iterations < 0) throw std::invalid_argument("iterations must be >= 0");
+  if (o.runs < 1) throw std::invalid_argument("runs must be >= 1");
+  if (!(o.vmax > 0.0)) throw std::invalid_argument("vmax must be > 0");
+  CheckBounds(o.lower, o.upper, "search bounds");
+  const auto start = std::chrono::steady_clock::now();
+  const int threads = ResolveThreads(o.threads);
+
+  PsoRunner runner(data, o);
+  PsoResult result;
+  result.runs.resize(o.runs);
+  for (int r = 0; r < o.runs; ++r) {
+    runner.swarms_.push_back(std::make_unique<Swarm>(o.swarm_size));
+    runner.swarms_.back()->rng.assign(o.swarm_size, Rng(0));
+    result.runs[r].history.reserve(o.iterations);
+  }
+  std::atomic<bool> cancel(false);
+  std::atomic<long long> done(0);
+  const long long total = static_cast<long long>(o.iterations) * o.runs;
+  const int every = std::max(1, o.progress_every);
+  // Progress is reported by team member 0 only (the caller's thread).
+  auto report = [&](bool from_caller) {
+    if (!progress || !from_caller) return;
+    Progress p;
+    p.done = done.load();
+    p.total = total;
+    p.best_fitness = std::numeric_limits<double>::infinity();
+    for (const auto& s : runner.swarms_) p.best_fitness = std::min(p.best_fitness, s->gbest_fit);
+    if (!progress(p)) cancel.store(true);
+  };
+
+  if (o.runs >= threads || threads == 1) {
+    // Independent runs in parallel, one thread each.
+    const int team = std::min(threads, o.runs);
+    result.threads = team;
+    RunTeam(team, [&](int member, SpinBarrier&) {
+      for (int r = member; r < o.runs; r += team) {
+        runner.RunSwarm(r, 0, 1, nullptr, &result.runs[r], &cancel, [&](int t) {
+          done.fetch_add(1, std::memory_order_relaxed);
+          if (member == 0 && t % every == 0) report(true);
+        });
+      }
+    });
+  } else {
+    // Fewer runs than threads: the particles of each run are shared among the team.
+    result.threads = threads;
+    RunTeam(threads, [&](int member, SpinBarrier& barrier) {
+      for (int r = 0; r < o.runs; ++r) {
+        runner.RunSwarm(r, member, threads, &barrier, &result.runs[r], &cancel, [&](int t) {
+          done.fetch_add(1, std::memory_order_relaxed);
+          if (t % every == 0) report(true);
+        });
+      }
+    });
+  }
+  result.cancelled = cancel.load();
+  for (int r = 1; r < o.runs; ++r) {
+    if (result.runs[r].best_fitness < result.runs[result.best_run].best_fitness) {
+      result.best_run = r;
+    }
+  }
+  result.seconds = Seconds(start);
+  return result;
+}
+
+RandomSearchResult RunRandomSearch(const FitnessData& data, const RandomSearchOptions& o,
+                                   const ProgressCallback& progress) {
+  if (data.size() < 1) {
+    throw std::invalid_argument("random search needs at least one calibration point");
+  }
+  if (o.evaluations < 1) throw std::invalid_argument("evaluations must be >= 1");
+  CheckBounds(o.lower, o.upper, "search bounds");
+  const auto start = std::chrono::steady_clock::now();
+  const int threads = static_cast<int>(
+      std::min<long long>(ResolveThreads(o.threads), o.evaluations));
+  constexpr long long kBlock = 4096;  // evaluations between cancellation checks
+  const long long blocks = (o.evaluations + kBlock - 1) / kBlock;
+  std::vector<double> best_fit(threads, std::numeric_limits<double>::infinity());
+  std::vector<long long> best_idx(threads, -1);
+  std::vector<Vector14d> best(threads, Vector14d::Zero());
+  std::atomic<long long> next_block(0), done(0);
+  std::atomic<bool> cancel(false);
+  const Vector14d range = o.upper - o.lower;
+
+  RunTeam(threads, [&](int member, SpinBarrier&) {
+    Vector14d q;
+    for (;;) {
+      const long long b = next_block.fetch_add(1);
+      if (b >= blocks || cancel.load(std::memory_order_relaxed)) break;
+      const long long end = std::min(o.evaluations, (b + 1) * kBlock);
+      for (long long e = b * kBlock; e < end; ++e) {
+        // Candidate e depends only on (seed, e): identical for any thread count.
+        Rng r(StreamKey(o.seed, 0x5253ULL, static_cast<std::uint64_t>(e)));
+        for (int d = 0; d < kNumParams; ++d) q[d] = o.lower[d] + r.Uniform() * range[d];
+        const double f = data.Evaluate(q.data());
+        if (f < best_fit[member] || (f == best_fit[member] && e < best_idx[member])) {
+          best_fit[member] = f;
+          best_idx[member] = e;
+          best[member] = q;
+        }
+      }
+      done.fetch_add(end - b * kBlock, std::memory_order_relaxed);
+      if (member == 0 && progress && (b % 16 == 0)) {
+        Progress p;
+        p.done = done.load();
+        p.total = o.evaluations;
+        p.best_fitness = best_fit[0];
+        if (!progress(p)) cancel.store(true);
+      }
+    }
+  });
+  RandomSearchResult result;
+  result.threads = threads;
+  result.best_fitness = std::numeric_limits<double>::infinity();
+  for (int t = 0; t < threads; ++t) {
+    if (best_idx[t] < 0) continue;
+    if (best_fit[t] < result.best_fitness ||
+        (best_fit[t] == result.best_fitness && best_idx[t] < result.best_index)) {
+      result.best_fitness = best_fit[t];
+      result.best_index = best_idx[t];
+      result.best = best[t];
+    }
+  }
+  result.evaluations = done.load();
+  result.cancelled = cancel.load();
+  result.seconds = Seconds(start);
+  return result;
+}
+
+}  // namespace hmlvs
