@@ -42,39 +42,67 @@ FitnessData::FitnessData(PixelsRef pixels, PosesRef poses, Points3Ref references
   }
 }
 
-double FitnessData::Evaluate(const double* q) const {
-  const Eigen::Matrix3d rc = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
-  const double tan_theta = std::tan(q[kTheta]);
-  const double f = q[kF], su = q[kSu], sv = q[kSv], cu = q[kCu], cv = q[kCv], k = q[kK],
-               h = q[kH], ftan = f * tan_theta;
-  const double r00 = rc(0, 0), r01 = rc(0, 1), r02 = rc(0, 2);
-  const double r10 = rc(1, 0), r11 = rc(1, 1), r12 = rc(1, 2);
-  const double r20 = rc(2, 0), r21 = rc(2, 1), r22 = rc(2, 2);
-  const double tx = q[kTx], ty = q[kTy], tz = q[kTz];
-  const Eigen::Index m = size();
-  const double* u = u_.data();
-  const double* v = v_.data();
-  const double* hx = hx_.data();
-  const double* hy = hy_.data();
-  const double* hz = hz_.data();
+namespace {
+
+struct KernelParams {
+  double f, su, sv, cu, cv, k, h, ftan;
+  double r[9];
+  double tx, ty, tz;
+};
+
+// The hot loop, with one division per point: with s = 1 + k r^2 and D = Yd + f tan(theta) s,
+// the camera point rho [Xu, Yu, f] equals (H / D) [Xd, Yd, f s], and the ray meets the plane
+// iff D s > 0 (the model's Yu + f tan(theta) = D / s). On x86-64 an AVX2 clone is chosen at
+// load time when the CPU has it; each machine always runs the same clone, so results do not
+// depend on the thread count.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__AVX2__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+double Kernel(const KernelParams& p, const double* u, const double* v, const double* hx,
+              const double* hy, const double* hz, Eigen::Index m, double* min_sign) {
   double sum = 0.0;
-  double min_denom = std::numeric_limits<double>::infinity();
+  double min_ds = std::numeric_limits<double>::infinity();
+#pragma omp simd reduction(+ : sum) reduction(min : min_ds)
   for (Eigen::Index i = 0; i < m; ++i) {
-    const double xd = su * (u[i] - cu);
-    const double yd = sv * (v[i] - cv);
-    const double inv = 1.0 / (1.0 + k * (xd * xd + yd * yd));
-    const double xu = xd * inv;
-    const double yu = yd * inv;
-    const double denom = yu + ftan;
-    min_denom = denom < min_denom ? denom : min_denom;
-    const double rho = h / denom;
-    const double cx = rho * xu, cy = rho * yu, cz = rho * f;
-    const double ex = hx[i] - (r00 * cx + r01 * cy + r02 * cz + tx);
-    const double ey = hy[i] - (r10 * cx + r11 * cy + r12 * cz + ty);
-    const double ez = hz[i] - (r20 * cx + r21 * cy + r22 * cz + tz);
+    const double xd = p.su * (u[i] - p.cu);
+    const double yd = p.sv * (v[i] - p.cv);
+    const double s = 1.0 + p.k * (xd * xd + yd * yd);
+    const double d = yd + p.ftan * s;
+    const double ds = d * s;
+    min_ds = ds < min_ds ? ds : min_ds;
+    const double g = p.h / d;
+    const double cx = g * xd, cy = g * yd, cz = g * p.f * s;
+    const double ex = hx[i] - (p.r[0] * cx + p.r[1] * cy + p.r[2] * cz + p.tx);
+    const double ey = hy[i] - (p.r[3] * cx + p.r[4] * cy + p.r[5] * cz + p.ty);
+    const double ez = hz[i] - (p.r[6] * cx + p.r[7] * cy + p.r[8] * cz + p.tz);
     sum += ex * ex + ey * ey + ez * ez;
   }
-  if (!(min_denom > 0.0)) return std::numeric_limits<double>::infinity();
+  *min_sign = min_ds;
+  return sum;
+}
+
+}  // namespace
+
+double FitnessData::Evaluate(const double* q) const {
+  const Eigen::Matrix3d rc = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
+  KernelParams p;
+  p.f = q[kF];
+  p.su = q[kSu];
+  p.sv = q[kSv];
+  p.cu = q[kCu];
+  p.cv = q[kCv];
+  p.k = q[kK];
+  p.h = q[kH];
+  p.ftan = q[kF] * std::tan(q[kTheta]);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) p.r[3 * r + c] = rc(r, c);
+  p.tx = q[kTx];
+  p.ty = q[kTy];
+  p.tz = q[kTz];
+  double min_ds = 0.0;
+  const double sum =
+      Kernel(p, u_.data(), v_.data(), hx_.data(), hy_.data(), hz_.data(), size(), &min_ds);
+  if (!(min_ds > 0.0)) return std::numeric_limits<double>::infinity();
   return 0.5 * sum;
 }
 

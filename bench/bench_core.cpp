@@ -1,0 +1,150 @@
+// hmlvs C++ benchmark on the paper's workload (50 fitting points, swarm 50, 5000 iterations).
+// Prints one JSON object per measurement (medians of several repetitions) on stdout.
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "hmlvs/fitness.h"
+#include "hmlvs/lm.h"
+#include "hmlvs/model.h"
+#include "hmlvs/search.h"
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+hmlvs::Vector14d Nominal() {
+  hmlvs::Vector14d q;
+  q << 8.0, 0.0074, 0.0074, 320.0, 240.0, 0.0, 140.0, 5 * M_PI / 36, 0.0, 0.0, 0.0, 60.0, 0.0,
+      -45.0;
+  return q;
+}
+
+void Table2(hmlvs::Vector14d* lo, hmlvs::Vector14d* hi) {
+  const double p16 = M_PI / 16;
+  *lo << 6, 0.005, 0.005, 300, 220, 0, 120, 0, -p16, -p16, -p16, 40, -10, -60;
+  *hi << 10, 0.01, 0.01, 340, 260, 0.1, 150, M_PI / 4, p16, p16, p16, 80, 10, -30;
+}
+
+// Random pixels and poses -> exact reference points (the paper's section 4 protocol).
+hmlvs::FitnessData MakeData(int m, unsigned seed, double pixel_noise) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> uu(0, 639), vv(0, 479), pos(-600, 600);
+  std::normal_distribution<double> g(0, 1);
+  hmlvs::RowMatX2 px(m, 2);
+  hmlvs::RowMatX16 poses(m, 16);
+  for (int i = 0; i < m; ++i) {
+    px(i, 0) = uu(rng);
+    px(i, 1) = vv(rng);
+    Eigen::Quaterniond qr(g(rng), g(rng), g(rng), g(rng));
+    Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
+    t.topLeftCorner<3, 3>() = qr.normalized().toRotationMatrix();
+    t.topRightCorner<3, 1>() << pos(rng), pos(rng), pos(rng);
+    for (int k = 0; k < 16; ++k) poses(i, k) = t(k / 4, k % 4);
+  }
+  const auto pts = hmlvs::BasePointsFromPixels(Nominal(), px, poses, true);
+  for (int i = 0; i < m; ++i) {
+    px(i, 0) += pixel_noise * g(rng);
+    px(i, 1) += pixel_noise * g(rng);
+  }
+  return hmlvs::FitnessData(px, poses, pts.points);
+}
+
+void Emit(const std::string& name, double value, const std::string& unit, int reps,
+          const std::string& extra = "") {
+  std::printf("{\"name\": \"%s\", \"value\": %.6g, \"unit\": \"%s\", \"repetitions\": %d%s}\n",
+              name.c_str(), value, unit.c_str(), reps, extra.c_str());
+  std::fflush(stdout);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const int reps = argc > 1 ? std::atoi(argv[1]) : 5;
+  const int hw = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const hmlvs::FitnessData data = MakeData(50, 1, 0.0);
+  hmlvs::Vector14d lo, hi;
+  Table2(&lo, &hi);
+
+  // 1. The fitness kernel alone: point evaluations per second.
+  {
+    std::mt19937_64 rng(2);
+    std::vector<hmlvs::Vector14d> qs(1000);
+    for (auto& q : qs)
+      for (int d = 0; d < hmlvs::kNumParams; ++d)
+        q[d] = lo[d] + std::uniform_real_distribution<double>(0, 1)(rng) * (hi[d] - lo[d]);
+    std::vector<double> rates;
+    double sink = 0;
+    for (int r = 0; r < reps; ++r) {
+      const auto t0 = Clock::now();
+      const int evals = 200000;
+      for (int e = 0; e < evals; ++e) sink += data.Evaluate(qs[e % qs.size()].data());
+      const double s = std::chrono::duration<double>(Clock::now() - t0).count();
+      rates.push_back(evals * 50.0 / s);
+    }
+    Emit("fitness_point_evaluations_per_second", Median(rates), "1/s", reps,
+         sink == 42.0 ? ", \"sink\": 1" : "");
+  }
+  // 2. One full PSO run (paper workload) on 1 thread and on all threads.
+  for (int threads : {1, hw}) {
+    hmlvs::PsoOptions o;
+    o.lower = lo;
+    o.upper = hi;
+    o.threads = threads;
+    std::vector<double> times;
+    double best = 0;
+    for (int r = 0; r < reps; ++r) {
+      o.seed = static_cast<std::uint64_t>(r);
+      const auto res = hmlvs::RunPso(data, o);
+      times.push_back(res.seconds);
+      best = res.runs[0].best_fitness;
+    }
+    Emit("pso_run_" + std::to_string(threads) + "_threads", Median(times) * 1e3, "ms", reps,
+         ", \"threads\": " + std::to_string(threads) + ", \"last_best_fitness\": " +
+             std::to_string(best));
+  }
+  // 3. LM solves from a perturbed start (s = 0.01 around the truth), modern and paper mode.
+  for (const auto mode : {hmlvs::LmMode::kModern, hmlvs::LmMode::kPaper}) {
+    const bool modern = mode == hmlvs::LmMode::kModern;
+    hmlvs::LmOptions o;
+    o.mode = mode;
+    o.lower = lo;
+    o.upper = hi;
+    o.fixed[hmlvs::kSu] = modern;
+    if (!modern) {
+      o.function_tolerance = o.parameter_tolerance = 1.49012e-8;
+      o.gradient_tolerance = 0.0;
+    }
+    std::vector<double> times;
+    std::mt19937_64 rng(3);
+    std::uniform_real_distribution<double> u(-0.005, 0.005);
+    int iterations = 0;
+    for (int r = 0; r < std::max(reps, 20); ++r) {
+      hmlvs::Vector14d q0 = Nominal();
+      for (int d = 0; d < hmlvs::kNumParams; ++d) q0[d] *= 1.0 + u(rng);
+      q0[hmlvs::kOmega] = 0.01 * u(rng);
+      q0[hmlvs::kPhi] = 0.01 * u(rng);
+      q0[hmlvs::kVarphi] = 0.01 * u(rng);
+      q0[hmlvs::kK] = 0.0;
+      q0[hmlvs::kTy] = u(rng);
+      const auto res = hmlvs::RunLm(data, q0, o);
+      times.push_back(res.seconds);
+      iterations = res.iterations;
+    }
+    Emit(modern ? "lm_modern_solve" : "lm_paper_solve", Median(times) * 1e3, "ms",
+         std::max(reps, 20), ", \"last_iterations\": " + std::to_string(iterations));
+  }
+  return 0;
+}
