@@ -3,6 +3,7 @@ robot arm's last link), turning stripe pixels and joint readings into 3D points 
 base frame."""
 
 from . import _core
+from . import design
 from . import simulate
 from .board import Checkerboard
 from .dataset import Dataset
@@ -23,7 +24,7 @@ __version__ = _core.__version__
 
 __all__ = [
     "Bounds", "Checkerboard", "DHLink", "Dataset", "NAMES", "Parameters", "Robot",
-    "__version__", "hand_from_camera", "laser_plane_distance", "objective",
+    "__version__", "design", "hand_from_camera", "laser_plane_distance", "objective",
     "pixels_from_points", "points_in_base", "points_in_camera", "project", "residuals",
     "simulate",
 ]
