@@ -235,6 +235,8 @@ def test_error_from_wrong_theta():
         ({"f": float("nan")}, "f must be a finite number > 0"),
         ({"k": float("inf")}, "k must be finite"),
         ({"principal_point": (1.0,)}, r"principal_point must be \(Cu, Cv\)"),
+        ({"principal_point": 320.0}, r"principal_point must be \(Cu, Cv\)"),
+        ({"principal_point": (320.0, "x")}, "principal point Cv must be a number"),
         ({"resolution_limit": 0.0}, "resolution_limit must be"),
         ({"theta": math.radians(-80)}, "no pixel of the 640 x 480 image sees the laser"),
     ],

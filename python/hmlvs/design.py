@@ -160,7 +160,7 @@ class Sensor:
             cu = (w - 1) / 2 if isinstance(w, (int, np.integer)) else 0.0
             cv = (h - 1) / 2 if isinstance(h, (int, np.integer)) else 0.0
         else:
-            ppt = list(principal_point)
+            ppt = list(np.atleast_1d(np.asarray(principal_point, dtype=object)))
             if len(ppt) != 2:
                 raise ValueError(f"principal_point must be (Cu, Cv) in px, got "
                                  f"{principal_point!r}")
