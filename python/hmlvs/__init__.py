@@ -3,6 +3,7 @@ robot arm's last link), turning stripe pixels and joint readings into 3D points 
 base frame."""
 
 from . import _core
+from . import design
 from . import simulate
 from .board import Checkerboard
 from .identify import CalibrationResult, calibrate, initial_candidates
@@ -23,8 +24,9 @@ from .robot import DHLink, Robot
 __version__ = _core.__version__
 
 __all__ = [
-    "Bounds", "CalibrationResult", "Checkerboard", "DHLink", "Dataset", "NAMES", "Parameters", "Robot",
-    "__version__", "calibrate", "hand_from_camera", "initial_candidates", "laser_plane_distance", "objective",
+    "Bounds", "CalibrationResult", "Checkerboard", "DHLink", "Dataset", "NAMES", "Parameters",
+    "Robot", "__version__", "calibrate", "design", "hand_from_camera", "initial_candidates",
+    "laser_plane_distance", "objective",
     "pixels_from_points", "points_in_base", "points_in_camera", "project", "residuals",
     "simulate",
 ]
