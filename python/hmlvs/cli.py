@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 import json
 from pathlib import Path
-from typing import Optional
+from typing import Iterator, Optional
 
 import typer
 
@@ -17,6 +18,26 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
+
+
+@contextmanager
+def _guard(as_json: bool = False) -> Iterator[None]:
+    """Exit codes: 2 for bad input (one-line error naming the problem), 130 for Ctrl-C."""
+    try:
+        yield
+    except ValueError as e:
+        msg = " ".join(str(e).split())
+        if as_json:
+            typer.echo(json.dumps({"error": msg}))
+        typer.echo(f"error: {msg}", err=True)
+        raise typer.Exit(2) from None
+    except KeyboardInterrupt:
+        typer.echo("interrupted", err=True)
+        raise typer.Exit(130) from None
+
+
+def _echo_json(obj: object) -> None:
+    typer.echo(json.dumps(obj, indent=2, default=float))
 
 
 @app.command()
@@ -48,16 +69,93 @@ def simulate(
 @app.command()
 def demo(
     seed: int = typer.Option(0, help="Random seed."),
-    poses: int = typer.Option(30, help="Number of robot poses."),
+    poses: int = typer.Option(40, help="Number of robot poses."),
+    pixel_noise: float = typer.Option(0.1, help="Pixel noise, standard deviation (px)."),
+    out: Path = typer.Option(Path("demo-out"), help="Folder for the calibration file."),
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
-    """Simulate a SCORBOT ER-VII calibration session and summarise it.
+    """Simulate a SCORBOT ER-VII session, calibrate it (PSO + LM), compare with the truth.
 
-    Example: hmlvs demo --seed 1
+    Example: hmlvs demo --seed 1 --poses 40
     """
     from . import simulate as sim
+    from .calibration_file import Calibration
+    from .identify import calibrate as run_calibration
 
-    s = sim.session(num_poses=poses, pixel_noise=0.1, seed=seed)
-    typer.echo(s.summary())
+    with _guard(as_json):
+        session = sim.session(num_poses=poses, pixel_noise=pixel_noise, seed=seed)
+        fit, test = session.dataset.split(0.5, seed=seed, by_pose=True)
+        if not as_json:
+            typer.echo(session.summary())
+            typer.echo(f"fit: {len(fit)} points from {fit.num_poses} poses; held out: "
+                       f"{len(test)} points from {test.num_poses} poses\n")
+        result = run_calibration(fit, test=test, seed=seed, progress=not as_json)
+        path = Calibration.from_result(result, fit, robot=session.robot).save(
+            out / "calibration.yaml")
+    if as_json:
+        _echo_json({"points": len(session.dataset), "poses": session.dataset.num_poses,
+                    "fit_rms_mm": result.fit_rms, "test_rms_mm": result.test_rms,
+                    "seconds": result.seconds, "calibration": str(path)})
+        return
+    typer.echo(result.summary(session.truth))
+    typer.echo(f"\ncalibration written to {path}")
+
+
+@app.command()
+def calibrate(
+    data: Path = typer.Argument(..., help="Calibration data set (.npz or .json)."),
+    out: Path = typer.Option(Path("calibration.yaml"), "--out", "-o",
+                             help="Calibration file to write (.yaml or .json)."),
+    method: str = typer.Option("pso+lm", help="pso+lm, pso, lm, lm-paper or random."),
+    test: Optional[Path] = typer.Option(None, help="Held-out data set for the test RMS."),
+    holdout: float = typer.Option(0.0, help="Fraction of poses held out for testing when "
+                                  "no --test is given (0 = none)."),
+    fixed: list[str] = typer.Option(["Su"], "--fixed", help="Parameter held at its initial "
+                                    "value (repeat the option); --fixed none frees all."),
+    runs: int = typer.Option(1, help="Independent PSO runs (the best is kept)."),
+    iterations: int = typer.Option(5000, help="PSO iterations."),
+    loss: Optional[str] = typer.Option(None, help="Robust loss for LM: huber or cauchy."),
+    loss_scale: float = typer.Option(1.0, help="Robust loss scale (mm)."),
+    seed: int = typer.Option(0, help="Random seed."),
+    threads: Optional[int] = typer.Option(None, help="Threads (default: all cores)."),
+    report: Optional[Path] = typer.Option(None, help="Also write an HTML report here."),
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+) -> None:
+    """Identify the sensor parameters from a calibration data set.
+
+    Example: hmlvs calibrate session.npz --holdout 0.3 --out calibration.yaml --report report.html
+    """
+    from .calibration_file import Calibration
+    from .dataset import Dataset
+    from .identify import calibrate as run_calibration
+
+    with _guard(as_json):
+        ds = Dataset.load(data)
+        test_ds = Dataset.load(test) if test is not None else None
+        if test_ds is None and holdout > 0:
+            ds, test_ds = ds.split(1.0 - holdout, seed=seed, by_pose=True)
+        fixed_names = () if [f.lower() for f in fixed] == ["none"] else tuple(fixed)
+        result = run_calibration(ds, method=method, test=test_ds, fixed=fixed_names, runs=runs,
+                                 iterations=iterations, loss=loss, loss_scale=loss_scale,
+                                 seed=seed, threads=threads, progress=not as_json)
+        path = Calibration.from_result(result, ds).save(out)
+        report_path = None
+        if report is not None:
+            from .report import write_report
+
+            report_path = write_report(result, ds, report, test=test_ds)
+    if as_json:
+        _echo_json({"calibration": str(path), "report": None if report_path is None
+                    else str(report_path), "fit_rms_mm": result.fit_rms,
+                    "test_rms_mm": result.test_rms, "method": method,
+                    "parameters": result.params.to_dict(), "fixed": list(result.fixed),
+                    "termination": result.termination, "seconds": result.seconds,
+                    "warnings": result.warnings})
+        return
+    typer.echo(result.summary())
+    typer.echo(f"calibration written to {path}")
+    if report_path is not None:
+        typer.echo(f"report written to {report_path}")
 
 
 @app.command()

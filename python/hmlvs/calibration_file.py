@@ -1,0 +1,174 @@
+"""The calibration file: what `hmlvs calibrate` writes and `hmlvs measure` reads back.
+
+Format ``hmlvs-calibration`` version 1, as YAML (``.yaml``/``.yml``) or JSON (``.json``)::
+
+    format: hmlvs-calibration
+    version: 1
+    units: {length: mm, angle: rad, pixel: px, k: 1/mm^2}
+    parameters: {f: 8.0, Su: 0.0074, ...}     # all 14, paper order (MODEL.md)
+    std: {f: 0.002, Su: null, ...}           # standard deviations; null when fixed/unknown
+    fixed: [Su]
+    fit_rms_mm: 0.09
+    test_rms_mm: 0.10                        # null without held-out points
+    num_points: 120
+    method: pso+lm
+    data_sha256: 3f2a...                     # hash of the calibration data used
+    created: '2026-11-22T16:00:00+00:00'
+    hmlvs_version: 0.1.0
+    hand_from_camera: [[...4x4...]]          # derived, for C++/ROS users (mm)
+    robot: {...}                             # optional DH description (hmlvs.Robot.to_dict)
+
+See docs/file-formats.md for the full description.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import datetime
+import hashlib
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from ._io import atomic_write
+from .dataset import Dataset
+from .model import hand_from_camera
+from .params import NAMES, UNITS, Parameters
+from .robot import Robot
+
+FORMAT = "hmlvs-calibration"
+FORMAT_VERSION = 1
+
+
+def dataset_hash(ds: Dataset) -> str:
+    """SHA-256 of a data set's pixels, poses, reference points and ids (order matters)."""
+    h = hashlib.sha256()
+    for a in (ds.pixels, ds.poses, ds.points):
+        h.update(np.ascontiguousarray(a, dtype="<f8").tobytes())
+    h.update("\n".join(map(str, ds.ids)).encode())
+    return h.hexdigest()
+
+
+@dataclass
+class Calibration:
+    """A calibrated sensor as stored on disk."""
+
+    params: Parameters
+    std: dict[str, float | None] = field(default_factory=dict)
+    fixed: tuple[str, ...] = ()
+    fit_rms: float | None = None
+    test_rms: float | None = None
+    num_points: int | None = None
+    method: str | None = None
+    data_sha256: str | None = None
+    created: str | None = None
+    hmlvs_version: str | None = None
+    robot: Robot | None = None
+
+    @classmethod
+    def from_result(cls, result: Any, dataset: Dataset | None = None,
+                    robot: Robot | None = None) -> "Calibration":
+        from . import __version__
+
+        std_src = getattr(result, "std", None) or {}
+        std = {n: (None if n in result.fixed or std_src.get(n) is None
+                   or not math.isfinite(std_src[n]) else float(std_src[n])) for n in NAMES}
+        return cls(params=result.params, std=std, fixed=tuple(result.fixed),
+                   fit_rms=float(result.fit_rms),
+                   test_rms=None if result.test_rms is None else float(result.test_rms),
+                   num_points=int(result.fit_errors.size), method=result.method,
+                   data_sha256=None if dataset is None else dataset_hash(dataset),
+                   created=datetime.datetime.now(datetime.timezone.utc).isoformat(
+                       timespec="seconds"),
+                   hmlvs_version=__version__, robot=robot)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "format": FORMAT,
+            "version": FORMAT_VERSION,
+            "units": {"length": "mm", "angle": "rad", "pixel": "px", "k": "1/mm^2"},
+            "parameters": {n: float(getattr(self.params, n)) for n in NAMES},
+            "std": {n: self.std.get(n) for n in NAMES},
+            "fixed": list(self.fixed),
+            "fit_rms_mm": self.fit_rms,
+            "test_rms_mm": self.test_rms,
+            "num_points": self.num_points,
+            "method": self.method,
+            "data_sha256": self.data_sha256,
+            "created": self.created,
+            "hmlvs_version": self.hmlvs_version,
+            "hand_from_camera": hand_from_camera(self.params).tolist(),
+            "robot": None if self.robot is None else self.robot.to_dict(),
+        }
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write atomically as YAML (.yaml/.yml) or JSON (.json)."""
+        path = Path(path)
+        d = self.to_dict()
+        if path.suffix in (".yaml", ".yml"):
+            text = yaml.safe_dump(d, sort_keys=False, default_flow_style=None)
+        elif path.suffix == ".json":
+            text = json.dumps(d, indent=2)
+        else:
+            raise ValueError(f"{path}: calibration files are .yaml, .yml or .json")
+        with atomic_write(path) as fh:
+            fh.write(text)
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "Calibration":
+        path = Path(path)
+        if not path.is_file():
+            raise ValueError(f"{path}: no such calibration file")
+        try:
+            text = path.read_text(encoding="utf-8")
+            d = json.loads(text) if path.suffix == ".json" else yaml.safe_load(text)
+        except (json.JSONDecodeError, yaml.YAMLError, UnicodeDecodeError) as e:
+            raise ValueError(f"{path}: malformed calibration file ({e})") from None
+        return cls.from_dict(d, source=str(path))
+
+    @classmethod
+    def from_dict(cls, d: Any, source: str = "calibration") -> "Calibration":
+        if not isinstance(d, dict) or d.get("format") != FORMAT:
+            raise ValueError(f"{source}: not an hmlvs calibration file (format field is "
+                             f"{d.get('format') if isinstance(d, dict) else None!r})")
+        if int(d.get("version", 0)) > FORMAT_VERSION:
+            raise ValueError(f"{source}: calibration format version {d.get('version')} is newer "
+                             f"than this hmlvs understands ({FORMAT_VERSION})")
+        units = d.get("units", {})
+        if units and (units.get("length", "mm") != "mm" or units.get("angle", "rad") != "rad"):
+            raise ValueError(f"{source}: units must be mm and rad, got {units}")
+        p = d.get("parameters")
+        if not isinstance(p, dict):
+            raise ValueError(f"{source}: 'parameters' must map the 14 parameter names to values")
+        try:
+            params = Parameters.from_dict(p)
+        except ValueError as e:
+            raise ValueError(f"{source}: {e}") from None
+        robot = None
+        if d.get("robot"):
+            robot = Robot.from_dict(d["robot"])
+        std = d.get("std") or {}
+        return cls(params=params, std={n: std.get(n) for n in NAMES},
+                   fixed=tuple(d.get("fixed") or ()), fit_rms=d.get("fit_rms_mm"),
+                   test_rms=d.get("test_rms_mm"), num_points=d.get("num_points"),
+                   method=d.get("method"), data_sha256=d.get("data_sha256"),
+                   created=d.get("created"), hmlvs_version=d.get("hmlvs_version"), robot=robot)
+
+    def table(self) -> str:
+        lines = [f"{'param':<7} {'unit':<7} {'value':>14} {'std':>11}"]
+        for n in NAMES:
+            s = self.std.get(n)
+            s_txt = "fixed" if n in self.fixed else ("-" if s is None else f"{s:.3g}")
+            lines.append(f"{n:<7} {UNITS[n]:<7} {getattr(self.params, n):>14.7g} {s_txt:>11}")
+        return "\n".join(lines)
+
+
+def load_calibration(path: str | os.PathLike) -> Calibration:
+    """Read a calibration file written by ``hmlvs calibrate`` (YAML or JSON)."""
+    return Calibration.load(path)

@@ -1,0 +1,186 @@
+"""Measurement with a calibrated sensor: stripe pixels + poses -> 3D points -> point clouds."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import os
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ._arrays import as_matrix
+from ._io import atomic_write
+from .calibration_file import Calibration
+from .model import points_in_base
+from .params import Parameters
+from .robot import Robot
+
+
+@dataclass(frozen=True)
+class PointCloud:
+    """Measured points in the robot base frame (mm).
+
+    Attributes
+    ----------
+    points : (n, 3) base-frame points; NaN rows where ``valid`` is False
+    valid : (n,) whether the stripe pixel's ray met the laser plane
+    pixels : (n, 2) the stripe pixels measured
+    pose_index : (n,) the pose (image) each point was measured at
+    intensity : (n,) stripe intensity per point (0 when unknown)
+    """
+
+    points: np.ndarray
+    valid: np.ndarray
+    pixels: np.ndarray
+    pose_index: np.ndarray
+    intensity: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.points.shape[0])
+
+    @property
+    def num_valid(self) -> int:
+        return int(self.valid.sum())
+
+    def valid_points(self) -> np.ndarray:
+        return self.points[self.valid]
+
+    def concat(self, other: "PointCloud") -> "PointCloud":
+        offset = int(self.pose_index.max()) + 1 if len(self) else 0
+        return PointCloud(np.vstack([self.points, other.points]),
+                          np.concatenate([self.valid, other.valid]),
+                          np.vstack([self.pixels, other.pixels]),
+                          np.concatenate([self.pose_index, other.pose_index + offset]),
+                          np.concatenate([self.intensity, other.intensity]))
+
+    def save(self, path: str | os.PathLike, only_valid: bool = True) -> Path:
+        """Write atomically as binary PLY (``.ply``) or CSV (``.csv``) by the suffix."""
+        path = Path(path)
+        if path.suffix == ".ply":
+            return self.save_ply(path, only_valid)
+        if path.suffix == ".csv":
+            return self.save_csv(path, only_valid)
+        raise ValueError(f"{path}: point clouds are written as .ply or .csv")
+
+    def save_ply(self, path: str | os.PathLike, only_valid: bool = True) -> Path:
+        """Binary little-endian PLY: x, y, z (double, mm), intensity (float), pose_index (int)."""
+        keep = self.valid if only_valid else np.ones(len(self), bool)
+        n = int(keep.sum())
+        rec = np.empty(n, dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8"),
+                                 ("intensity", "<f4"), ("pose_index", "<i4")])
+        rec["x"], rec["y"], rec["z"] = self.points[keep].T
+        rec["intensity"] = self.intensity[keep]
+        rec["pose_index"] = self.pose_index[keep]
+        header = ("ply\nformat binary_little_endian 1.0\n"
+                  "comment hmlvs point cloud, robot base frame, units mm\n"
+                  f"element vertex {n}\nproperty double x\nproperty double y\n"
+                  "property double z\nproperty float intensity\nproperty int pose_index\n"
+                  "end_header\n")
+        with atomic_write(path, "wb") as fh:
+            fh.write(header.encode("ascii"))
+            fh.write(rec.tobytes())
+        return Path(path)
+
+    def save_csv(self, path: str | os.PathLike, only_valid: bool = True) -> Path:
+        """CSV with a header: x_mm, y_mm, z_mm, intensity, pose_index, u_px, v_px."""
+        keep = self.valid if only_valid else np.ones(len(self), bool)
+        with atomic_write(path) as fh:
+            fh.write("x_mm,y_mm,z_mm,intensity,pose_index,u_px,v_px\n")
+            for p, i, k, px in zip(self.points[keep], self.intensity[keep],
+                                   self.pose_index[keep], self.pixels[keep]):
+                fh.write(f"{p[0]:.6f},{p[1]:.6f},{p[2]:.6f},{i:.6g},{int(k)},"
+                         f"{px[0]:.4f},{px[1]:.4f}\n")
+        return Path(path)
+
+
+def read_ply(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Read a binary little-endian PLY written by :meth:`PointCloud.save_ply`."""
+    path = Path(path)
+    data = path.read_bytes()
+    end = data.find(b"end_header\n")
+    if not data.startswith(b"ply\n") or end < 0:
+        raise ValueError(f"{path}: not a PLY file")
+    header = data[:end].decode("ascii").splitlines()
+    if "format binary_little_endian 1.0" not in header:
+        raise ValueError(f"{path}: only binary little-endian PLY is read")
+    types = {"double": "<f8", "float": "<f4", "int": "<i4", "uchar": "u1"}
+    n, fields = 0, []
+    for line in header:
+        parts = line.split()
+        if parts[:2] == ["element", "vertex"]:
+            n = int(parts[2])
+        elif parts and parts[0] == "property":
+            fields.append((parts[2], types[parts[1]]))
+    rec = np.frombuffer(data[end + len(b"end_header\n"):], dtype=fields, count=n)
+    return {name: rec[name].copy() for name, _ in fields}
+
+
+def _params_of(calibration: Any) -> Parameters:
+    if isinstance(calibration, Calibration):
+        return calibration.params
+    if isinstance(calibration, Parameters):
+        return calibration
+    if hasattr(calibration, "params") and isinstance(calibration.params, Parameters):
+        return calibration.params  # a CalibrationResult
+    if isinstance(calibration, (str, os.PathLike)):
+        return Calibration.load(calibration).params
+    raise ValueError("calibration must be a Calibration, CalibrationResult, Parameters or the "
+                     "path of a calibration file")
+
+
+def measure(calibration: Any, stripes: Sequence[Any] | np.ndarray, poses: Any = None, *,
+            joints: Any = None, robot: Robot | None = None, degrees: bool = False,
+            on_invalid: str = "mask") -> PointCloud:
+    """Stripe pixels seen at hand poses -> a point cloud in the robot base frame.
+
+    Parameters
+    ----------
+    calibration : a :class:`Calibration`, a ``CalibrationResult``, :class:`Parameters` or the
+        path of a calibration file
+    stripes : one entry per pose: an (k, 2) array of stripe pixels (u, v), or an object with
+        ``pixels`` (and optionally ``intensity``) such as :class:`hmlvs.image.StripeResult`
+    poses : (n_poses, 4, 4) base_from_hand poses, or
+    joints : (n_poses, dof) joint readings, with ``robot`` (default: the calibration's robot,
+        else SCORBOT ER-VII); ``degrees`` for readings in degrees
+    on_invalid : "mask" keeps rays that miss the laser plane as invalid points; "raise" raises
+
+    Returns
+    -------
+    PointCloud
+    """
+    params = _params_of(calibration)
+    stripes = list(stripes) if not isinstance(stripes, np.ndarray) or stripes.ndim != 2 \
+        else [stripes]
+    if (poses is None) == (joints is None):
+        raise ValueError("give either poses or joints (with a robot), not both or neither")
+    if poses is None:
+        if robot is None:
+            robot = getattr(calibration, "robot", None) or Robot.scorbot_er7()
+        poses = robot.poses(joints, degrees=degrees)
+    poses = np.asarray(poses, dtype=float)
+    if poses.ndim == 2:
+        poses = poses[None]
+    if poses.shape[0] != len(stripes):
+        raise ValueError(f"{len(stripes)} stripes but {poses.shape[0]} poses: give one pose per "
+                         "stripe (image)")
+    px_all, pose_idx, inten = [], [], []
+    for k, s in enumerate(stripes):
+        px = s.pixels if hasattr(s, "pixels") else s
+        px = as_matrix(px, 2, f"stripe {k} pixels") if np.size(px) else np.empty((0, 2))
+        it = getattr(s, "intensity", None)
+        if it is not None and hasattr(s, "pixels"):
+            found = getattr(s, "found", None)
+            it = np.asarray(it, float)
+            if found is not None and it.shape[0] != px.shape[0]:
+                it = it[np.asarray(found, bool)]
+        it = np.zeros(px.shape[0]) if it is None or np.shape(it)[0] != px.shape[0] else it
+        px_all.append(px)
+        pose_idx.append(np.full(px.shape[0], k, dtype=np.int32))
+        inten.append(np.asarray(it, float))
+    pixels = np.vstack(px_all) if px_all else np.empty((0, 2))
+    pidx = np.concatenate(pose_idx) if pose_idx else np.empty(0, np.int32)
+    if pixels.shape[0] == 0:
+        raise ValueError("no stripe pixels to measure")
+    pts, valid = points_in_base(params, pixels, poses[pidx], on_invalid=on_invalid)
+    return PointCloud(pts, valid, pixels, pidx, np.concatenate(inten))

@@ -1,0 +1,165 @@
+"""A self-contained HTML calibration report (figures embedded as PNG data URIs)."""
+
+from __future__ import annotations
+
+import base64
+import datetime
+import html
+import io
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._io import atomic_write
+from .dataset import Dataset
+from .model import points_in_base
+from .params import DESCRIPTIONS, NAMES, TABLE2_LOWER, TABLE2_UPPER, UNITS, Parameters
+
+# The paper's Table 2: nominal values, PSO bounds and its best-fit parameters.
+PAPER_TABLE2_BEST = [7.70, 0.0074, 0.0075, 323.8, 238.3, 4.8e-4, 137.3, 0.47, -1.8e-3, -0.05,
+                     -6.8e-3, 63.2, -2.3, -46.2]
+
+
+def _png(fig: Any) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _figures(result: Any, ds: Dataset, test: Dataset | None) -> dict[str, str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figs: dict[str, str] = {}
+    fig, ax = plt.subplots(figsize=(6, 3.4))
+    ax.hist(result.fit_errors, bins=30, alpha=0.75, label="fit points")
+    if result.test_errors is not None:
+        ax.hist(result.test_errors, bins=30, alpha=0.6, label="held-out points")
+    ax.set_xlabel("distance error ||E_i|| (mm)")
+    ax.set_ylabel("points")
+    ax.set_title("Residual histogram")
+    ax.legend()
+    figs["hist"] = _png(fig)
+
+    fig, ax = plt.subplots(figsize=(7, 3.4))
+    ax.plot(np.arange(result.fit_errors.size), result.fit_errors, "o", ms=3, label="fit")
+    if result.test_errors is not None:
+        ax.plot(result.fit_errors.size + np.arange(result.test_errors.size), result.test_errors,
+                "s", ms=3, label="held out")
+    ax.set_xlabel("point")
+    ax.set_ylabel("||E_i|| (mm)")
+    ax.set_title("Per-point distance errors")
+    ax.legend()
+    figs["points"] = _png(fig)
+
+    hist = getattr(result, "extra", {}).get("pso_histories") or (
+        [result.history] if result.history.size else [])
+    if hist:
+        fig, ax = plt.subplots(figsize=(6, 3.4))
+        for k, h in enumerate(hist):
+            ax.semilogy(np.arange(1, len(h) + 1), h, lw=1, label=f"run {k + 1}" if k < 8 else None)
+        ax.set_xlabel("PSO iteration")
+        ax.set_ylabel("best fitness F (mm^2)")
+        ax.set_title("PSO convergence (paper Fig. 11)")
+        if len(hist) <= 8:
+            ax.legend(fontsize=7)
+        figs["convergence"] = _png(fig)
+
+    fig = plt.figure(figsize=(6, 5))
+    ax = fig.add_subplot(projection="3d")
+    for d, label, mk in ((ds, "fit", "o"), (test, "held out", "s")):
+        if d is None or len(d) == 0:
+            continue
+        meas, ok = points_in_base(result.params, d.pixels, d.poses, on_invalid="mask")
+        ax.scatter(*d.points.T, s=14, marker=mk, facecolors="none", edgecolors="k",
+                   label=f"reference ({label})")
+        ax.scatter(*meas[ok].T, s=5, marker=".", label=f"measured ({label})")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_zlabel("z (mm)")
+    ax.set_title("Reference against measured points (base frame)")
+    ax.legend(fontsize=7)
+    figs["cloud"] = _png(fig)
+    return figs
+
+
+def render_report(result: Any, ds: Dataset, test: Dataset | None = None,
+                  truth: Parameters | None = None, title: str = "hmlvs calibration report") -> str:
+    """The report as an HTML string."""
+    figs = _figures(result, ds, test)
+    std = getattr(result, "std", None) or {}
+    rows = []
+    for i, n in enumerate(NAMES):
+        v = getattr(result.params, n)
+        s = std.get(n)
+        s_txt = "fixed" if n in result.fixed else ("-" if s is None or not math.isfinite(s)
+                                                    else f"{s:.3g}")
+        cells = [n, UNITS[n], html.escape(DESCRIPTIONS[n]), f"{v:.6g}", s_txt,
+                 f"{TABLE2_LOWER[i]:.4g}", f"{TABLE2_UPPER[i]:.4g}", f"{PAPER_TABLE2_BEST[i]:.4g}"]
+        if truth is not None:
+            cells.append(f"{getattr(truth, n):.6g}")
+        rows.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
+    truth_head = "<th>true</th>" if truth is not None else ""
+    warn = list(getattr(result, "warnings", []))
+    notes = list(getattr(result, "notes", []))
+    items = "".join(f'<li class="warn">{html.escape(w)}</li>' for w in warn) + "".join(
+        f"<li>{html.escape(n)}</li>" for n in notes)
+    test_txt = ("-" if result.test_rms is None else
+                f"{result.test_rms:.4g} mm over {result.test_errors.size} points")
+    captions = {"hist": "Residual histogram", "points": "Per-point distance errors",
+                "convergence": "PSO convergence (paper Fig. 11)",
+                "cloud": "Reference against measured points"}
+    img = "".join(f'<figure><img alt="{captions[k]}" src="{v}"><figcaption>{captions[k]}'
+                  f"</figcaption></figure>" for k, v in figs.items())
+    now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
+<style>
+body {{ font-family: sans-serif; margin: 2em; color: #222; max-width: 1100px; }}
+table {{ border-collapse: collapse; margin: 1em 0; }}
+td, th {{ border: 1px solid #bbb; padding: 3px 8px; text-align: right; font-size: 13px; }}
+td:nth-child(3) {{ text-align: left; }}
+th {{ background: #eee; }}
+.summary td {{ text-align: left; }}
+li.warn {{ color: #a40; font-weight: bold; }}
+figure {{ display: inline-block; margin: 0.5em; }}
+img {{ max-width: 520px; border: 1px solid #ddd; }}
+</style></head><body>
+<h1>{html.escape(title)}</h1>
+<table class="summary">
+<tr><td>method</td><td>{html.escape(result.method)} ({html.escape(result.termination)})</td></tr>
+<tr><td>fit RMS of ||E_i||</td><td>{result.fit_rms:.4g} mm over {result.fit_errors.size} points</td></tr>
+<tr><td>held-out RMS</td><td>{test_txt}</td></tr>
+<tr><td>iterations, time</td><td>{result.iterations}, {result.seconds:.3f} s on {result.threads} threads (seed {result.seed})</td></tr>
+<tr><td>written</td><td>{now}</td></tr>
+</table>
+<h2>Warnings and notes</h2>
+<ul>{items or "<li>none</li>"}</ul>
+<h2>Parameters (layout of the paper's Table 2)</h2>
+<table><tr><th>parameter</th><th>unit</th><th>meaning</th><th>identified</th><th>std</th>
+<th>lower bound</th><th>upper bound</th><th>paper best fit</th>{truth_head}</tr>
+{"".join(rows)}</table>
+<h2>Figures</h2>
+{img}
+</body></html>
+"""
+
+
+def write_report(result: Any, ds: Dataset, path: str | os.PathLike, test: Dataset | None = None,
+                 truth: Parameters | None = None) -> Path:
+    """Write the report atomically; returns its path."""
+    path = Path(path)
+    if path.suffix not in (".html", ".htm"):
+        raise ValueError(f"{path}: the report is an .html file")
+    text = render_report(result, ds, test, truth)
+    with atomic_write(path) as fh:
+        fh.write(text)
+    return path
