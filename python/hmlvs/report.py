@@ -130,7 +130,7 @@ td:nth-child(3) {{ text-align: left; }}
 th {{ background: #eee; }}
 .summary td {{ text-align: left; }}
 li.warn {{ color: #a40; font-weight: bold; }}
-figure {{ display: inline-block; margin: 0.5em; }}
+figure {{ display: inline-block; margin: 0.5em; vertical-align: top; }}
 img {{ max-width: 520px; border: 1px solid #ddd; }}
 </style></head><body>
 <h1>{html.escape(title)}</h1>
