@@ -7,7 +7,9 @@ from . import design
 from . import simulate
 from .board import Checkerboard
 from .identify import CalibrationResult, calibrate, initial_candidates
+from .calibration_file import Calibration, load_calibration
 from .dataset import Dataset
+from .measure import PointCloud, measure
 from .model import (
     hand_from_camera,
     laser_plane_distance,
@@ -24,9 +26,9 @@ from .robot import DHLink, Robot
 __version__ = _core.__version__
 
 __all__ = [
-    "Bounds", "CalibrationResult", "Checkerboard", "DHLink", "Dataset", "NAMES", "Parameters",
+    "Bounds", "Calibration", "CalibrationResult", "Checkerboard", "DHLink", "Dataset", "NAMES", "Parameters",
     "Robot", "__version__", "calibrate", "design", "hand_from_camera", "initial_candidates",
-    "laser_plane_distance", "objective",
+    "laser_plane_distance", "load_calibration", "measure", "objective", "PointCloud",
     "pixels_from_points", "points_in_base", "points_in_camera", "project", "residuals",
     "simulate",
 ]
