@@ -124,3 +124,24 @@ def test_cli_calibrate_json_and_exit_codes(tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         cli_main(["calibrate", str(ds_path), "--method", "magic"])
     assert e.value.code == 2 and "unknown method 'magic'" in capsys.readouterr().err
+
+
+def test_cli_report_and_measure_on_a_dataset(tmp_path, capsys, calibrated):
+    sim, result = calibrated
+    cal = Calibration.from_result(result, sim.fit).save(tmp_path / "cal.json")
+    fit = sim.fit.save(tmp_path / "fit.npz")
+    test = sim.test.save(tmp_path / "test.json")
+    with pytest.raises(SystemExit) as e:
+        cli_main(["report", str(cal), str(fit), "--test", str(test), "--out",
+                  str(tmp_path / "r.html"), "--json"])
+    assert e.value.code == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["test_rms_mm"] == pytest.approx(result.test_rms, rel=1e-9)
+    with pytest.raises(SystemExit) as e:
+        cli_main(["measure", str(cal), str(test), "--out", str(tmp_path / "c.csv"), "--json"])
+    assert e.value.code == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["points"] == len(sim.test) and s["rms_mm"] == pytest.approx(result.test_rms)
+    with pytest.raises(SystemExit) as e:
+        cli_main(["measure", str(tmp_path / "nope.yaml"), str(test)])
+    assert e.value.code == 2 and "nope.yaml: no such calibration file" in capsys.readouterr().err

@@ -217,5 +217,72 @@ def design(
             typer.echo(f"written to {out}: " + ", ".join(p.name for p in files))
 
 
+@app.command()
+def report(
+    calibration: Path = typer.Argument(..., help="Calibration file (.yaml or .json)."),
+    data: Path = typer.Argument(..., help="Data set to evaluate on (.npz or .json)."),
+    test: Optional[Path] = typer.Option(None, help="Held-out data set."),
+    out: Path = typer.Option(Path("report.html"), "--out", "-o", help="HTML file to write."),
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+) -> None:
+    """Write a self-contained HTML report for a calibration file on a data set.
+
+    Example: hmlvs report calibration.yaml session.npz --out report.html
+    """
+    from .calibration_file import Calibration
+    from .dataset import Dataset
+    from .identify import evaluate
+    from .report import write_report
+
+    with _guard(as_json):
+        cal = Calibration.load(calibration)
+        ds = Dataset.load(data)
+        test_ds = Dataset.load(test) if test is not None else None
+        result = evaluate(cal.params, ds, test_ds, method=cal.method or "loaded",
+                          fixed=cal.fixed)
+        result.std = cal.std  # shown in the parameter table
+        path = write_report(result, ds, out, test=test_ds)
+    if as_json:
+        _echo_json({"report": str(path), "fit_rms_mm": result.fit_rms,
+                    "test_rms_mm": result.test_rms})
+        return
+    typer.echo(f"RMS on {data.name}: {result.fit_rms:.4g} mm over {len(ds)} points")
+    if result.test_rms is not None:
+        typer.echo(f"RMS on {test.name}: {result.test_rms:.4g} mm over {len(test_ds)} points")
+    typer.echo(f"report written to {path}")
+
+
+@app.command()
+def measure(
+    calibration: Path = typer.Argument(..., help="Calibration file (.yaml or .json)."),
+    source: Path = typer.Argument(..., help="A data set (.npz/.json) of stripe pixels and poses, "
+                                  "or an image manifest (folder or manifest.json)."),
+    out: Path = typer.Option(Path("cloud.ply"), "--out", "-o",
+                             help="Point cloud to write (.ply or .csv)."),
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+) -> None:
+    """Measure 3D points in the robot base frame with a calibrated sensor.
+
+    Example: hmlvs measure calibration.yaml scan/ --out cloud.ply
+    """
+    from .calibration_file import Calibration
+    from .measure import measure_source
+
+    with _guard(as_json):
+        cal = Calibration.load(calibration)
+        cloud, info = measure_source(cal, source)
+        path = cloud.save(out)
+    summary = {"cloud": str(path), "points": cloud.num_valid,
+               "invalid": len(cloud) - cloud.num_valid, **info}
+    if as_json:
+        _echo_json(summary)
+        return
+    typer.echo(f"{cloud.num_valid} points measured ({len(cloud) - cloud.num_valid} rays missed "
+               "the laser plane)")
+    if "rms_mm" in info:
+        typer.echo(f"RMS distance to the reference points: {info['rms_mm']:.4g} mm")
+    typer.echo(f"point cloud written to {path}")
+
+
 def main(argv: Optional[list[str]] = None) -> None:
     app(args=argv)

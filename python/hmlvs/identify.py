@@ -173,6 +173,22 @@ def _lm_options(mode: str, fixed_mask: np.ndarray, bounds: Bounds, loss: str | N
     return o
 
 
+def evaluate(params: Any, dataset: Dataset, test: Dataset | None = None,
+             method: str = "evaluated", fixed: Iterable[str] = ()) -> CalibrationResult:
+    """A :class:`CalibrationResult` for given parameters (no solve): RMS and per-point errors
+    on ``dataset`` (and ``test``), e.g. to report on a calibration file."""
+    q = _as_vector(params, "params")
+    fit_errors = np.array(_fitness_data(dataset).point_errors(q))
+    test_errors = None if test is None else np.array(_fitness_data(test).point_errors(q))
+    return CalibrationResult(
+        params=Parameters.from_array(q), method=method, fixed=tuple(fixed),
+        fit_rms=_rms(fit_errors), test_rms=None if test_errors is None else _rms(test_errors),
+        fit_errors=fit_errors, test_errors=test_errors,
+        cost=float(0.5 * np.nansum(fit_errors**2)), history=np.empty(0),
+        run_fitness=np.empty(0), iterations=0, termination="none (evaluation only)",
+        seconds=0.0, seed=0, threads=0, bounds=Bounds.table2())
+
+
 def initial_candidates(center: Any, s: float, n: int, seed: int = 0,
                        bounds: Bounds | None = None) -> np.ndarray:
     """n initial candidates by the paper's Eq. 22: q_i = q_i0 (1 + (rand - 0.5) s).

@@ -184,3 +184,20 @@ def measure(calibration: Any, stripes: Sequence[Any] | np.ndarray, poses: Any = 
         raise ValueError("no stripe pixels to measure")
     pts, valid = points_in_base(params, pixels, poses[pidx], on_invalid=on_invalid)
     return PointCloud(pts, valid, pixels, pidx, np.concatenate(inten))
+
+
+def measure_source(calibration: Any, source: str | os.PathLike) -> tuple[PointCloud, dict]:
+    """Measure every stripe of a data set file (.npz/.json) or an image manifest.
+
+    Returns the cloud and a summary; for a data set with reference points the summary holds
+    the RMS distance between measured and reference points (``rms_mm``).
+    """
+    from .dataset import Dataset
+
+    path = Path(source)
+    if path.suffix in (".npz", ".json") and path.is_file() and path.name != "manifest.json":
+        ds = Dataset.load(path)
+        cloud = measure(calibration, [ds.pixels[i:i + 1] for i in range(len(ds))], ds.poses)
+        err = np.linalg.norm(cloud.points - ds.points, axis=1)[cloud.valid]
+        return cloud, {"rms_mm": float(np.sqrt(np.mean(err**2))) if err.size else None}
+    return measure_images(calibration, path)
