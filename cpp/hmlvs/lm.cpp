@@ -21,6 +21,20 @@ double WrapNear(double angle, double reference) {
   return angle + 2.0 * kPi * std::round((reference - angle) / (2.0 * kPi));
 }
 
+// E = h - (R cP + t) in the hand frame, for intrinsics q[0..7], a rotation (quaternion or
+// matrix) and a translation. False when the pixel's ray misses the laser plane.
+template <typename T, typename Rotation>
+bool HandResidual(const T* q, const Rotation& rot, const T& tx, const T& ty, const T& tz,
+                  double u, double v, const Eigen::Vector3d& h, T* residual) {
+  using std::tan;
+  T cp[3];
+  if (!(PixelToCamera(q, tan(q[kTheta]), T(u), T(v), cp) > T(0.0))) return false;
+  const Eigen::Matrix<T, 3, 1> hand =
+      rot * Eigen::Matrix<T, 3, 1>(cp[0], cp[1], cp[2]) + Eigen::Matrix<T, 3, 1>(tx, ty, tz);
+  for (int i = 0; i < 3; ++i) residual[i] = T(h[i]) - hand[i];
+  return true;
+}
+
 // Intrinsics and translation as 11 scalar blocks (f..theta, tx, ty, tz) and the rotation as an
 // Eigen quaternion [x, y, z, w]: E = h - (R cP + t) in the hand frame (same norm as in base).
 struct ModernResidual {
@@ -31,8 +45,7 @@ struct ModernResidual {
   bool operator()(const T* f, const T* su, const T* sv, const T* cu, const T* cv, const T* k,
                   const T* hh, const T* theta, const T* quat, const T* tx, const T* ty,
                   const T* tz, T* residual) const {
-    using std::tan;
-    T q[kNumParams];
+    T q[kNumParams];  // only the intrinsics f..theta are read
     q[kF] = *f;
     q[kSu] = *su;
     q[kSv] = *sv;
@@ -41,15 +54,8 @@ struct ModernResidual {
     q[kK] = *k;
     q[kH] = *hh;
     q[kTheta] = *theta;
-    T cp[3];
-    if (!(PixelToCamera(q, tan(*theta), T(u), T(v), cp) > T(0.0))) return false;
     const Eigen::Quaternion<T> rot(quat[3], quat[0], quat[1], quat[2]);
-    const Eigen::Matrix<T, 3, 1> hand =
-        rot * Eigen::Matrix<T, 3, 1>(cp[0], cp[1], cp[2]) + Eigen::Matrix<T, 3, 1>(*tx, *ty, *tz);
-    residual[0] = T(h[0]) - hand[0];
-    residual[1] = T(h[1]) - hand[1];
-    residual[2] = T(h[2]) - hand[2];
-    return true;
+    return HandResidual(q, rot, *tx, *ty, *tz, u, v, h, residual);
   }
 };
 
@@ -60,19 +66,10 @@ struct EulerResidual {
 
   template <typename T>
   bool operator()(const T* const* p, T* residual) const {
-    using std::tan;
     T q[kNumParams];
     for (int i = 0; i < kNumParams; ++i) q[i] = p[i][0];
-    T cp[3];
-    if (!(PixelToCamera(q, tan(q[kTheta]), T(u), T(v), cp) > T(0.0))) return false;
-    const Eigen::Matrix<T, 3, 3> rc = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
-    const Eigen::Matrix<T, 3, 1> hand =
-        rc * Eigen::Matrix<T, 3, 1>(cp[0], cp[1], cp[2]) +
-        Eigen::Matrix<T, 3, 1>(q[kTx], q[kTy], q[kTz]);
-    residual[0] = T(h[0]) - hand[0];
-    residual[1] = T(h[1]) - hand[1];
-    residual[2] = T(h[2]) - hand[2];
-    return true;
+    return HandResidual(q, RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), q[kTx], q[kTy], q[kTz],
+                        u, v, h, residual);
   }
 };
 
@@ -82,12 +79,12 @@ struct PaperResidual {
   Eigen::Vector3d h;
 
   bool operator()(const double* q, double* residual) const {
-    const Eigen::Matrix3d rc = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
-    double cp[3];
-    if (!(PixelToCamera(q, std::tan(q[kTheta]), u, v, cp) > 0.0)) return false;
-    const Eigen::Vector3d hand =
-        rc * Eigen::Vector3d(cp[0], cp[1], cp[2]) + Eigen::Vector3d(q[kTx], q[kTy], q[kTz]);
-    residual[0] = (h - hand).norm();
+    double e[3];
+    if (!HandResidual(q, RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), q[kTx], q[kTy], q[kTz], u,
+                      v, h, e)) {
+      return false;
+    }
+    residual[0] = std::sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
     return true;
   }
 };

@@ -36,7 +36,7 @@ import numpy as np
 import yaml
 
 from ._io import atomic_write
-from .dataset import Dataset
+from .dataset import Dataset, check_format
 from .model import hand_from_camera
 from .params import NAMES, UNITS, Parameters
 from .robot import Robot
@@ -134,12 +134,7 @@ class Calibration:
 
     @classmethod
     def from_dict(cls, d: Any, source: str = "calibration") -> "Calibration":
-        if not isinstance(d, dict) or d.get("format") != FORMAT:
-            raise ValueError(f"{source}: not an hmlvs calibration file (format field is "
-                             f"{d.get('format') if isinstance(d, dict) else None!r})")
-        if int(d.get("version", 0)) > FORMAT_VERSION:
-            raise ValueError(f"{source}: calibration format version {d.get('version')} is newer "
-                             f"than this hmlvs understands ({FORMAT_VERSION})")
+        check_format(d, FORMAT, FORMAT_VERSION, source, "calibration file")
         units = d.get("units", {})
         if units and (units.get("length", "mm") != "mm" or units.get("angle", "rad") != "rad"):
             raise ValueError(f"{source}: units must be mm and rad, got {units}")

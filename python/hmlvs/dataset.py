@@ -273,13 +273,19 @@ class Dataset:
                    else None, length_unit=d.get("length_unit", "mm"), meta=d.get("meta", {}))
 
 
-def _check_header(d: dict[str, Any], source: Any) -> None:
-    if not isinstance(d, dict) or d.get("format") != FORMAT:
-        raise ValueError(f"{source}: not an hmlvs data set (format field is "
+def check_format(d: Any, fmt: str, version: int, source: Any, what: str) -> None:
+    """Raise ``ValueError`` unless ``d`` is a mapping with ``format == fmt`` and a version this
+    hmlvs understands. Shared by the data set, calibration and manifest readers."""
+    if not isinstance(d, dict) or d.get("format") != fmt:
+        raise ValueError(f"{source}: not an hmlvs {what} (format field is "
                          f"{d.get('format') if isinstance(d, dict) else None!r})")
-    if int(d.get("version", 0)) > FORMAT_VERSION:
-        raise ValueError(f"{source}: data set format version {d.get('version')} is newer than "
-                         f"this hmlvs understands ({FORMAT_VERSION})")
+    if int(d.get("version", 0)) > version:
+        raise ValueError(f"{source}: {what} format version {d.get('version')} is newer than "
+                         f"this hmlvs understands ({version})")
+
+
+def _check_header(d: dict[str, Any], source: Any) -> None:
+    check_format(d, FORMAT, FORMAT_VERSION, source, "data set")
 
 
 def _split_count(fit: float | int, total: int, what: str) -> int:
