@@ -225,3 +225,426 @@ def _nonneg(x: Any, name: str) -> float:
     if not (np.isfinite(x) and x >= 0):
         raise ValueError(f"{name} must be a finite number >= 0, got {x}")
     return x
+
+
+# ------------------------------------------------------------------------------------------
+# Checkerboard corners
+
+
+@dataclass(frozen=True)
+class Corners:
+    """Checkerboard corners found in an image, each numbered on the board.
+
+    Attributes
+    ----------
+    pixels : (k, 2) sub-pixel corner positions (u, v)
+    index : (k,) row-major board corner index ``r * board.cols + c`` (0-based inner corners)
+    anchor : (k,) True for corners found by ``findChessboardCornersSB``, False for corners
+        added by following the board's homography into the rest of the image
+    board : the :class:`~hmlvs.Checkerboard` the indices refer to
+    rule : how the ordering was fixed: "expected" (nearest to predicted pixels) or
+        "top-left" (the marker-free rule for a fully visible board)
+    """
+
+    pixels: np.ndarray
+    index: np.ndarray
+    anchor: np.ndarray
+    board: Any
+    rule: str = "expected"
+
+    def __len__(self) -> int:
+        return int(self.index.shape[0])
+
+    @property
+    def rc(self) -> np.ndarray:
+        """(k, 2) board (row, column) of each corner."""
+        return np.stack([self.index // self.board.cols, self.index % self.board.cols], axis=1)
+
+    @property
+    def ids(self) -> list[str]:
+        """Corner ids as :meth:`Checkerboard.corner_ids` spells them (``"r2c4"``)."""
+        return [f"r{r}c{c}" for r, c in self.rc]
+
+    @property
+    def board_xy(self) -> np.ndarray:
+        """(k, 2) board coordinates (mm) along the board's row and column directions."""
+        return self.rc.astype(float) * self.board.square
+
+    @property
+    def points(self) -> np.ndarray:
+        """(k, 3) corner positions in the robot base frame (mm)."""
+        return self.board.corners()[self.index]
+
+
+def _handedness(board: Any) -> float:
+    """Sign of the image cross product (row step x column step) of a board seen from the
+    side its ``normal`` points to: the camera's z axis looks into the scene, so a board frame
+    whose row x col points towards the camera appears clockwise (negative) in (u, v)."""
+    n = np.cross(board.row_direction, board.col_direction)
+    return -1.0 if float(n @ board.normal) > 0 else 1.0
+
+
+def _orientation(px: np.ndarray, idx: np.ndarray, board: Any) -> float:
+    """Image cross product sign of the board's row and column steps under a numbering."""
+    rc = np.stack([idx // board.cols, idx % board.cols], axis=-1).reshape(-1, 2).astype(float)
+    # affine fit px = [r, c, 1] A: its 2x2 part holds the row and column steps
+    a, *_ = np.linalg.lstsq(np.hstack([rc, np.ones((len(rc), 1))]), px.reshape(-1, 2),
+                            rcond=None)
+    return float(np.sign(a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]))
+
+
+def _spacing(px: np.ndarray) -> float:
+    """Median distance from each point to its nearest neighbour (px)."""
+    d = np.linalg.norm(px[:, None, :] - px[None, :, :], axis=2)
+    np.fill_diagonal(d, np.inf)
+    return float(np.median(d.min(axis=1)))
+
+
+def _refine(gray: np.ndarray, pts: np.ndarray, win: int) -> np.ndarray:
+    import cv2
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4)
+    p = np.ascontiguousarray(pts, dtype=np.float32).reshape(-1, 1, 2)
+    return cv2.cornerSubPix(gray, p, (win, win), (-1, -1), crit).reshape(-1, 2).astype(float)
+
+
+def _match(px: np.ndarray, pred: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mutual nearest neighbours between detected px and predicted board corners within
+    radius: (indices into px, board indices)."""
+    d = np.linalg.norm(px[:, None, :] - pred[None, :, :], axis=2)
+    d[:, ~np.isfinite(pred).all(axis=1)] = np.inf
+    j = np.argmin(d, axis=1)
+    i_back = np.argmin(d, axis=0)
+    ok = (d[np.arange(len(px)), j] < radius) & (i_back[j] == np.arange(len(px)))
+    return np.nonzero(ok)[0], j[ok]
+
+
+def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | None = None,
+                 extend: bool = True, max_error: float = 0.35) -> Corners:
+    """Checkerboard corners of an image (laser off), numbered on the board.
+
+    OpenCV's ``findChessboardCornersSB`` gives sub-pixel corners. Which board corners they
+    are is ambiguous: a checkerboard looks the same turned by 180 degrees and, when only
+    part of it is visible, shifted by whole squares. The numbering is fixed by
+
+    - ``expected`` (rows*cols, 2): approximate pixels of every board corner in row-major
+      order (NaN allowed), e.g. projected with approximate sensor parameters and the robot's
+      pose (:func:`hmlvs.render.predicted_corners`). The detected corners (found with
+      ``CALIB_CB_LARGER``, so a board larger than the view is found) are matched to them
+      after removing their median offset, then through the board's homography; a corner is
+      matched within ``max_error`` times the corner spacing. So the expected pixels may be
+      off by a common shift of up to about half a square plus ``max_error`` of a square of
+      scatter. Required for a partly visible board.
+    - otherwise, for a fully visible board only, a marker-free rule: among the orderings
+      with the board's handedness (the camera sees the side ``board.normal`` points to), the
+      one whose corner r0c0 is nearest the image's top-left (smallest u + v). It is right as
+      long as the board appears rotated by less than about 90 degrees in the image.
+
+    With ``extend`` the homography of the numbered corners predicts the board's remaining
+    corners inside the image, which are refined with ``cornerSubPix`` and kept when they
+    move less than 15 % of the spacing (repeated as the set grows).
+
+    Raises ``ValueError`` if the image is not an 8- or 16-bit image, no board is found, or
+    the corners cannot be numbered.
+    """
+    import cv2
+
+    from .board import Checkerboard
+    board = Checkerboard() if board is None else board
+    gray = _as_gray(image, "the image", None)
+    if gray.dtype == np.uint16:
+        gray = (gray >> 8).astype(np.uint8)
+    gray = np.ascontiguousarray(gray)
+    h, w = gray.shape
+    n_board = board.rows * board.cols
+    bxy = board.board_coordinates()
+    flags = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
+    if expected is not None:
+        expected = np.asarray(expected, dtype=float)
+        if expected.shape != (n_board, 2):
+            raise ValueError(f"expected must hold the ({n_board}, 2) predicted pixels of the "
+                             f"board's corners, got shape {expected.shape}")
+        ok, found, _ = cv2.findChessboardCornersSBWithMeta(gray, (3, 3),
+                                                           flags | cv2.CALIB_CB_LARGER)
+        if not ok or found is None or len(found) < 4:
+            raise ValueError("no checkerboard found in the image (findChessboardCornersSB "
+                             "found no 3 x 3 grid of corners)")
+        det = found.reshape(-1, 2).astype(float)
+        spacing = _spacing(det)
+        radius = max_error * spacing
+        vis = np.isfinite(expected).all(axis=1)
+        shift = np.median(det - expected[np.argmin(np.linalg.norm(
+            det[:, None] - np.where(vis[:, None], expected, np.inf)[None], axis=2), axis=1)],
+            axis=0) if vis.any() else np.zeros(2)
+        i_det, idx = _match(det, expected + shift, radius)
+        if len(idx) >= 4:
+            hmat, _ = cv2.findHomography(bxy[idx], det[i_det], 0)
+            if hmat is not None:
+                pred = cv2.perspectiveTransform(bxy.reshape(-1, 1, 2), hmat).reshape(-1, 2)
+                i_det, idx = _match(det, pred, radius)
+        if len(idx) < 4:
+            raise ValueError(f"the detected corners do not match the expected ones (fewer than "
+                             f"4 within {radius:.0f} px after removing the median offset "
+                             f"{np.round(shift, 1).tolist()} px): the approximate parameters "
+                             "or pose are too far off")
+        px = det[i_det]
+        hmat, _ = cv2.findHomography(bxy[idx], px, 0)
+        res = np.linalg.norm(cv2.perspectiveTransform(bxy[idx].reshape(-1, 1, 2), hmat)
+                             .reshape(-1, 2) - px, axis=1)
+        if res.max() > 0.1 * spacing:
+            raise ValueError(f"the matched corners do not form a board grid (homography "
+                             f"residual {res.max():.1f} px): numbering is unreliable")
+        rule = "expected"
+    else:
+        ok, found = cv2.findChessboardCornersSB(gray, (board.cols, board.rows), flags)
+        if not ok or found is None:
+            raise ValueError(f"no fully visible {board.rows} x {board.cols} checkerboard found "
+                             "in the image; for a partly visible board pass the expected "
+                             "corner pixels")
+        grid = found.reshape(board.rows, board.cols, 2).astype(float)
+        spacing = _spacing(grid.reshape(-1, 2))
+        base = np.arange(n_board).reshape(board.rows, board.cols)
+        cands = [base, base[::-1, ::-1], base[::-1, :], base[:, ::-1]]
+        if board.rows == board.cols:
+            cands += [c.T for c in cands]
+        sign = _handedness(board)
+        cands = [c for c in cands if _orientation(grid, c, board) == sign]
+        # placement c says grid point (i, j) is board corner c[i, j]; r0c0 sits where c == 0
+        first = [grid.reshape(-1, 2)[int(np.argmin(c.ravel()))] for c in cands]
+        c = cands[int(np.argmin([p.sum() for p in first]))]
+        idx = c.ravel()
+        px = grid.reshape(-1, 2)
+        rule = "top-left"
+    win = int(np.clip(round(0.2 * spacing), 2, 9))
+    # findChessboardCornersSB's own sub-pixel positions are less accurate on sharp images
+    # than cornerSubPix (about 0.1 px against 0.05 px RMS on rendered boards): refine them
+    # where the window fits in the image.
+    fits = (px[:, 0] >= win + 2) & (px[:, 0] <= w - 3 - win) & (px[:, 1] >= win + 2) & \
+        (px[:, 1] <= h - 3 - win)
+    if fits.any():
+        ref = _refine(gray, px[fits], win)
+        moved = np.linalg.norm(ref - px[fits], axis=1) < 0.1 * spacing
+        px = px.copy()
+        px[np.nonzero(fits)[0][moved]] = ref[moved]
+    anchor = np.ones(len(idx), bool)
+    if extend:
+        for _ in range(4):
+            todo = np.setdiff1d(np.arange(n_board), idx)
+            if todo.size == 0:
+                break
+            hmat, _ = cv2.findHomography(bxy[idx], px, 0)
+            if hmat is None:
+                break
+            pred = cv2.perspectiveTransform(bxy[todo].reshape(-1, 1, 2), hmat).reshape(-1, 2)
+            m = win + 2
+            inside = (pred[:, 0] >= m) & (pred[:, 0] <= w - 1 - m) & (pred[:, 1] >= m) & \
+                (pred[:, 1] <= h - 1 - m)
+            if not inside.any():
+                break
+            ref = _refine(gray, pred[inside], win)
+            keep = np.linalg.norm(ref - pred[inside], axis=1) < 0.15 * spacing
+            if not keep.any():
+                break
+            idx = np.concatenate([idx, todo[inside][keep]])
+            px = np.vstack([px, ref[keep]])
+            anchor = np.concatenate([anchor, np.zeros(int(keep.sum()), bool)])
+    order = np.argsort(idx)
+    return Corners(px[order], idx[order], anchor[order], board, rule)
+
+
+# ------------------------------------------------------------------------------------------
+# Calibration points
+
+Mode = Literal["corners", "homography"]
+
+
+@dataclass(frozen=True)
+class CalibrationPoints:
+    """Stripe pixels paired with reference points of one image.
+
+    Attributes
+    ----------
+    pixels : (m, 2) stripe pixels (u, v)
+    points : (m, 3) reference points in the robot base frame (mm)
+    board_xy : (m, 2) the same points in board coordinates (mm)
+    ids : (m,) point ids within the image: the corner id (``"r2c4"``) in "corners" mode,
+        ``"u312"`` / ``"v87"`` (the scan line) in "homography" mode
+    sigma : (m,) 1-sigma uncertainty (px) of the stripe pixel across the stripe, from noise
+    distance : (m,) signed distance (px) from the corner to the stripe centre line
+        ("corners" mode; 0 in "homography" mode)
+    mode : "corners" or "homography"
+    rejected : reasons why candidate corners near the stripe (or stripe pixels) were not
+        used, e.g. ``{"r1c3": "stripe not found on both sides of the corner"}``
+    """
+
+    pixels: np.ndarray
+    points: np.ndarray
+    board_xy: np.ndarray
+    ids: np.ndarray
+    sigma: np.ndarray
+    distance: np.ndarray
+    mode: str
+    rejected: dict[str, str] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.pixels.shape[0])
+
+
+def _to_base(board: Any, xy: np.ndarray) -> np.ndarray:
+    t = board.base_from_board()
+    return xy @ t[:3, :2].T + t[:3, 3]
+
+
+def _scan_coords(stripe: StripeResult, pts: np.ndarray) -> np.ndarray:
+    """(u, v) pixels -> (scan position, across) coordinates of the stripe's scan lines."""
+    return pts if stripe.direction == "columns" else pts[:, ::-1]
+
+
+def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None,
+                       mode: Mode = "corners", tolerance: float = 0.5, window: int = 4,
+                       step: int = 8) -> CalibrationPoints:
+    """Pair the stripe's pixels with reference points on the board.
+
+    Parameters
+    ----------
+    stripe : stripe centres of the image (:func:`extract_stripe`)
+    corners : numbered corners of the same image (:func:`find_corners`)
+    board : the board (default: ``corners.board``)
+    mode :
+        "corners" (the paper's procedure): a corner is on the stripe when the stripe's
+        centre line passes within ``tolerance`` px of it. The centre line near the corner is
+        a weighted straight-line fit to the found centres within ``window`` scan lines on
+        either side (both sides required, which also cancels the opposite biases the
+        stripe picks up on the two sides of a corner); the pixel is the foot of the
+        perpendicular from the corner onto that line and the reference point is the
+        corner. A corner within ``tolerance`` that is not exactly on the laser plane
+        gives an error of up to ``tolerance`` px, so keep it small.
+        "homography" (beyond the paper): every ``step``-th found stripe centre on the board
+        is mapped to board coordinates by the homography of the four corners of the square
+        it lies in (all four must have been found), then to the base frame; the reference
+        points are points of the board plane where the stripe is, many per image.
+    """
+    if mode not in ("corners", "homography"):
+        raise ValueError(f"mode must be 'corners' or 'homography', got {mode!r}")
+    if not isinstance(stripe, StripeResult):
+        raise ValueError("stripe must be the StripeResult of extract_stripe")
+    if not isinstance(corners, Corners):
+        raise ValueError("corners must be the Corners of find_corners")
+    board = corners.board if board is None else board
+    if (board.rows, board.cols) != (corners.board.rows, corners.board.cols):
+        raise ValueError(f"the corners were numbered on a {corners.board.rows} x "
+                         f"{corners.board.cols} board, not this {board.rows} x {board.cols} one")
+    if not tolerance > 0:
+        raise ValueError(f"tolerance must be > 0 px, got {tolerance}")
+    if int(window) < 1 or int(step) < 1:
+        raise ValueError(f"window and step must be >= 1, got {window} and {step}")
+    found = stripe.found
+    pos = stripe.position[found].astype(float)
+    cen = stripe.centre[found]
+    sig = stripe.sigma[found]
+    rejected: dict[str, str] = {}
+    if mode == "corners":
+        rows = []
+        cs = _scan_coords(stripe, corners.pixels)
+        all_lines = stripe.position.astype(float)
+        for k, cid in enumerate(corners.ids):
+            s0, a0 = cs[k]
+            near = np.abs(pos - s0) <= window
+            # is the stripe near this corner at all? use any line within the window
+            lines = np.abs(all_lines - s0) <= window
+            if not lines.any():
+                continue
+            if near.sum() < 3 or not ((pos[near] < s0).any() and (pos[near] > s0).any()):
+                c_near = stripe.centre[lines & found] if (lines & found).any() else None
+                if c_near is not None and np.nanmin(np.abs(c_near - a0)) <= tolerance + 2:
+                    rejected[cid] = "stripe not found on both sides of the corner"
+                continue
+            x = pos[near] - s0
+            wts = 1.0 / np.maximum(sig[near], 1e-3) ** 2
+            A = np.stack([np.ones_like(x), x], axis=1)
+            cov = np.linalg.inv(A.T @ (A * wts[:, None]))
+            a, b = cov @ (A.T @ (wts * cen[near]))
+            dist = (a0 - a) / np.hypot(1.0, b)
+            if abs(dist) > tolerance:
+                if abs(dist) <= 3 * tolerance:
+                    rejected[cid] = f"stripe passes {dist:+.2f} px from the corner (tolerance " \
+                                    f"{tolerance:g})"
+                continue
+            foot_s = s0 + (a0 - a) * b / (1.0 + b * b)
+            foot_a = a + b * (foot_s - s0)
+            rows.append((k, cid, foot_s, foot_a, float(np.sqrt(cov[0, 0])), dist))
+        if not rows:
+            return _empty_points(mode, rejected)
+        k_idx = np.array([r[0] for r in rows])
+        sa = np.array([[r[2], r[3]] for r in rows])
+        px = sa if stripe.direction == "columns" else sa[:, ::-1]
+        xy = corners.board_xy[k_idx]
+        return CalibrationPoints(px, corners.points[k_idx], xy, np.array([r[1] for r in rows]),
+                                 np.array([r[4] for r in rows]), np.array([r[5] for r in rows]),
+                                 mode, rejected)
+
+    import cv2
+    if len(corners) < 4:
+        return _empty_points(mode, {"board": "fewer than 4 corners"})
+    sel = np.arange(0, pos.size, int(step))
+    spx = np.stack([pos[sel], cen[sel]], axis=1) if stripe.direction == "columns" else \
+        np.stack([cen[sel], pos[sel]], axis=1)
+    ssig = sig[sel]
+    sq = board.square
+    lookup = {int(i): corners.pixels[j] for j, i in enumerate(corners.index)}
+    hmat, _ = cv2.findHomography(corners.pixels, corners.board_xy, 0)
+    if hmat is None:
+        return _empty_points(mode, {"board": "no homography from the corners"})
+    rough = cv2.perspectiveTransform(spx.reshape(-1, 1, 2), hmat).reshape(-1, 2)
+    out_px, out_xy, out_ids, out_sig = [], [], [], []
+    cache: dict[tuple[int, int], np.ndarray | None] = {}
+
+    def cell_h(i: int, j: int) -> np.ndarray | None:
+        if (i, j) not in cache:
+            ids4 = [(i + di) * board.cols + (j + dj) for di, dj in ((0, 0), (1, 0), (1, 1), (0, 1))]
+            ok = 0 <= i < board.rows - 1 and 0 <= j < board.cols - 1 and \
+                all(k in lookup for k in ids4)
+            cache[(i, j)] = cv2.getPerspectiveTransform(
+                np.array([lookup[k] for k in ids4], np.float32),
+                (np.array([(0, 0), (1, 0), (1, 1), (0, 1)], np.float32) +
+                 np.array([i, j], np.float32)) * np.float32(sq)) if ok else None
+        return cache[(i, j)]
+
+    n_outside = n_missing = 0
+    for p, rxy, sg in zip(spx, rough, ssig):
+        i, j = int(np.floor(rxy[0] / sq)), int(np.floor(rxy[1] / sq))
+        placed = None
+        for _ in range(2):  # the rough (global) homography may pick a neighbouring square
+            hm = cell_h(i, j)
+            if hm is None:
+                break
+            xy = cv2.perspectiveTransform(p.reshape(1, 1, 2), hm).reshape(2)
+            ii, jj = int(np.floor(xy[0] / sq)), int(np.floor(xy[1] / sq))
+            if (ii, jj) == (i, j):
+                placed = xy
+                break
+            i, j = ii, jj
+        if placed is None:
+            if 0 <= i < board.rows - 1 and 0 <= j < board.cols - 1:
+                n_missing += 1
+            else:
+                n_outside += 1
+            continue
+        out_px.append(p)
+        out_xy.append(placed)
+        out_ids.append(f"u{int(round(p[0]))}" if stripe.direction == "columns"
+                       else f"v{int(round(p[1]))}")
+        out_sig.append(sg)
+    if n_missing:
+        rejected["squares"] = f"{n_missing} stripe pixels in squares without all four corners"
+    if n_outside:
+        rejected["outside"] = f"{n_outside} stripe pixels outside the inner corners' area"
+    if not out_px:
+        return _empty_points(mode, rejected)
+    xy = np.array(out_xy)
+    return CalibrationPoints(np.array(out_px), _to_base(board, xy), xy, np.array(out_ids),
+                             np.array(out_sig), np.zeros(len(out_px)), mode, rejected)
+
+
+def _empty_points(mode: str, rejected: dict[str, str]) -> CalibrationPoints:
+    return CalibrationPoints(np.zeros((0, 2)), np.zeros((0, 3)), np.zeros((0, 2)),
+                             np.array([], dtype=str), np.zeros(0), np.zeros(0), mode, rejected)
