@@ -6,6 +6,18 @@ from . import _core
 from . import simulate
 from .board import Checkerboard
 from .dataset import Dataset
+from .image import (
+    CalibrationPoints,
+    Corners,
+    ImageReport,
+    StripeResult,
+    StripeStatus,
+    calibration_points,
+    dataset_from_images,
+    difference_image,
+    extract_stripe,
+    find_corners,
+)
 from .model import (
     hand_from_camera,
     laser_plane_distance,
@@ -22,7 +34,10 @@ from .robot import DHLink, Robot
 __version__ = _core.__version__
 
 __all__ = [
-    "Bounds", "Checkerboard", "DHLink", "Dataset", "NAMES", "Parameters", "Robot",
+    "Bounds", "CalibrationPoints", "Checkerboard", "Corners", "DHLink", "Dataset",
+    "ImageReport", "NAMES", "Parameters", "Robot", "StripeResult", "StripeStatus",
+    "calibration_points", "dataset_from_images", "difference_image", "extract_stripe",
+    "find_corners",
     "__version__", "hand_from_camera", "laser_plane_distance", "objective",
     "pixels_from_points", "points_in_base", "points_in_camera", "project", "residuals",
     "simulate",
