@@ -181,7 +181,7 @@ def extract(image: np.ndarray, direction: str = "columns", method: str = "centro
         cen, sig = c[best], s[best]
     elif method == "gaussian":
         mm = m[best]
-        ok = (mm > 0) & (mm < h - 1)
+        ok = (mm > 0) & (mm < h - 1) & (pk[best] < np.iinfo(image.dtype).max)
         mc = np.clip(mm, 1, h - 2)
         av = np.maximum(d[mc - 1, cols], 0.5)
         bv_ = np.maximum(d[mc, cols], 0.5)

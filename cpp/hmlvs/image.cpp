@@ -275,6 +275,8 @@ template <typename T>
 Centre GaussianCentre(const ScanView<T>& v, int s, const Peak& pk, double noise) {
   Centre c;
   if (pk.m <= 0 || pk.m >= v.n_prof - 1) return c;
+  // a saturated peak has a flat top the log-parabola cannot place
+  if (pk.value >= static_cast<double>(std::numeric_limits<T>::max())) return c;
   // Neighbours below half a quantum are taken as 0.5 so that the logarithm exists.
   const double a = std::max(v.at(s, pk.m - 1), 0.5);
   const double b = std::max(v.at(s, pk.m), 0.5);

@@ -53,7 +53,7 @@ enum class StripeDirection : int { kColumns = 0, kRows = 1 };
 /// How the sub-pixel centre of the chosen peak is computed.
 ///  - kCentroid: gray centroid of (I - threshold) over the run of pixels above threshold.
 ///  - kGaussian: three-point Gaussian fit (log-parabola) through the peak pixel and its two
-///    neighbours along the scan line.
+///    neighbours along the scan line (kFitFailed for a saturated peak).
 ///  - kSteger: Steger's Hessian line detector: Gaussian-smoothed derivatives at the peak
 ///    pixel, the line normal from the Hessian's most negative eigenvalue, the sub-pixel
 ///    centre along that normal, intersected with the scan line. Follows curved and slanted

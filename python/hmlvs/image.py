@@ -854,7 +854,10 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                               f"{100 * diff_big.mean():.0f}% of the pixels, far more than a "
                               "stripe: they are not a pair taken at the same pose")
             d = difference_image(on_g, off_g, normalize=normalize)
-            stripe = extract_stripe(d, **stripe_options)
+            opts = dict(stripe_options)
+            if normalize and opts.get("threshold") is None:
+                opts["threshold"] = _normalized_threshold(on_g, off_g, d)
+            stripe = extract_stripe(d, **opts)
             info["stripe"] = stripe.counts()
             if stripe.found.sum() < min_stripe:
                 raise _Reject(f"no laser stripe found: only {int(stripe.found.sum())} scan lines "
@@ -896,6 +899,22 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                        "pairs": len(records), "pairs_used": sum(r.ok for r in reports),
                        "image_size": list(size) if size else None})
     return ds, reports
+
+
+def _normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray) -> float:
+    """Automatic threshold for an albedo-normalised difference image.
+
+    Normalising multiplies the noise by the gain mean(off) / max(off, floor), which is
+    largest on dark surfaces (black squares): the global 5-sigma rule of
+    :func:`extract_stripe` would let noise peaks through there. Use 5 x the plain
+    difference's noise x the 95th percentile of the gain instead (and at least 0.15 x the
+    image maximum, as for the plain image).
+    """
+    raw = _core._difference_image(on, off, False, -1.0, -1.0)
+    sigma = float(_core._estimate_difference_noise(raw))
+    mean = float(off.mean())
+    gain = mean / np.maximum(off[::4, ::4].astype(float), max(1.0, 0.1 * mean))
+    return max(5.0 * sigma * float(np.percentile(gain, 95)), 0.15 * float(d[::4].max()))
 
 
 def _counts_text(counts: dict[str, int]) -> str:
