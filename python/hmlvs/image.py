@@ -339,8 +339,10 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
       one whose corner r0c0 is nearest the image's top-left (smallest u + v). It is right as
       long as the board appears rotated by less than about 90 degrees in the image.
 
-    With ``extend`` the homography of the numbered corners predicts the board's remaining
-    corners inside the image, which are refined with ``cornerSubPix`` and kept when they
+    Every corner is refined with ``cornerSubPix`` (a window of about 0.2 times the corner
+    spacing, at most 19 x 19 px); corners too close to the image border for the window are
+    dropped. With ``extend`` the homography of the numbered corners predicts the board's
+    remaining corners inside the image, which are refined the same way and kept when they
     move less than 15 % of the spacing (repeated as the set grows).
 
     Raises ``ValueError`` if the image is not an 8- or 16-bit image, no board is found, or
@@ -416,15 +418,16 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
         rule = "top-left"
     win = int(np.clip(round(0.2 * spacing), 2, 9))
     # findChessboardCornersSB's own sub-pixel positions are less accurate on sharp images
-    # than cornerSubPix (about 0.1 px against 0.05 px RMS on rendered boards): refine them
-    # where the window fits in the image.
+    # than cornerSubPix (about 0.1 px against 0.05 px RMS on rendered boards, and off by
+    # more than a pixel next to the image border): refine them, and drop the corners too
+    # close to the border for the refinement window.
     fits = (px[:, 0] >= win + 2) & (px[:, 0] <= w - 3 - win) & (px[:, 1] >= win + 2) & \
         (px[:, 1] <= h - 3 - win)
-    if fits.any():
-        ref = _refine(gray, px[fits], win)
-        moved = np.linalg.norm(ref - px[fits], axis=1) < 0.1 * spacing
-        px = px.copy()
-        px[np.nonzero(fits)[0][moved]] = ref[moved]
+    if not fits.any():
+        raise ValueError("every corner found is too close to the image border to be refined")
+    ref = _refine(gray, px[fits], win)
+    moved = np.linalg.norm(ref - px[fits], axis=1) < 0.1 * spacing
+    px, idx = ref[moved], idx[fits][moved]
     anchor = np.ones(len(idx), bool)
     if extend:
         for _ in range(4):
