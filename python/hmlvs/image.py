@@ -251,6 +251,7 @@ class Corners:
     anchor: np.ndarray
     board: Any
     rule: str = "expected"
+    image_size: tuple[int, int] | None = None  # (width, height) of the image
 
     def __len__(self) -> int:
         return int(self.index.shape[0])
@@ -451,7 +452,7 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
             px = np.vstack([px, ref[keep]])
             anchor = np.concatenate([anchor, np.zeros(int(keep.sum()), bool)])
     order = np.argsort(idx)
-    return Corners(px[order], idx[order], anchor[order], board, rule)
+    return Corners(px[order], idx[order], anchor[order], board, rule, (w, h))
 
 
 # ------------------------------------------------------------------------------------------
@@ -524,7 +525,9 @@ def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None
         "homography" (beyond the paper): every ``step``-th found stripe centre on the board
         is mapped to board coordinates by the homography of the four corners of the square
         it lies in (all four must have been found), then to the base frame; the reference
-        points are points of the board plane where the stripe is, many per image.
+        points are points of the board plane where the stripe is, many per image. Radial
+        distortion is taken out first: the division model of MODEL.md about the image
+        centre, its coefficient fitted so that all corners obey one homography.
     """
     if mode not in ("corners", "homography"):
         raise ValueError(f"mode must be 'corners' or 'homography', got {mode!r}")
@@ -593,11 +596,17 @@ def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None
         np.stack([cen[sel], pos[sel]], axis=1)
     ssig = sig[sel]
     sq = board.square
-    lookup = {int(i): corners.pixels[j] for j, i in enumerate(corners.index)}
-    hmat, _ = cv2.findHomography(corners.pixels, corners.board_xy, 0)
+    # Radial distortion bends the board's lines, which a homography cannot follow. Fit the
+    # model's division distortion p_u = c + (p - c) / (1 + k |p - c|^2) about the image
+    # centre so that the corners best fit one homography, and map undistorted pixels.
+    centre, k_px = _fit_division_distortion(corners)
+    cpx = _undistort(corners.pixels, centre, k_px)
+    spx_u = _undistort(spx, centre, k_px)
+    lookup = {int(i): cpx[j] for j, i in enumerate(corners.index)}
+    hmat, _ = cv2.findHomography(cpx, corners.board_xy, 0)
     if hmat is None:
         return _empty_points(mode, {"board": "no homography from the corners"})
-    rough = cv2.perspectiveTransform(spx.reshape(-1, 1, 2), hmat).reshape(-1, 2)
+    rough = cv2.perspectiveTransform(spx_u.reshape(-1, 1, 2), hmat).reshape(-1, 2)
     out_px, out_xy, out_ids, out_sig = [], [], [], []
     cache: dict[tuple[int, int], np.ndarray | None] = {}
 
@@ -613,14 +622,14 @@ def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None
         return cache[(i, j)]
 
     n_outside = n_missing = 0
-    for p, rxy, sg in zip(spx, rough, ssig):
+    for p, pu, rxy, sg in zip(spx, spx_u, rough, ssig):
         i, j = int(np.floor(rxy[0] / sq)), int(np.floor(rxy[1] / sq))
         placed = None
         for _ in range(2):  # the rough (global) homography may pick a neighbouring square
             hm = cell_h(i, j)
             if hm is None:
                 break
-            xy = cv2.perspectiveTransform(p.reshape(1, 1, 2), hm).reshape(2)
+            xy = cv2.perspectiveTransform(pu.reshape(1, 1, 2), hm).reshape(2)
             ii, jj = int(np.floor(xy[0] / sq)), int(np.floor(xy[1] / sq))
             if (ii, jj) == (i, j):
                 placed = xy
@@ -646,6 +655,40 @@ def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None
     xy = np.array(out_xy)
     return CalibrationPoints(np.array(out_px), _to_base(board, xy), xy, np.array(out_ids),
                              np.array(out_sig), np.zeros(len(out_px)), mode, rejected)
+
+
+def _undistort(px: np.ndarray, centre: np.ndarray, k: float) -> np.ndarray:
+    d = px - centre
+    return centre + d / (1.0 + k * np.sum(d * d, axis=1, keepdims=True))
+
+
+def _fit_division_distortion(corners: Corners) -> tuple[np.ndarray, float]:
+    """(centre, k) of the division model (MODEL.md step 2, in pixels: k_px = k Su^2) that
+    makes the corners fit one homography best; k = 0 with fewer than 9 corners."""
+    import cv2
+    from scipy.optimize import minimize_scalar
+    if corners.image_size is not None:
+        w, h = corners.image_size
+        centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+    else:
+        centre = corners.pixels.mean(axis=0)
+    if len(corners) < 9:
+        return centre, 0.0
+    r2max = float(np.max(np.sum((corners.pixels - centre) ** 2, axis=1)))
+    xy = corners.board_xy
+
+    def cost(kn: float) -> float:
+        u = _undistort(corners.pixels, centre, kn / r2max)
+        hm, _ = cv2.findHomography(xy, u, 0)
+        if hm is None:
+            return np.inf
+        return float(np.sum((cv2.perspectiveTransform(xy.reshape(-1, 1, 2), hm).reshape(-1, 2)
+                             - u) ** 2))
+
+    # |k r^2| up to 10 % at the farthest corner
+    res = minimize_scalar(cost, bounds=(-0.1, 0.1), method="bounded",
+                          options={"xatol": 1e-7})
+    return centre, float(res.x) / r2max
 
 
 def _empty_points(mode: str, rejected: dict[str, str]) -> CalibrationPoints:
