@@ -51,7 +51,7 @@ def main() -> None:
     args = ap.parse_args()
     img = make_image()
     print(f"image {img.shape[1]} x {img.shape[0]} uint8, single thread")
-    print(f"{'method':10s} {'C++ fps':>10s} {'NumPy fps':>10s} {'ratio':>8s}")
+    print(f"{'method':24s} {'C++ fps':>10s} {'NumPy fps':>10s} {'ratio':>8s}")
     for method in ("centroid", "gaussian", "steger"):
         for kw, label in (({}, ""), ({"threshold": 40.0, "noise": 2.0}, " (given thr.)")):
             a = hmlvs.extract_stripe(img, method=method, **kw)

@@ -24,6 +24,8 @@ def difference(on: np.ndarray, off: np.ndarray, normalize: bool = False) -> np.n
     d = (a - b) * mean / np.maximum(b, max(1.0, 0.1 * mean))
     top = np.iinfo(on.dtype).max
     return np.where(a > b, np.minimum(top, np.floor(d + 0.5)), 0).astype(on.dtype)
+    # (the C++ code computes 8-bit images in single precision: it may round a value lying
+    # within ~1e-4 of a half-integer the other way)
 
 
 def noise_estimate(img: np.ndarray) -> float:

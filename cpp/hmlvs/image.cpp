@@ -5,6 +5,7 @@
 #include <limits>
 #include <sstream>
 #include <stdexcept>
+#include <type_traits>
 #include <vector>
 
 namespace hmlvs {
@@ -404,32 +405,36 @@ void DifferenceImage(const ImageView<T>& on, const ImageView<T>& off, T* out,
     }
     return;
   }
-  double mean = 0.0;
+  std::uint64_t sum = 0;
   for (int r = 0; r < rows; ++r) {
     const T* b = off.data + r * off_rs;
-    double row = 0.0;
+    std::uint64_t row = 0;
     for (int c = 0; c < cols; ++c) row += b[c * off_cs];
-    mean += row;
+    sum += row;
   }
-  mean /= static_cast<double>(rows) * cols;
+  const double mean = static_cast<double>(sum) / (static_cast<double>(rows) * cols);
   const double scale = o.scale > 0.0 ? o.scale : mean;
   const double floor = o.floor > 0.0 ? o.floor : std::max(1.0, 0.1 * mean);
-  const double tmax = static_cast<double>(std::numeric_limits<T>::max());
+  // Single precision for 8-bit images (exact enough: values below 2^12, and ~10x faster
+  // here than double), double for 16-bit.
+  using Acc = std::conditional_t<sizeof(T) == 1, float, double>;
+  const Acc tmax = static_cast<Acc>(std::numeric_limits<T>::max());
   // gain per laser-off value: one multiplication per pixel instead of a division
-  std::vector<double> gain(static_cast<size_t>(std::numeric_limits<T>::max()) + 1);
+  std::vector<Acc> gain(static_cast<size_t>(std::numeric_limits<T>::max()) + 1);
   for (size_t y = 0; y < gain.size(); ++y) {
-    gain[y] = scale / std::max(static_cast<double>(y), floor);
+    gain[y] = static_cast<Acc>(scale / std::max(static_cast<double>(y), floor));
   }
-  const double* g = gain.data();
+  const Acc* g = gain.data();
   for (int r = 0; r < rows; ++r) {
     const T* a = on.data + r * on_rs;
     const T* b = off.data + r * off_rs;
     T* dst = out + static_cast<std::ptrdiff_t>(r) * cols;
     for (int c = 0; c < cols; ++c) {
       const T x = a[c * on_cs], y = b[c * off_cs];
-      // d >= 0 where x > y, so truncating d + 0.5 rounds (no libm floor call per pixel)
-      const double d = std::min(tmax, (static_cast<double>(x) - y) * g[y] + 0.5);
-      dst[c] = x > y ? static_cast<T>(static_cast<std::int64_t>(d)) : T(0);
+      // branch-free: max(0, x - y) is 0 where x <= y, and d >= 0.5 so truncating rounds
+      const Acc d = std::min(
+          tmax, std::max(Acc(0), static_cast<Acc>(x) - static_cast<Acc>(y)) * g[y] + Acc(0.5));
+      dst[c] = static_cast<T>(static_cast<int>(d));  // int: a 64-bit conversion is ~10x slower
     }
   }
 }
