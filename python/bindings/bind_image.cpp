@@ -1,11 +1,146 @@
+// Image pipeline bindings: numpy buffers are read in place (any strides), the GIL is released
+// while the core works.
+#include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <cstdint>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
 #include "bindings.h"
+#include "hmlvs/image.h"
 
 namespace py = pybind11;
 
 namespace hmlvs::python {
 
-void BindImage(py::module_& /*m*/) {}
+namespace {
+
+enum class Depth { kU8, kU16 };
+
+Depth DepthOf(const py::array& a, const char* name) {
+  if (py::isinstance<py::array_t<std::uint8_t>>(a)) return Depth::kU8;
+  if (py::isinstance<py::array_t<std::uint16_t>>(a)) return Depth::kU16;
+  std::ostringstream msg;
+  msg << name << " must be an 8- or 16-bit grayscale image (uint8 or uint16), got dtype "
+      << std::string(py::str(a.dtype()));
+  throw std::invalid_argument(msg.str());
+}
+
+template <typename T>
+ImageView<T> ViewOf(const py::array& a, const char* name) {
+  if (a.ndim() != 2) {
+    std::ostringstream msg;
+    msg << name << " must be a 2D (rows x cols) grayscale array, got " << a.ndim()
+        << " dimensions";
+    throw std::invalid_argument(msg.str());
+  }
+  const auto item = static_cast<py::ssize_t>(sizeof(T));
+  if (a.strides(0) % item != 0 || a.strides(1) % item != 0) {
+    throw std::invalid_argument(std::string(name) + " has strides that are not a multiple of "
+                                                    "its pixel size");
+  }
+  ImageView<T> v;
+  v.data = static_cast<const T*>(a.data());
+  v.rows = static_cast<int>(a.shape(0));
+  v.cols = static_cast<int>(a.shape(1));
+  v.row_stride = a.strides(0) / item;
+  v.col_stride = a.strides(1) / item;
+  return v;
+}
+
+template <typename T>
+py::array Difference(const py::array& on, const py::array& off, const DifferenceOptions& o) {
+  const ImageView<T> a = ViewOf<T>(on, "the laser-on image");
+  const ImageView<T> b = ViewOf<T>(off, "the laser-off image");
+  py::array_t<T> out({static_cast<py::ssize_t>(a.rows), static_cast<py::ssize_t>(a.cols)});
+  T* dst = out.mutable_data();
+  {
+    py::gil_scoped_release release;
+    DifferenceImage(a, b, dst, o);
+  }
+  return std::move(out);
+}
+
+template <typename T>
+StripeResult Extract(const py::array& image, const StripeOptions& options) {
+  const ImageView<T> v = ViewOf<T>(image, "the image");
+  py::gil_scoped_release release;
+  return ExtractStripe(v, options);
+}
+
+}  // namespace
+
+void BindImage(py::module_& m) {
+  py::enum_<StripeDirection>(m, "_StripeDirection")
+      .value("columns", StripeDirection::kColumns)
+      .value("rows", StripeDirection::kRows);
+  py::enum_<StripeMethod>(m, "_StripeMethod")
+      .value("centroid", StripeMethod::kCentroid)
+      .value("gaussian", StripeMethod::kGaussian)
+      .value("steger", StripeMethod::kSteger);
+  py::class_<StripeOptions>(m, "_StripeOptions")
+      .def(py::init<>())
+      .def_readwrite("direction", &StripeOptions::direction)
+      .def_readwrite("method", &StripeOptions::method)
+      .def_readwrite("threshold", &StripeOptions::threshold)
+      .def_readwrite("min_width", &StripeOptions::min_width)
+      .def_readwrite("max_width", &StripeOptions::max_width)
+      .def_readwrite("noise", &StripeOptions::noise)
+      .def_readwrite("steger_sigma", &StripeOptions::steger_sigma)
+      .def_readwrite("dominance", &StripeOptions::dominance);
+  py::class_<StripeResult>(m, "_StripeResult")
+      .def_readonly("centre", &StripeResult::centre)
+      .def_readonly("intensity", &StripeResult::intensity)
+      .def_readonly("width", &StripeResult::width)
+      .def_readonly("sigma", &StripeResult::sigma)
+      .def_readonly("status", &StripeResult::status)
+      .def_readonly("num_peaks", &StripeResult::num_peaks)
+      .def_readonly("threshold", &StripeResult::threshold)
+      .def_readonly("noise", &StripeResult::noise);
+
+  m.def(
+      "_difference_image",
+      [](const py::array& on, const py::array& off, bool normalize, double scale,
+         double floor) -> py::array {
+        DifferenceOptions o;
+        o.normalize = normalize;
+        o.scale = scale;
+        o.floor = floor;
+        const Depth d = DepthOf(on, "the laser-on image");
+        if (DepthOf(off, "the laser-off image") != d) {
+          throw std::invalid_argument(
+              "the laser-on and laser-off images have different bit depths (" +
+              std::string(py::str(on.dtype())) + " and " + std::string(py::str(off.dtype())) +
+              ")");
+        }
+        return d == Depth::kU8 ? Difference<std::uint8_t>(on, off, o)
+                               : Difference<std::uint16_t>(on, off, o);
+      },
+      py::arg("on"), py::arg("off"), py::arg("normalize") = false, py::arg("scale") = -1.0,
+      py::arg("floor") = -1.0);
+  m.def(
+      "_extract_stripe",
+      [](const py::array& image, const StripeOptions& options) {
+        return DepthOf(image, "the image") == Depth::kU8 ? Extract<std::uint8_t>(image, options)
+                                                         : Extract<std::uint16_t>(image, options);
+      },
+      py::arg("image"), py::arg("options"));
+  m.def(
+      "_estimate_difference_noise",
+      [](const py::array& image) {
+        if (DepthOf(image, "the image") == Depth::kU8) {
+          const auto v = ViewOf<std::uint8_t>(image, "the image");
+          py::gil_scoped_release release;
+          return EstimateDifferenceNoise(v);
+        }
+        const auto v = ViewOf<std::uint16_t>(image, "the image");
+        py::gil_scoped_release release;
+        return EstimateDifferenceNoise(v);
+      },
+      py::arg("image"));
+}
 
 }  // namespace hmlvs::python

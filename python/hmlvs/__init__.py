@@ -6,9 +6,21 @@ from . import _core
 from . import design
 from . import simulate
 from .board import Checkerboard
-from .identify import CalibrationResult, calibrate, initial_candidates
 from .calibration_file import Calibration, load_calibration
 from .dataset import Dataset
+from .identify import CalibrationResult, calibrate, initial_candidates
+from .image import (
+    CalibrationPoints,
+    Corners,
+    ImageReport,
+    StripeResult,
+    StripeStatus,
+    calibration_points,
+    dataset_from_images,
+    difference_image,
+    extract_stripe,
+    find_corners,
+)
 from .measure import PointCloud, measure
 from .model import (
     hand_from_camera,
@@ -26,9 +38,11 @@ from .robot import DHLink, Robot
 __version__ = _core.__version__
 
 __all__ = [
-    "Bounds", "Calibration", "CalibrationResult", "Checkerboard", "DHLink", "Dataset", "NAMES", "Parameters",
-    "Robot", "__version__", "calibrate", "design", "hand_from_camera", "initial_candidates",
-    "laser_plane_distance", "load_calibration", "measure", "objective", "PointCloud",
-    "pixels_from_points", "points_in_base", "points_in_camera", "project", "residuals",
-    "simulate",
+    "NAMES", "Bounds", "Calibration", "CalibrationPoints", "CalibrationResult", "Checkerboard",
+    "Corners", "DHLink", "Dataset", "ImageReport", "Parameters", "PointCloud", "Robot",
+    "StripeResult", "StripeStatus", "__version__", "calibrate", "calibration_points",
+    "dataset_from_images", "design", "difference_image", "extract_stripe", "find_corners",
+    "hand_from_camera", "initial_candidates", "laser_plane_distance", "load_calibration",
+    "measure", "objective", "pixels_from_points", "points_in_base", "points_in_camera",
+    "project", "residuals", "simulate",
 ]

@@ -288,3 +288,6 @@ class _CallableModule(types.ModuleType):
 
 
 sys.modules[__name__].__class__ = _CallableModule
+
+# Rendered images of a session (imported last: render.py uses this module's session()).
+from .render import RenderOptions, render_session  # noqa: E402

@@ -1,0 +1,118 @@
+// The image pipeline's pixel work: the laser on/off difference image (paper Eq. 23) and
+// sub-pixel laser stripe centres.
+//
+// Images are strided views of 8- or 16-bit grayscale buffers (rows x cols, strides in
+// elements), so that a numpy array, an OpenCV Mat or a camera driver's buffer can be read
+// without a copy. Pixel (u = column, v = row) is 0-based with pixel centres at integers.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include <Eigen/Core>
+
+namespace hmlvs {
+
+/// A read-only strided 2D view. Element (r, c) is data[r * row_stride + c * col_stride].
+template <typename T>
+struct ImageView {
+  const T* data = nullptr;
+  int rows = 0;
+  int cols = 0;
+  std::ptrdiff_t row_stride = 0;  // in elements
+  std::ptrdiff_t col_stride = 1;  // in elements
+  const T& operator()(int r, int c) const { return data[r * row_stride + c * col_stride]; }
+};
+
+/// Options of the difference image.
+struct DifferenceOptions {
+  /// Divide by the laser-off image (the surface's albedo under ambient light), so that the
+  /// stripe's profile no longer steps where it crosses a black/white edge of the board:
+  ///   D = (on - off) * scale / max(off, floor), rounded and clipped to the pixel type.
+  /// Without it the centre of a stripe running along a square edge is pulled towards the
+  /// white side by a large fraction of a pixel.
+  bool normalize = false;
+  /// Normalisation gain; negative: the mean of the laser-off image (keeps D's magnitude).
+  double scale = -1.0;
+  /// Smallest divisor; negative: 0.1 x the mean of the laser-off image (at least 1).
+  double floor = -1.0;
+};
+
+/// D = on - off where on > off, else 0 (paper Eq. 23), optionally albedo-normalised, written
+/// to `out` (rows x cols, contiguous row-major). Throws std::invalid_argument if the two
+/// views differ in size or the options are invalid.
+template <typename T>
+void DifferenceImage(const ImageView<T>& on, const ImageView<T>& off, T* out,
+                     const DifferenceOptions& options = DifferenceOptions());
+
+/// Which way the stripe is scanned: one centre per image column (a roughly horizontal
+/// stripe; the centre is a row coordinate v) or one per image row (a roughly vertical stripe;
+/// the centre is a column coordinate u).
+enum class StripeDirection : int { kColumns = 0, kRows = 1 };
+
+/// How the sub-pixel centre of the chosen peak is computed.
+///  - kCentroid: gray centroid of (I - threshold) over the run of pixels above threshold.
+///  - kGaussian: three-point Gaussian fit (log-parabola) through the peak pixel and its two
+///    neighbours along the scan line (kFitFailed for a saturated peak).
+///  - kSteger: Steger's Hessian line detector: Gaussian-smoothed derivatives at the peak
+///    pixel, the line normal from the Hessian's most negative eigenvalue, the sub-pixel
+///    centre along that normal, intersected with the scan line. Follows curved and slanted
+///    stripes without the bias of a 1D profile.
+enum class StripeMethod : int { kCentroid = 0, kGaussian = 1, kSteger = 2 };
+
+/// The outcome for one scan line.
+enum class StripeStatus : std::uint8_t {
+  kFound = 0,      // one stripe peak, centre measured
+  kNone = 1,       // no pixel above threshold
+  kMultiple = 2,   // two or more plausible peaks (reflections): no centre is guessed
+  kTooNarrow = 3,  // only peaks narrower than min_width (noise, hot pixels)
+  kTooWide = 4,    // only peaks wider than max_width (glare, out-of-focus blobs)
+  kFitFailed = 5,  // a peak was found but the chosen method could not fit it (e.g. a
+                   // saturated flat top for the Gaussian fit, or a Hessian that is not a line)
+};
+
+struct StripeOptions {
+  StripeDirection direction = StripeDirection::kColumns;
+  StripeMethod method = StripeMethod::kCentroid;
+  /// Intensity a pixel must exceed to belong to a peak. Negative: automatic,
+  /// max(5 * noise, 0.15 * image maximum) with both taken from every 4th row.
+  double threshold = -1.0;
+  /// Accepted full width at half maximum of a peak (px, along the scan line).
+  double min_width = 2.0;
+  double max_width = 20.0;
+  /// Standard deviation of the per-pixel noise (intensity units), used for the uncertainty.
+  /// Negative: estimated from the image as a zero-clipped difference of two noisy frames
+  /// (see EstimateDifferenceNoise).
+  double noise = -1.0;
+  /// Smoothing scale (px) of Steger's derivatives.
+  double steger_sigma = 1.5;
+  /// 0: a second plausible peak makes the scan line kMultiple. A value d >= 1 accepts the
+  /// strongest peak when its intensity is at least d times every other peak's.
+  double dominance = 0.0;
+};
+
+/// One entry per scan line (image column for kColumns, image row for kRows).
+struct StripeResult {
+  Eigen::VectorXd centre;     // sub-pixel stripe centre across the scan line (px), NaN if none
+  Eigen::VectorXd intensity;  // peak pixel value of the chosen (or strongest) peak, NaN if none
+  Eigen::VectorXd width;      // FWHM of that peak along the scan line (px), NaN if none
+  Eigen::VectorXd sigma;      // 1-sigma uncertainty of centre from pixel noise (px), NaN if none
+  Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1> status;  // StripeStatus per scan line
+  Eigen::VectorXi num_peaks;  // peaks of plausible (or too large) width on the scan line
+  double threshold = 0.0;     // the threshold used
+  double noise = 0.0;         // the noise level used
+};
+
+/// Sub-pixel stripe centres, one per scan line. Throws std::invalid_argument for an empty
+/// image or invalid options.
+template <typename T>
+StripeResult ExtractStripe(const ImageView<T>& image, const StripeOptions& options);
+
+/// Noise standard deviation of a zero-clipped difference image D = max(0, X), X ~ N(0, s^2)
+/// in the background: s = sqrt(2 mean(D^2)) over pixels of every `row_step`-th row at or
+/// below a cut of four times a first, percentile-based estimate (so that the stripe does not
+/// count), combined with the quantisation noise of two rounded frames (variance 1/6).
+template <typename T>
+double EstimateDifferenceNoise(const ImageView<T>& image, int row_step = 4);
+
+}  // namespace hmlvs

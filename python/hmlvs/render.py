@@ -1,0 +1,401 @@
+"""Rendered laser-on / laser-off images of a checkerboard session, with known truth.
+
+Every pixel is ray-traced through the sensor model of MODEL.md: the pixel's (distorted)
+position gives an undistorted camera ray (:func:`hmlvs.model.rays_in_camera`), the ray meets
+the board plane (the board lies on a table in that plane), the point's albedo comes from the
+checkerboard pattern and the laser adds a Gaussian of the pixel's distance to the
+laser-plane / board intersection curve. Pixels are supersampled for anti-aliasing, then
+blurred (optics), given sensor noise and rounded to 8 bits.
+
+``hmlvs.simulate.render_session(...)`` renders a whole simulated session
+(:func:`hmlvs.simulate.session`) and writes the images plus a JSON manifest of joint readings;
+:func:`hmlvs.dataset_from_images` reads that back.
+
+Board layout: inner corner (r, c) is at board coordinates (x, y) = (r, c) * square. The
+squares between inner corners, extended by one square on every side, form the pattern; the
+square with ``floor(x / square) + floor(y / square)`` even is black (so the four outer
+corner squares are black for the paper's 6 x 8 inner corners). A white border of
+``RenderOptions.margin`` squares surrounds the pattern; beyond it is the table.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+import json
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ._arrays import as_params
+from ._io import atomic_write
+from .board import Checkerboard
+from .model import hand_from_camera, project, rays_in_camera
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .simulate import Session
+
+MANIFEST_FORMAT = "hmlvs-images"
+MANIFEST_VERSION = 1
+MANIFEST_NAME = "manifest.json"
+
+
+@dataclass(frozen=True)
+class RenderOptions:
+    """How images are rendered. Intensities are 8-bit grey levels.
+
+    Attributes
+    ----------
+    supersample : samples per pixel along each axis (anti-aliasing), odd so that one sample
+        sits at the pixel centre
+    stripe_sigma : standard deviation (px) of the laser stripe's Gaussian profile across the
+        stripe, before blur
+    blur_sigma : optics blur (px), applied to both frames; 0 for none
+    laser : laser intensity on a white (albedo 1) surface at the stripe centre
+    ambient : ambient light on a white surface (both frames)
+    white, black, table : albedos of the white and black squares and of the table
+    margin : white border around the pattern, in squares
+    noise : standard deviation of Gaussian sensor noise, independent in each frame
+    glare : a saturating specular highlight of ambient light (both frames) centred on the
+        stripe at ``glare_at`` (fraction of the image width), radius ``glare_radius`` px
+    spurious : relative intensity of a laser reflection: a second copy of the stripe offset
+        by ``spurious_offset`` px over the columns ``spurious_columns`` (fractions of the
+        width); 0 for none
+    """
+
+    supersample: int = 3
+    stripe_sigma: float = 1.2
+    blur_sigma: float = 0.5
+    laser: float = 140.0
+    ambient: float = 130.0
+    white: float = 0.85
+    black: float = 0.25
+    table: float = 0.45
+    margin: float = 1.0
+    noise: float = 0.0
+    glare: bool = False
+    glare_at: float = 0.3
+    glare_radius: float = 25.0
+    spurious: float = 0.0
+    spurious_offset: float = 20.0
+    spurious_columns: tuple[float, float] = (0.6, 0.8)
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.supersample, (int, np.integer)) and self.supersample >= 1
+                and self.supersample % 2 == 1):
+            raise ValueError(f"supersample must be an odd integer >= 1, got {self.supersample}")
+        for name in ("stripe_sigma",):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        for name in ("blur_sigma", "laser", "ambient", "noise", "spurious", "margin",
+                     "glare_radius"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {v}")
+        for name in ("white", "black", "table"):
+            v = getattr(self, name)
+            if not 0 <= v <= 1:
+                raise ValueError(f"albedo {name} must lie in [0, 1], got {v}")
+
+
+@dataclass(frozen=True)
+class RenderedPose:
+    """One rendered pose: the two frames and the true stripe centre per column."""
+
+    on: np.ndarray       # (h, w) uint8, laser on
+    off: np.ndarray      # (h, w) uint8, laser off
+    stripe_v: np.ndarray  # (w,) true sub-pixel row of the stripe centre in each column, NaN
+    #                       where the stripe is not in the image
+
+
+@dataclass(frozen=True)
+class RenderedSession:
+    """A rendered session: images, true stripe centres and the simulated session behind them.
+
+    ``stripe_v[i, u]`` is the true centre row of the stripe in column u of pose i (NaN where
+    the stripe does not cross that column). ``manifest`` is the written manifest's path, if
+    the session was written to a folder.
+    """
+
+    session: "Session"
+    options: RenderOptions
+    ids: list[str]
+    on: list[np.ndarray]
+    off: list[np.ndarray]
+    stripe_v: np.ndarray
+    manifest: Path | None = None
+    files: dict[str, Any] = field(default_factory=dict)
+
+
+_RAY_CACHE: dict[tuple, np.ndarray] = {}
+
+
+def _sample_rays(q: np.ndarray, image_size: tuple[int, int], s: int) -> np.ndarray:
+    """Camera rays (h*s, w*s, 3) of the supersample positions, cached for the last call."""
+    key = (tuple(q.tolist()), tuple(image_size), s)
+    if key not in _RAY_CACHE:
+        w, h = image_size
+        off = (np.arange(s) + 0.5) / s - 0.5
+        us = (np.arange(w)[:, None] + off[None, :]).ravel()
+        vs = (np.arange(h)[:, None] + off[None, :]).ravel()
+        uu, vv = np.meshgrid(us, vs)
+        rays = rays_in_camera(q, np.stack([uu.ravel(), vv.ravel()], axis=1))
+        _RAY_CACHE.clear()
+        _RAY_CACHE[key] = rays.reshape(h * s, w * s, 3)
+    return _RAY_CACHE[key]
+
+
+def _board_from_camera(q: np.ndarray, pose: np.ndarray, board: Checkerboard) -> np.ndarray:
+    base_from_camera = np.asarray(pose, float) @ hand_from_camera(q)
+    return np.linalg.inv(board.base_from_board()) @ base_from_camera
+
+
+def _soft_sign(t_px: np.ndarray, width: float) -> np.ndarray:
+    """-1 -> 1 across an edge at signed pixel distance 0: a cubic (C1) ramp over +-width px,
+    a cheap stand-in for a Gaussian-smoothed step."""
+    t = np.clip(t_px / width, -1.0, 1.0)
+    return t * (1.5 - 0.5 * t * t)
+
+
+def _albedo(x: np.ndarray, y: np.ndarray, gx: np.ndarray, gy: np.ndarray,
+            board: Checkerboard, o: RenderOptions) -> np.ndarray:
+    """Albedo at board coordinates (x, y) mm, edges pre-smoothed analytically.
+
+    ``gx``, ``gy`` are |grad x| and |grad y| in mm per pixel, so that every edge is smoothed
+    over +-1.5/supersample px: the supersamples then integrate the pixel area without the
+    aliasing that makes point-sampled squares bias corner positions by ~0.1 px.
+    """
+    sq = board.square
+    width = 1.5 / o.supersample
+
+    def soft_sign(c: np.ndarray, g: np.ndarray) -> np.ndarray:
+        # (-1)^floor(c/sq) smoothed across the lines c = n * sq
+        k = np.floor(c / sq)
+        f = c / sq - k
+        dist = sq * np.minimum(f, 1.0 - f) / g
+        return np.where(k % 2 == 0, 1.0, -1.0) * _soft_sign(dist, width)
+
+    def inside(c: np.ndarray, g: np.ndarray, lo: float, hi: float) -> np.ndarray:
+        return (0.25 * (1.0 + _soft_sign((c - lo) / g, width))
+                * (1.0 + _soft_sign((hi - c) / g, width)))
+
+    black = 0.5 + 0.5 * soft_sign(x, gx) * soft_sign(y, gy)
+    pattern = inside(x, gx, -sq, board.rows * sq) * inside(y, gy, -sq, board.cols * sq)
+    m = o.margin * sq
+    on_board = inside(x, gx, -sq - m, board.rows * sq + m) * \
+        inside(y, gy, -sq - m, board.cols * sq + m)
+    white_part = o.table + (o.white - o.table) * on_board
+    return white_part + (o.black - o.white) * black * pattern
+
+
+def _laser_distance(q: np.ndarray, cam: np.ndarray) -> np.ndarray:
+    """Signed distance (mm) of camera-frame points from the laser plane y + z tan(theta) = H."""
+    th, hh = q[7], q[6]
+    return (cam[..., 1] + cam[..., 2] * np.tan(th) - hh) * np.cos(th)
+
+
+def _true_stripe_rows(q: np.ndarray, pose: np.ndarray, board: Checkerboard,
+                      image_size: tuple[int, int], d_centres: np.ndarray) -> np.ndarray:
+    """Row v per column u where the laser-plane distance on the board plane is zero.
+
+    ``d_centres`` (h, w) holds the distance at pixel centres (NaN where the ray misses the
+    plane); its sign changes bracket the root, then Newton steps on exact rays refine it.
+    """
+    w, h = image_size
+    bfc = _board_from_camera(q, pose, board)
+    out = np.full(w, np.nan)
+    d = d_centres
+    sign_change = (np.sign(d[:-1]) * np.sign(d[1:]) <= 0) & np.isfinite(d[:-1]) & \
+        np.isfinite(d[1:])
+    cols = np.nonzero(sign_change.any(axis=0))[0]
+    if cols.size == 0:
+        return out
+    rows = np.argmax(sign_change[:, cols], axis=0)
+    d0, d1 = d[rows, cols], d[rows + 1, cols]
+    v = rows + np.where(d0 != d1, d0 / (d0 - d1), 0.5)
+
+    def dist(vv: np.ndarray) -> np.ndarray:
+        rays = rays_in_camera(q, np.stack([cols.astype(float), vv], axis=1))
+        rb = rays @ bfc[:3, :3].T
+        t = -bfc[2, 3] / rb[:, 2]
+        return _laser_distance(q, rays * t[:, None])
+
+    for _ in range(4):
+        f = dist(v)
+        g = (dist(v + 1e-3) - dist(v - 1e-3)) / 2e-3
+        v = v - f / g
+    out[cols] = v
+    return out
+
+
+def render_pose(params: Any, pose: np.ndarray, board: Checkerboard | None = None,
+                image_size: tuple[int, int] = (640, 480), options: RenderOptions | None = None,
+                rng: np.random.Generator | None = None) -> RenderedPose:
+    """Render the laser-on and laser-off images seen at one base_from_hand pose.
+
+    Parameters
+    ----------
+    params : true sensor parameters (:class:`hmlvs.Parameters` or 14-vector)
+    pose : (4, 4) base_from_hand transform
+    board : the checkerboard (default: the paper's)
+    image_size : (width, height) in pixels
+    options : :class:`RenderOptions`
+    rng : random generator for the sensor noise (default: seeded with 0)
+    """
+    q = as_params(params)
+    board = Checkerboard() if board is None else board
+    o = RenderOptions() if options is None else options
+    rng = np.random.default_rng(0) if rng is None else rng
+    w, h = (int(image_size[0]), int(image_size[1]))
+    if w < 8 or h < 8:
+        raise ValueError(f"image_size must be at least 8 x 8 pixels, got {image_size}")
+    s = o.supersample
+    rays = _sample_rays(q, (w, h), s)
+    bfc = _board_from_camera(q, pose, board)
+    ambient = np.empty((h, w))
+    laser = np.empty((h, w))
+    d_centres = np.empty((h, w))
+    u_sub = ((np.arange(w * s) + 0.5) / s - 0.5)
+    chunk = 40  # pixel rows per block, to bound memory
+    for r0 in range(0, h, chunk):
+        r1 = min(h, r0 + chunk)
+        ray = rays[r0 * s:r1 * s]
+        rb = ray @ bfc[:3, :3].T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -bfc[2, 3] / rb[..., 2]
+        hit = np.isfinite(t) & (t > 0)
+        t = np.where(hit, t, np.nan)
+        x = bfc[0, 3] + t * rb[..., 0]
+        y = bfc[1, 3] + t * rb[..., 1]
+        gxv, gxu = np.gradient(x, 1.0 / s)
+        gyv, gyu = np.gradient(y, 1.0 / s)
+        with np.errstate(invalid="ignore"):
+            alb = _albedo(np.nan_to_num(x), np.nan_to_num(y),
+                          np.nan_to_num(np.hypot(gxu, gxv), nan=1.0),
+                          np.nan_to_num(np.hypot(gyu, gyv), nan=1.0), board, o)
+        alb = np.where(hit, alb, 0.0)
+        d = _laser_distance(q, ray * t[..., None])
+        # distance to the stripe curve in pixels: d (mm) over its gradient (mm per px)
+        gv, gu = np.gradient(d, 1.0 / s)
+        dpx = d / np.hypot(gu, gv)
+        prof = np.exp(-0.5 * (dpx / o.stripe_sigma) ** 2)
+        if o.spurious > 0:
+            lo, hi = o.spurious_columns
+            inside = (u_sub >= lo * w) & (u_sub <= hi * w)
+            prof = prof + o.spurious * inside[None, :] * np.exp(
+                -0.5 * ((dpx - o.spurious_offset) / o.stripe_sigma) ** 2)
+        lz = np.nan_to_num(o.laser * alb * prof)
+        az = o.ambient * alb
+        ambient[r0:r1] = az.reshape(r1 - r0, s, w, s).mean(axis=(1, 3))
+        laser[r0:r1] = lz.reshape(r1 - r0, s, w, s).mean(axis=(1, 3))
+        d_centres[r0:r1] = d[s // 2::s, s // 2::s]
+    stripe_v = _true_stripe_rows(q, pose, board, (w, h), d_centres)
+    if o.glare:
+        u0 = o.glare_at * (w - 1)
+        v0 = np.interp(u0, np.arange(w)[np.isfinite(stripe_v)],
+                       stripe_v[np.isfinite(stripe_v)]) if np.isfinite(stripe_v).any() else h / 2
+        vv, uu = np.mgrid[0:h, 0:w]
+        ambient = ambient + 400.0 * np.exp(-0.5 * ((uu - u0) ** 2 + (vv - v0) ** 2)
+                                           / o.glare_radius ** 2)
+    off = ambient
+    on = ambient + laser
+    import cv2
+    frames = []
+    for img in (on, off):
+        if o.blur_sigma > 0:
+            img = cv2.GaussianBlur(img, (0, 0), o.blur_sigma, borderType=cv2.BORDER_REFLECT)
+        if o.noise > 0:
+            img = img + rng.normal(0.0, o.noise, img.shape)
+        frames.append(np.clip(np.rint(img), 0, 255).astype(np.uint8))
+    return RenderedPose(frames[0], frames[1], stripe_v)
+
+
+def _write_png(path: Path, image: np.ndarray) -> None:
+    import cv2
+    ok, buf = cv2.imencode(".png", image)
+    if not ok:
+        raise ValueError(f"could not encode {path.name} as PNG")
+    with atomic_write(path, "wb") as fh:
+        fh.write(buf.tobytes())
+
+
+def board_to_dict(board: Checkerboard) -> dict[str, Any]:
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(board).items()}
+
+
+def render_session(session: "Session | None" = None, out_dir: str | os.PathLike | None = None,
+                   *, options: RenderOptions | None = None, seed: int = 0,
+                   **session_kwargs: Any) -> RenderedSession:
+    """Render laser-on / laser-off images of a simulated session, optionally writing them.
+
+    Parameters
+    ----------
+    session : a :func:`hmlvs.simulate.session`; default: one made with ``seed`` and
+        ``session_kwargs`` (e.g. ``num_poses=8``, ``params=...``)
+    out_dir : folder to write ``pNNN_on.png``, ``pNNN_off.png``, ``manifest.json`` (pose ids,
+        image files, joint readings in rad, image size, robot and board) and ``truth.npz``
+        (true parameters and per-column stripe centres ``stripe_v``). Every file is written
+        atomically. None: nothing is written.
+    options : :class:`RenderOptions` (stripe width, blur, noise, glare, spurious peak, ...)
+    seed : seeds the session (if made here) and the sensor noise
+
+    Returns
+    -------
+    RenderedSession
+
+    Examples
+    --------
+    >>> r = hmlvs.simulate.render_session(num_poses=4, seed=1, out_dir="session1")
+    >>> ds, report = hmlvs.dataset_from_images("session1")
+    """
+    from .simulate import session as make_session
+    if session is None:
+        session = make_session(seed=seed, **session_kwargs)
+    elif session_kwargs:
+        raise ValueError(f"session_kwargs {sorted(session_kwargs)} apply only when no "
+                         "session is given")
+    o = RenderOptions() if options is None else options
+    rng = np.random.default_rng([seed, 7])
+    poses = session.robot.poses(session.joints)
+    ids = [f"p{i:03d}" for i in range(len(poses))]
+    on, off, sv = [], [], []
+    for pose in poses:
+        r = render_pose(session.truth, pose, session.board, session.image_size, o, rng)
+        on.append(r.on)
+        off.append(r.off)
+        sv.append(r.stripe_v)
+    stripe_v = np.array(sv)
+    manifest = None
+    files: dict[str, Any] = {}
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        entries = []
+        for i, pid in enumerate(ids):
+            names = {"on": f"{pid}_on.png", "off": f"{pid}_off.png"}
+            _write_png(out / names["on"], on[i])
+            _write_png(out / names["off"], off[i])
+            entries.append({"id": pid, **names, "joints": session.joints[i].tolist()})
+        doc = {"format": MANIFEST_FORMAT, "version": MANIFEST_VERSION,
+               "image_size": list(session.image_size), "joint_unit": "rad",
+               "robot": session.robot.name, "board": board_to_dict(session.board),
+               "render_options": asdict(o), "poses": entries}
+        with atomic_write(out / "truth.npz", "wb") as fh:
+            np.savez_compressed(fh, params=session.truth.to_array(), stripe_v=stripe_v,
+                                joints=session.joints, ids=np.array(ids))
+        manifest = out / MANIFEST_NAME
+        with atomic_write(manifest, "w") as fh:
+            json.dump(doc, fh, indent=1)
+        files = {"manifest": manifest, "truth": out / "truth.npz"}
+    return RenderedSession(session, o, ids, on, off, stripe_v, manifest, files)
+
+
+def predicted_corners(params: Any, pose: np.ndarray, board: Checkerboard) -> np.ndarray:
+    """Pixels (rows*cols, 2) where the board's corners appear at a base_from_hand pose
+    (row-major corner order, NaN behind the camera); for identifying detected corners."""
+    corners = board.corners()
+    px, ok = project(params, corners, np.repeat(np.asarray(pose, float)[None], len(corners),
+                                                axis=0))
+    px[~ok] = np.nan
+    return px

@@ -1,0 +1,542 @@
+"""The image pipeline on rendered sessions with known truth: difference image, stripe centres
+(against the truth and against the NumPy reference), corners, calibration points, and whole
+sessions of image files to a data set."""
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+import hmlvs
+import reference_stripe as ref
+from hmlvs.image import StripeStatus
+from hmlvs.render import RenderOptions, predicted_corners, render_pose
+
+METHODS = ["centroid", "gaussian", "steger"]
+
+
+def rms(x):
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+@pytest.fixture(scope="module")
+def clean():
+    """8 poses of the paper's set-up, no sensor noise."""
+    return hmlvs.simulate.render_session(num_poses=8, seed=0)
+
+
+@pytest.fixture(scope="module")
+def uniform_noisy():
+    """A board of uniform albedo (no square edges to bias the stripe) with sensor noise, to
+    compare the reported uncertainty with the actual error."""
+    s = hmlvs.simulate.session(num_poses=4, seed=3)
+    return hmlvs.simulate.render_session(s, options=RenderOptions(noise=2.0, black=0.85), seed=3)
+
+
+@pytest.fixture(scope="module")
+def troubled():
+    """Sensor noise, a saturating glare spot on the stripe and a laser reflection."""
+    s = hmlvs.simulate.session(num_poses=2, seed=0)
+    return hmlvs.simulate.render_session(
+        s, options=RenderOptions(noise=2.0, glare=True, spurious=0.6), seed=1)
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    """A session with sensor noise written to disk (images + manifest)."""
+    out = tmp_path_factory.mktemp("session")
+    r = hmlvs.simulate.render_session(num_poses=8, seed=5, out_dir=out,
+                                      options=RenderOptions(noise=1.0))
+    return r, out
+
+
+def stripe_errors(r, method, normalize=True, **kw):
+    errs, z = [], []
+    for i in range(len(r.on)):
+        d = hmlvs.difference_image(r.on[i], r.off[i], normalize=normalize)
+        s = hmlvs.extract_stripe(d, method=method, **kw)
+        f = s.found & np.isfinite(r.stripe_v[i])
+        errs.append(s.centre[f] - r.stripe_v[i][f])
+        z.append((s.centre[f] - r.stripe_v[i][f]) / s.sigma[f])
+    return np.concatenate(errs), np.concatenate(z)
+
+
+# ------------------------------------------------------------------------------ difference
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_difference_image_is_eq23(rng, dtype):
+    top = np.iinfo(dtype).max
+    on = rng.integers(0, top, (37, 53), endpoint=True).astype(dtype)
+    off = rng.integers(0, top, (37, 53), endpoint=True).astype(dtype)
+    d = hmlvs.difference_image(on, off)
+    expect = np.where(on > off, on.astype(np.int64) - off, 0)
+    assert d.dtype == dtype
+    np.testing.assert_array_equal(d, expect)
+    # a strided (non-contiguous) view is read in place and gives the same result
+    big_on = np.zeros((37, 106), dtype)
+    big_on[:, ::2] = on
+    np.testing.assert_array_equal(hmlvs.difference_image(big_on[:, ::2], off), expect)
+    # normalised: (on - off) * mean(off) / max(off, 0.1 mean(off)), rounded. 8-bit images
+    # are computed in single precision, which may round a value within ~1e-4 of a
+    # half-integer the other way: allow that on a few pixels.
+    dn = hmlvs.difference_image(on, off, normalize=True).astype(np.int64)
+    dr = ref.difference(on, off, normalize=True).astype(np.int64)
+    assert np.abs(dn - dr).max() <= 1 and np.count_nonzero(dn != dr) <= 2
+
+
+def test_difference_image_colour(rng):
+    on = rng.integers(0, 256, (20, 30, 3)).astype(np.uint8)
+    off = rng.integers(0, 256, (20, 30, 3)).astype(np.uint8)
+    gray = hmlvs.difference_image(on, off)
+    g_on, g_off = (cv2.cvtColor(x, cv2.COLOR_BGR2GRAY).astype(int) for x in (on, off))
+    np.testing.assert_array_equal(gray, np.clip(g_on - g_off, 0, None))
+    red = hmlvs.difference_image(on, off, channel=2)
+    np.testing.assert_array_equal(red, np.clip(on[..., 2].astype(int) - off[..., 2], 0, None))
+
+
+@pytest.mark.parametrize("on, off, match", [
+    (np.zeros((4, 5), np.uint8), np.zeros((4, 6), np.uint8), "5 x 4 pixels but the laser-off"),
+    (np.zeros((4, 5), np.uint8), np.zeros((4, 5), np.uint16), "different bit depths"),
+    (np.zeros((4, 5), np.float32), np.zeros((4, 5), np.float32), "8- or 16-bit"),
+    (np.zeros((4, 5, 2), np.uint8), np.zeros((4, 5, 2), np.uint8), "has 2 channels"),
+    (np.zeros((0, 5), np.uint8), np.zeros((0, 5), np.uint8), "empty"),
+    ([[1, 2]], [[1, 2]], "numpy array"),
+])
+def test_difference_image_bad_input(on, off, match):
+    with pytest.raises(ValueError, match=match):
+        hmlvs.difference_image(on, off)
+
+
+# ------------------------------------------------------------------------------ stripe
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("direction", ["columns", "rows"])
+def test_stripe_matches_numpy_reference(troubled, method, direction):
+    """C++ and the independent NumPy version agree on every status and every number, on
+    images with noise, glare and a reflection (so every status and code path occurs)."""
+    seen = set()
+    for i in range(2):
+        d = hmlvs.difference_image(troubled.on[i], troubled.off[i], normalize=True)
+        img = d if direction == "columns" else np.ascontiguousarray(d.T)
+        a = hmlvs.extract_stripe(img, direction=direction, method=method)
+        b = ref.extract(img, direction=direction, method=method)
+        np.testing.assert_array_equal(a.status, b["status"])
+        np.testing.assert_array_equal(a.num_peaks, b["num_peaks"])
+        assert a.threshold == pytest.approx(b["threshold"], rel=1e-12)
+        assert a.noise == pytest.approx(b["noise"], rel=1e-12)
+        f = a.found
+        np.testing.assert_allclose(a.centre[f], b["centre"][f], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(a.sigma[f], b["sigma"][f], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(a.width, b["width"], rtol=1e-12, equal_nan=True)
+        np.testing.assert_allclose(a.intensity, b["intensity"], rtol=0, equal_nan=True)
+        seen |= set(np.unique(a.status).tolist())
+    assert {StripeStatus.FOUND, StripeStatus.NONE, StripeStatus.MULTIPLE} <= seen
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_stripe_accuracy_without_noise(clean, method):
+    e, _ = stripe_errors(clean, method, normalize=True)
+    assert e.size > 0.95 * 8 * 640  # the stripe crosses every column of every image
+    assert rms(e) < 0.05
+    assert np.abs(e).max() < 0.2
+    # Without normalisation the stripe's albedo steps (black/white squares) pull the centre
+    # towards the white side: the paper's plain difference image is much worse wherever the
+    # stripe runs along a row of corners, i.e. exactly in the paper's procedure.
+    e_raw, _ = stripe_errors(clean, method, normalize=False)
+    assert rms(e_raw) > 3 * rms(e)
+
+
+@pytest.mark.parametrize("method, zmax", [("centroid", 1.3), ("gaussian", 1.3), ("steger", 1.5)])
+def test_stripe_error_reported_honestly(uniform_noisy, method, zmax):
+    """With noise the reported sigma matches the actual error: the normalised errors
+    (error / sigma) have an RMS near 1. Steger's sigma neglects the noise of the Hessian and
+    runs ~25 % optimistic, hence its wider bound."""
+    e, z = stripe_errors(uniform_noisy, method, normalize=False, noise=None)
+    assert rms(e) < 0.1
+    assert 0.75 < rms(z) < zmax
+
+
+def test_stripe_rows_equal_columns_of_the_transposed_image(clean):
+    d = hmlvs.difference_image(clean.on[0], clean.off[0], normalize=True)
+    # threshold and noise given: automatic ones are taken from every 4th image row, which
+    # are other pixels in the transposed image
+    kw = {"noise": 1.0, "threshold": 20.0}
+    for method in METHODS:
+        a = hmlvs.extract_stripe(d, method=method, **kw)
+        b = hmlvs.extract_stripe(np.ascontiguousarray(d.T), direction="rows", method=method,
+                                 **kw)
+        np.testing.assert_array_equal(a.status, b.status)
+        np.testing.assert_allclose(a.centre, b.centre, rtol=0, atol=1e-12, equal_nan=True)
+        np.testing.assert_allclose(a.pixels, b.pixels[:, ::-1], rtol=0, atol=1e-12)
+        # a transposed view (strided, no copy) gives the same numbers
+        c = hmlvs.extract_stripe(d.T, direction="rows", method=method, **kw)
+        np.testing.assert_allclose(c.centre, a.centre, rtol=0, atol=1e-12, equal_nan=True)
+
+
+def gaussian_column(n, centre, sigma, peak):
+    v = np.arange(n)
+    return peak * np.exp(-0.5 * ((v - centre) / sigma) ** 2)
+
+
+def test_stripe_statuses_on_synthetic_columns():
+    n = 60
+    cols = [
+        gaussian_column(n, 20.3, 1.5, 200),                                 # one stripe
+        np.zeros(n),                                                        # nothing
+        gaussian_column(n, 15.0, 1.5, 200) + gaussian_column(n, 40.0, 1.5, 150),  # two peaks
+        np.where(np.arange(n) == 30, 200.0, 0.0),                           # a hot pixel
+        gaussian_column(n, 30.0, 12.0, 200),                                # a wide blob
+        np.minimum(gaussian_column(n, 25.0, 2.0, 600), 255),                # saturated top
+        gaussian_column(n, 10.0, 1.5, 200) + gaussian_column(n, 45.0, 1.5, 60),  # weak echo
+    ]
+    img = np.clip(np.rint(np.stack(cols, axis=1)), 0, 255).astype(np.uint8)
+    s = hmlvs.extract_stripe(img, method="gaussian", threshold=30, noise=1.0)
+    S = StripeStatus
+    assert s.status.tolist() == [S.FOUND, S.NONE, S.MULTIPLE, S.TOO_NARROW, S.TOO_WIDE,
+                                 S.FIT_FAILED, S.MULTIPLE]
+    assert s.num_peaks.tolist() == [1, 0, 2, 0, 1, 1, 2]
+    assert s.centre[0] == pytest.approx(20.3, abs=0.02)
+    assert s.width[0] == pytest.approx(2.3548 * 1.5, abs=0.1)
+    assert s.intensity[0] == img[:, 0].max()
+    assert np.isnan(s.centre[1:]).all()
+    # with a dominance ratio the strong stripe over a weak echo is accepted, the two equal
+    # peaks still are not
+    s2 = hmlvs.extract_stripe(img, method="centroid", threshold=30, noise=1.0, dominance=2.0)
+    assert s2.status[6] == S.FOUND and s2.centre[6] == pytest.approx(10.0, abs=0.02)
+    assert s2.status[2] == S.MULTIPLE
+    assert s2.pixels.tolist() == [[0.0, s2.centre[0]], [5.0, s2.centre[5]], [6.0, s2.centre[6]]]
+    # 16-bit images work the same (same numbers scaled by 256)
+    s16 = hmlvs.extract_stripe(img.astype(np.uint16) * 256, method="gaussian",
+                               threshold=30 * 256, noise=256.0)
+    # Column 5 is not saturated in 16 bits (255 * 256 < 65535): its flat top is fitted as
+    # if it were a peak. Saturation is recognised only at the pixel type's maximum.
+    np.testing.assert_array_equal(np.delete(s16.status, 5), np.delete(s.status, 5))
+    assert s16.status[5] == S.FOUND
+    assert s16.centre[0] == pytest.approx(s.centre[0], abs=1e-2)
+
+
+def test_stripe_reflection_and_glare_are_reported_not_guessed(troubled):
+    r = troubled
+    w = r.on[0].shape[1]
+    lo, hi = (np.array(r.options.spurious_columns) * w).astype(int)
+    for i in range(2):
+        # The plain difference has the same noise everywhere, so the automatic threshold
+        # (5 sigma) keeps noise out. (The normalised one amplifies noise on black squares;
+        # dataset_from_images raises its threshold accordingly, tested below.)
+        d = hmlvs.difference_image(r.on[i], r.off[i])
+        s = hmlvs.extract_stripe(d)
+        truth = r.stripe_v[i]
+        # every centre that is reported is the stripe's (no reflection or glare edge taken);
+        # the bound allows the plain difference's albedo bias (up to ~0.75 px), a wrong
+        # peak would be >= 20 px off
+        f = s.found
+        assert np.abs(s.centre[f] - truth[f]).max() < 1.0
+        # the reflection's columns are flagged as multiple peaks
+        band = np.arange(lo + 3, hi - 3)
+        assert np.mean(s.status[band] == StripeStatus.MULTIPLE) > 0.9
+        # the saturated glare spot hides the stripe there: no stripe, not a wrong one
+        g = int(round(r.options.glare_at * (w - 1)))
+        assert np.all(s.status[g - 5:g + 6] != StripeStatus.FOUND)
+        # with a dominance ratio the stripe (1 / 0.6 brighter) is taken over its reflection;
+        # only on the albedo-normalised image, as in the plain one a reflection off a white
+        # square can outshine the stripe on a black one
+        dn = hmlvs.difference_image(r.on[i], r.off[i], normalize=True)
+        thr = hmlvs.image._normalized_threshold(r.on[i], r.off[i], dn)
+        s2 = hmlvs.extract_stripe(dn, dominance=1.3, threshold=thr)
+        ok = s2.found[band]
+        assert ok.mean() > 0.8
+        assert rms(s2.centre[band][ok] - truth[band][ok]) < 0.3
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"direction": "diagonal"}, "direction must be"),
+    ({"method": "moments"}, "method must be"),
+    ({"min_width": 5, "max_width": 4}, "min_width < max_width"),
+    ({"threshold": -3}, "threshold must be"),
+    ({"noise": float("nan")}, "noise must be"),
+    ({"steger_sigma": 0.1}, "steger_sigma must"),
+    ({"dominance": 0.5}, "dominance must be"),
+])
+def test_extract_stripe_bad_options(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        hmlvs.extract_stripe(np.zeros((10, 10), np.uint8), **kwargs)
+
+
+def test_extract_stripe_bad_images():
+    with pytest.raises(ValueError, match="uint8 or uint16"):
+        hmlvs.extract_stripe(np.zeros((10, 10)))
+    with pytest.raises(ValueError, match="grayscale"):
+        hmlvs.extract_stripe(np.zeros((10, 10), np.uint8), channel=1)
+    with pytest.raises(ValueError, match="2D grayscale or 3D colour"):
+        hmlvs.extract_stripe(np.zeros((2, 10, 10, 3), np.uint8))
+
+
+# ------------------------------------------------------------------------------ corners
+
+
+def true_corner_errors(r, params=None):
+    s = r.session
+    poses = s.robot.poses(s.joints)
+    errs, counts = [], []
+    for i in range(len(poses)):
+        truth = predicted_corners(s.truth, poses[i], s.board)
+        exp = predicted_corners(params or s.truth, poses[i], s.board)
+        try:
+            c = hmlvs.find_corners(r.off[i], s.board, expected=exp)
+        except ValueError:
+            counts.append(0)
+            continue
+        errs.append(np.linalg.norm(c.pixels - truth[c.index], axis=1))
+        counts.append(len(c))
+    return np.concatenate(errs), counts
+
+
+def test_corners_accurate_and_numbered(clean):
+    e, counts = true_corner_errors(clean)
+    # pose 1 sees the board's corner with only 6 inner corners and no 3 x 3 grid: not found
+    assert sum(c > 0 for c in counts) >= 7
+    assert rms(e) < 0.1 and e.max() < 0.15
+    # approximate parameters (3 mm, 1 degree off) number the corners the same way
+    approx = clean.session.truth.replace(tx=clean.session.truth.tx + 3.0, omega=0.0175)
+    e2, counts2 = true_corner_errors(clean, approx)
+    # (cornerSubPix works in float32: the same corners to ~1e-6 px)
+    assert counts2 == counts and rms(e2) == pytest.approx(rms(e), abs=1e-5)
+
+
+def overhead_pose(q, flip=False):
+    """base_from_hand with the camera 700 mm above the board centre, looking down, the image
+    showing the whole board (rotated by 180 degrees with flip)."""
+    x = np.array([0.0, 1.0, 0.0]) if flip else np.array([0.0, -1.0, 0.0])
+    z = np.array([0.0, 0.0, -1.0])
+    bfc = np.eye(4)
+    bfc[:3, 0], bfc[:3, 1], bfc[:3, 2] = x, np.cross(z, x), z
+    bfc[:3, 3] = [625.0, -15.0, 700.0]
+    return bfc @ np.linalg.inv(hmlvs.hand_from_camera(q))
+
+
+def test_corner_numbering_full_board_and_flip():
+    q = hmlvs.Parameters.nominal()
+    board = hmlvs.Checkerboard()
+    n = board.rows * board.cols
+    for flip in (False, True):
+        pose = overhead_pose(q, flip)
+        img = render_pose(q, pose, board).off
+        truth = predicted_corners(q, pose, board)
+        c = hmlvs.find_corners(img, board, expected=truth)
+        assert len(c) == n and c.rule == "expected"
+        assert np.linalg.norm(c.pixels - truth[c.index], axis=1).max() < 0.1
+        # the marker-free rule: r0c0 is the corner nearest the image's top-left. Right for
+        # the upright view; for the view turned by 180 degrees it numbers the board from the
+        # opposite corner (the documented limit of a rule without markers).
+        c2 = hmlvs.find_corners(img, board)
+        assert c2.rule == "top-left" and len(c2) == n
+        want = truth if not flip else truth[::-1]
+        assert np.linalg.norm(c2.pixels - want[c2.index], axis=1).max() < 0.1
+    # a partly visible board cannot be numbered without expected pixels
+    with pytest.raises(ValueError, match="for a partly visible board pass the expected"):
+        hmlvs.find_corners(render_pose(q, overhead_pose(q)[:, :] @ _shift(150), board).off,
+                           board)
+
+
+def _shift(dx):
+    t = np.eye(4)
+    t[0, 3] = dx
+    return t
+
+
+def test_find_corners_no_board_and_bad_expected(clean):
+    blank = np.full((480, 640), 120, np.uint8)
+    with pytest.raises(ValueError, match="no checkerboard found"):
+        hmlvs.find_corners(blank, expected=np.zeros((48, 2)))
+    with pytest.raises(ValueError, match=r"expected must hold the \(48, 2\)"):
+        hmlvs.find_corners(clean.off[0], expected=np.zeros((10, 2)))
+    s = clean.session
+    far = predicted_corners(s.truth, s.robot.poses(s.joints)[0], s.board) + [0.0, 0.0]
+    far[:, 0] = far[:, 0][::-1]  # scrambled: nothing is where it should be
+    with pytest.raises(ValueError, match="do not match the expected|do not form a board"):
+        hmlvs.find_corners(clean.off[0], s.board, expected=far)
+
+
+# ------------------------------------------------------------------------------ points
+
+
+def test_calibration_points_corners_mode(clean):
+    """The stripe passes through exactly the corners the session put on the laser plane;
+    their stripe pixels are within 0.1 px of the exact ones."""
+    s = clean.session
+    poses = s.robot.poses(s.joints)
+    found_ids, errs = [], []
+    for i in range(len(poses)):
+        exp = predicted_corners(s.truth, poses[i], s.board)
+        try:
+            c = hmlvs.find_corners(clean.off[i], s.board, expected=exp)
+        except ValueError:
+            continue
+        st = hmlvs.extract_stripe(hmlvs.difference_image(clean.on[i], clean.off[i],
+                                                         normalize=True))
+        cp = hmlvs.calibration_points(st, c, mode="corners")
+        found_ids += [f"p{i:03d}:{k}" for k in cp.ids]
+        exact, _ = hmlvs.pixels_from_points(s.truth, cp.points,
+                                            np.repeat(poses[i][None], len(cp), axis=0))
+        errs.append(np.linalg.norm(cp.pixels - exact, axis=1))
+        assert np.all(np.abs(cp.distance) < 0.5)
+    # every corner of the session on the stripe, except those of the pose without a board
+    want = {k for k in s.dataset.ids if not k.startswith("p001:")}
+    assert set(found_ids) == want
+    e = np.concatenate(errs)
+    assert rms(e) < 0.1 and e.max() < 0.15
+
+
+def test_calibration_points_homography_mode(clean):
+    s = clean.session
+    poses = s.robot.poses(s.joints)
+    errs, n_images = [], 0
+    for i in range(len(poses)):
+        exp = predicted_corners(s.truth, poses[i], s.board)
+        try:
+            c = hmlvs.find_corners(clean.off[i], s.board, expected=exp)
+        except ValueError:
+            continue
+        st = hmlvs.extract_stripe(hmlvs.difference_image(clean.on[i], clean.off[i],
+                                                         normalize=True))
+        cp = hmlvs.calibration_points(st, c, mode="homography", step=4)
+        if len(cp) == 0:
+            continue
+        n_images += 1
+        rep = np.repeat(poses[i][None], len(cp), axis=0)
+        # the reference points lie on the board plane, at the laser plane to ~0.01 mm
+        assert np.abs(cp.points[:, 2]).max() < 1e-9
+        assert np.abs(hmlvs.laser_plane_distance(s.truth, cp.points, rep)).max() < 0.05
+        exact, _ = hmlvs.project(s.truth, cp.points, rep)
+        errs.append(np.linalg.norm(cp.pixels - exact, axis=1))
+    e = np.concatenate(errs)
+    assert e.size > 20 * n_images  # many points per image, not one or two corners
+    assert rms(e) < 0.1 and e.max() < 0.3
+
+
+def test_calibration_points_bad_input(clean):
+    st = hmlvs.extract_stripe(hmlvs.difference_image(clean.on[0], clean.off[0]))
+    s = clean.session
+    c = hmlvs.find_corners(clean.off[0], s.board, expected=predicted_corners(
+        s.truth, s.robot.poses(s.joints)[0], s.board))
+    with pytest.raises(ValueError, match="mode must be"):
+        hmlvs.calibration_points(st, c, mode="lines")
+    with pytest.raises(ValueError, match="tolerance must be > 0"):
+        hmlvs.calibration_points(st, c, tolerance=0)
+    with pytest.raises(ValueError, match="numbered on a 6 x 8 board"):
+        hmlvs.calibration_points(st, c, hmlvs.Checkerboard(rows=5, cols=7))
+
+
+# ------------------------------------------------------------------------------ sessions
+
+
+def test_render_session_writes_manifest_and_images(written):
+    r, out = written
+    doc = json.loads((out / "manifest.json").read_text())
+    assert doc["format"] == "hmlvs-images" and doc["joint_unit"] == "rad"
+    assert doc["image_size"] == [640, 480] and len(doc["poses"]) == 8
+    for i, e in enumerate(doc["poses"]):
+        np.testing.assert_array_equal(cv2.imread(str(out / e["on"]), cv2.IMREAD_UNCHANGED),
+                                      r.on[i])
+        np.testing.assert_allclose(e["joints"], r.session.joints[i], rtol=0, atol=0)
+    with np.load(out / "truth.npz") as z:
+        np.testing.assert_array_equal(z["stripe_v"], r.stripe_v)
+    assert not list(out.glob(".*tmp"))  # atomic writes leave no temporary files
+    # the true stripe crosses the image in every pose
+    assert np.isfinite(r.stripe_v).mean() > 0.95
+
+
+@pytest.mark.parametrize("mode", ["corners", "homography"])
+def test_dataset_from_images_end_to_end(written, mode):
+    r, out = written
+    s = r.session
+    ds, report = hmlvs.dataset_from_images(out, mode=mode)
+    assert len(report) == 8
+    assert sum(x.ok for x in report) >= 6
+    assert all(x.reason for x in report if not x.ok)
+    np.testing.assert_allclose(ds.poses, s.robot.poses(ds.joints), atol=1e-12)
+    assert all(k.split(":")[0] == f"p{i:03d}" for k, i in zip(ds.ids, ds.pose_index))
+    exact, ok = hmlvs.project(s.truth, ds.points, ds.poses)
+    err = np.linalg.norm(ds.pixels - exact, axis=1)
+    assert ok.all() and rms(err) < 0.1
+    e3 = np.linalg.norm(hmlvs.residuals(s.truth, ds.pixels, ds.poses, ds.points), axis=1)
+    if mode == "corners":
+        # the snapped corners are exactly the session's points: the residual is the 3D
+        # effect of the pixel error alone
+        assert set(ds.ids) <= set(s.dataset.ids)
+        p_exact, _ = hmlvs.points_in_base(s.truth, exact, ds.poses)
+        p_found, _ = hmlvs.points_in_base(s.truth, ds.pixels, ds.poses)
+        assert rms(e3) == pytest.approx(rms(np.linalg.norm(p_found - p_exact, axis=1)),
+                                        rel=1e-6)
+    else:
+        assert len(ds) > 10 * sum(x.ok for x in report)
+    assert rms(e3) < 0.1  # mm, for < 0.1 px at ~0.25 mm per pixel
+
+
+def test_dataset_from_images_reports_bad_pairs(written, tmp_path):
+    r, out = written
+    joints = r.session.joints
+    good = [{"id": f"g{i}", "on": r.on[i], "off": r.off[i], "joints": joints[i]}
+            for i in (0, 2)]
+    (tmp_path / "broken.png").write_bytes(b"not a png")
+    bad = [
+        {"id": "nostripe", "on": r.off[0], "off": r.off[0], "joints": joints[0]},
+        {"id": "noboard", "on": 80 + hmlvs.difference_image(r.on[0], r.off[0]) // 2,
+         "off": np.full((480, 640), 80, np.uint8), "joints": joints[0]},
+        {"id": "size", "on": r.on[0][:400], "off": r.off[0][:400], "joints": joints[0]},
+        {"id": "dtype", "on": r.on[0].astype(np.float32), "off": r.off[0], "joints": joints[0]},
+        {"id": "black", "on": np.zeros((480, 640), np.uint8),
+         "off": np.zeros((480, 640), np.uint8), "joints": joints[0]},
+        {"id": "mismatch", "on": r.on[0], "off": r.off[3], "joints": joints[0]},
+        {"id": "missing", "on": str(tmp_path / "nope.png"), "off": r.off[0], "joints": joints[0]},
+        {"id": "unreadable", "on": str(tmp_path / "broken.png"), "off": r.off[0],
+         "joints": joints[0]},
+        {"id": "joints", "on": r.on[0], "off": r.off[0], "joints": [0.1, 0.2]},
+    ]
+    ds, report = hmlvs.dataset_from_images(good[:1] + bad + good[1:])
+    by_id = {x.id: x for x in report}
+    assert by_id["g0"].ok and by_id["g2"].ok
+    assert set(ds.pose_index.tolist()) == {0, len(bad) + 1}
+    expect = {
+        "nostripe": "no laser stripe found",
+        "noboard": "checkerboard: no checkerboard found",
+        "size": "are 640 x 400 pixels but the session's are 640 x 480",
+        "dtype": "8- or 16-bit",
+        "black": "all black",
+        "mismatch": "not a pair taken at the same pose",
+        "missing": "does not exist",
+        "unreadable": "cannot be read as an image",
+        "joints": "joint readings must be 5 finite numbers",
+    }
+    for k, text in expect.items():
+        assert not by_id[k].ok and text in by_id[k].reason, (k, by_id[k].reason)
+    # the data set from the good pairs is the same as from a session of only those pairs
+    ds2, _ = hmlvs.dataset_from_images(good)
+    np.testing.assert_allclose(ds.pixels, ds2.pixels, rtol=0, atol=0)
+    with pytest.raises(ValueError, match="no image pair gave a calibration point"):
+        hmlvs.dataset_from_images(bad)
+    with pytest.raises(ValueError, match="no such manifest"):
+        hmlvs.dataset_from_images(tmp_path / "nowhere")
+    with pytest.raises(ValueError, match="method must be"):
+        hmlvs.dataset_from_images(good, method="moments")
+
+
+def test_pipeline_with_radial_distortion():
+    """k = 0.003 / mm^2 moves the image corners by ~2.6 % (10 px): corners and stripe still
+    within 0.1 px, and the homography mode takes the distortion out before mapping."""
+    q = hmlvs.Parameters.nominal().replace(k=0.003)
+    s = hmlvs.simulate.session(q, num_poses=4, seed=0)
+    r = hmlvs.simulate.render_session(s, options=RenderOptions(noise=1.0), seed=4)
+    e, _ = stripe_errors(r, "steger")
+    assert rms(e) < 0.1
+    records = [{"id": f"p{i:03d}", "on": r.on[i], "off": r.off[i], "joints": s.joints[i]}
+               for i in range(4)]
+    for mode in ("corners", "homography"):
+        # the approximate parameters (nominal, k = 0) still number the corners
+        ds, report = hmlvs.dataset_from_images(records, mode=mode)
+        assert sum(x.ok for x in report) >= 3
+        exact, _ = hmlvs.project(q, ds.points, ds.poses)
+        assert rms(np.linalg.norm(ds.pixels - exact, axis=1)) < 0.1
