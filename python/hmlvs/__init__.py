@@ -5,6 +5,8 @@ base frame."""
 from . import _core
 from . import design
 from . import simulate
+from ._identifiability import Direction, HmlvsDataWarning, IdentifiabilityReport, identifiability
+from ._uncertainty import Combination, Uncertainty, uncertainty
 from .board import Checkerboard
 from .identify import CalibrationResult, calibrate, initial_candidates
 from .dataset import Dataset
@@ -29,4 +31,8 @@ __all__ = [
     "laser_plane_distance", "objective",
     "pixels_from_points", "points_in_base", "points_in_camera", "project", "residuals",
     "simulate",
+    # identifiability and uncertainty (issue 4)
+    "Combination", "Direction", "HmlvsDataWarning", "IdentifiabilityReport",
+    "Uncertainty", "identifiability",
+    "uncertainty",
 ]
