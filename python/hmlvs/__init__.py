@@ -6,6 +6,7 @@ from . import _core
 from . import design
 from . import simulate
 from ._identifiability import Direction, HmlvsDataWarning, IdentifiabilityReport, identifiability
+from ._repeatability import RepeatabilityReport, Spread, repeatability
 from ._uncertainty import Combination, Uncertainty, uncertainty
 from .board import Checkerboard
 from .identify import CalibrationResult, calibrate, initial_candidates
@@ -33,6 +34,6 @@ __all__ = [
     "simulate",
     # identifiability and uncertainty (issue 4)
     "Combination", "Direction", "HmlvsDataWarning", "IdentifiabilityReport",
-    "Uncertainty", "identifiability",
+    "RepeatabilityReport", "Spread", "Uncertainty", "identifiability", "repeatability",
     "uncertainty",
 ]
