@@ -42,10 +42,17 @@ def test_paper_data_all_three_known_degeneracies_found_and_named(paper):
     got = [by_kind["scale_gauge"].loadings[n] for n in ("f", "Su", "Sv")]
     np.testing.assert_allclose(got, g / np.linalg.norm(g), rtol=1e-9)
     # In the data's coordinates (rotation on SO(3)) the gimbal lock is no flat direction, but
-    # a camera tilt about its own x axis with Cv is: the SVD finds it as a fourth direction.
+    # a camera tilt about its own x axis with Cv and tz is: the SVD finds it as a fourth one,
+    # shown as it is with Su and Sv fixed (unmixed with the gauge and the camera shift).
     unnamed = [d for d in rep.directions if d.kind == "unnamed"]
     assert len(unnamed) == 1 and unnamed[0].status == "null"
-    assert {"Cv", "ty"} <= {n for n, _ in unnamed[0].top(4)}
+    assert [n for n, _ in unnamed[0].top(3)] == ["Cv", "tz", "rot_x"]
+    assert unnamed[0].loadings["Su"] == pytest.approx(0, abs=1e-9)
+    assert unnamed[0].loadings["Sv"] == pytest.approx(0, abs=1e-9)
+    tilt = hmlvs.identifiability(paper.fit, paper.truth, fixed=("Su", "Sv")).directions
+    tilt = next(d for d in tilt if d.kind == "unnamed")
+    assert abs(sum(unnamed[0].loadings[n] * v for n, v in tilt.loadings.items())) == \
+        pytest.approx(1.0, abs=1e-9)  # the same direction
     text = rep.summary()
     for name in ("scale gauge", "gimbal lock", "camera shift along its y axis"):
         assert name in text

@@ -534,11 +534,35 @@ def _unnamed_directions(an: _Analysis, known: list[Direction]) -> list[Direction
     count = d - len(explained)
     if count <= 0:
         return []
+    rest = None
     if explained:
         xs = np.column_stack([np.array([d_.loadings[an.coordinates[i]] for i in an.free_idx])
                               for d_ in explained])
-        qk, _ = np.linalg.qr(flat @ (flat.T @ xs))  # their parts inside the flat subspace
-        rest = flat - qk @ (qk.T @ flat)
+        # Representatives that leave each known direction's signature coordinate unchanged
+        # (Su for the gauge, Sv for the camera shift: the first coordinate in the order of
+        # _PRIOR_KNOWN, then by loading, that it moves and that keeps the signatures
+        # independent): with Su free the tilt then comes out as it is with Su and Sv fixed,
+        # not mixed with the camera shift as an orthogonal complement would be.
+        coords = [an.coordinates[i] for i in an.free_idx]
+        order = [coords.index(n) for n in _PRIOR_KNOWN if n in coords]
+        sig: list[int] = []
+        for c in range(xs.shape[1]):
+            cands = order + [k for k in np.argsort(-np.abs(xs[:, c])) if k not in order]
+            for k in cands:
+                if k in sig or abs(xs[k, c]) < 1e-3:
+                    continue
+                trial = xs[sig + [k], : c + 1]
+                if np.linalg.matrix_rank(trial, tol=1e-6) == c + 1:
+                    sig.append(int(k))
+                    break
+        if len(sig) == xs.shape[1]:
+            _, sv_, vt_ = np.linalg.svd(flat[sig], full_matrices=True)
+            r_ = int(np.sum(sv_ > 1e-6))
+            if flat.shape[1] - r_ == count:
+                rest = flat @ vt_[r_:].T
+        if rest is None:  # fall back to the orthogonal complement
+            qk, _ = np.linalg.qr(flat @ (flat.T @ xs))
+            rest = flat - qk @ (qk.T @ flat)
     else:
         rest = flat
     u, _, _ = np.linalg.svd(rest, full_matrices=False)
