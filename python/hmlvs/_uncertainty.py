@@ -15,8 +15,8 @@ v - Cv). This sandwich form is needed because ``calibrate`` minimises the plain 
 squares while pixel noise moves points only within the laser plane, by amounts that grow
 with depth: the residuals are neither isotropic nor of equal size. The textbook
 Gauss-Newton ``s^2 (J^T J)^-1`` with ``s^2 = SSR / (3m - r)`` assumes they are; on the
-paper's data (0.1 px pixel noise) it misstates the standard deviations by factors 0.4 to
-2.6 over 200 simulations, so it is not used.
+paper's data (0.1 px pixel noise) it misstates the standard deviations by factors 0.2 (the
+rotation about the camera's z axis) to 2.6 (k) over 200 simulations, so it is not used.
 
 The noise levels are the user's (``pixel_noise``, ``point_noise``) or, by default, estimated
 from the residuals by the method of moments (:func:`_estimate_noise`): the residual
