@@ -22,7 +22,7 @@ angles.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import math
 from typing import Any, Iterable
 
@@ -311,7 +311,6 @@ class _Analysis:
     euler_vt: np.ndarray
     null_tol: float
     weak_tol: float
-    extra_warnings: list[str] = field(default_factory=list)
 
     @property
     def p(self) -> int:
@@ -435,11 +434,11 @@ _KNOWN_RECOMMENDATIONS = {
 }
 
 
-def _unit_scaled(t: np.ndarray, scales: np.ndarray, free_idx: np.ndarray) -> tuple[np.ndarray,
-                                                                                   float]:
+def _unit_scaled(t: np.ndarray, scales: np.ndarray, free_idx: np.ndarray) -> np.ndarray:
+    """The free part of a tangent in range-scaled coordinates, as a unit vector."""
     x = t[free_idx] / scales[free_idx]
     n = float(np.linalg.norm(x))
-    return (x / n if n > 0 else x), n
+    return x / n if n > 0 else x
 
 
 def _status(gain: float, null_tol: float, weak_tol: float) -> str:
@@ -481,7 +480,7 @@ def _known_directions(an: _Analysis) -> list[Direction]:
         on_fixed = np.linalg.norm(tx[fixed]) > 1e-12 * np.linalg.norm(tx)
         (removed if on_fixed else valid).append(kind)
     for kind in valid:
-        x, _ = _unit_scaled(tangents[kind], an.scales, an.free_idx)
+        x = _unit_scaled(tangents[kind], an.scales, an.free_idx)
         out.append(_make_direction(kind, _KNOWN_NAMES[kind], x, a, smax, an.coordinates,
                                    an.scales, an.free_idx, flat, an.null_tol, an.weak_tol,
                                    _KNOWN_DESCRIPTIONS[kind], _KNOWN_RECOMMENDATIONS[kind],
@@ -493,7 +492,7 @@ def _known_directions(an: _Analysis) -> list[Direction]:
         for c in vt[r:]:
             kinds = [k for k, w in zip(removed, c) if abs(w) > 1e-9]
             t = sum(w * tangents[k] for k, w in zip(removed, c))
-            x, _ = _unit_scaled(t, an.scales, an.free_idx)
+            x = _unit_scaled(t, an.scales, an.free_idx)
             kind = "+".join(kinds)
             out.append(_make_direction(
                 kind, " combined with ".join(_KNOWN_NAMES[k].split(" (")[0] for k in kinds),
@@ -513,7 +512,7 @@ def _known_directions(an: _Analysis) -> list[Direction]:
     if an.rotation_free:  # the gimbal lock lives in the Euler chart only
         ev = an.euler_sv
         ae = an.jacobian[:, :, an.free_idx].reshape(-1, an.p) * an.euler_scales[an.free_idx]
-        x, _ = _unit_scaled(gimbal_tangent(), an.euler_scales, an.free_idx)
+        x = _unit_scaled(gimbal_tangent(), an.euler_scales, an.free_idx)
         weak = ev < an.weak_tol * ev[0] if ev[0] > 0 else np.ones_like(ev, bool)
         out.append(_make_direction("gimbal_lock", _KNOWN_NAMES["gimbal_lock"], x, ae,
                                    float(ev[0]), NAMES, an.euler_scales, an.free_idx,
@@ -684,7 +683,7 @@ def _report(an: _Analysis) -> IdentifiabilityReport:
     unnamed = _unnamed_directions(an, known)
     flat = [d for d in known if d.status in ("null", "weak")] + unnamed
     flat.sort(key=lambda d: d.gain)
-    warns = data_warnings(an.dataset, an.p) + an.extra_warnings
+    warns = data_warnings(an.dataset, an.p)
     suggested = _suggest_fixed(an)
     sv = an.sv
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
