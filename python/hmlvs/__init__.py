@@ -5,6 +5,9 @@ base frame."""
 from . import _core
 from . import design
 from . import simulate
+from ._identifiability import Direction, HmlvsDataWarning, IdentifiabilityReport, identifiability
+from ._repeatability import RepeatabilityReport, Spread, repeatability
+from ._uncertainty import Combination, Uncertainty, uncertainty
 from .board import Checkerboard
 from .calibration_file import Calibration, load_calibration
 from .dataset import Dataset
@@ -39,10 +42,12 @@ __version__ = _core.__version__
 
 __all__ = [
     "NAMES", "Bounds", "Calibration", "CalibrationPoints", "CalibrationResult", "Checkerboard",
-    "Corners", "DHLink", "Dataset", "ImageReport", "Parameters", "PointCloud", "Robot",
-    "StripeResult", "StripeStatus", "__version__", "calibrate", "calibration_points",
-    "dataset_from_images", "design", "difference_image", "extract_stripe", "find_corners",
-    "hand_from_camera", "initial_candidates", "laser_plane_distance", "load_calibration",
-    "measure", "objective", "pixels_from_points", "points_in_base", "points_in_camera",
-    "project", "residuals", "simulate",
+    "Combination", "Corners", "DHLink", "Dataset", "Direction", "HmlvsDataWarning",
+    "IdentifiabilityReport", "ImageReport", "Parameters", "PointCloud", "RepeatabilityReport",
+    "Robot", "Spread", "StripeResult", "StripeStatus", "Uncertainty", "__version__",
+    "calibrate", "calibration_points", "dataset_from_images", "design", "difference_image",
+    "extract_stripe", "find_corners", "hand_from_camera", "identifiability",
+    "initial_candidates", "laser_plane_distance", "load_calibration", "measure", "objective",
+    "pixels_from_points", "points_in_base", "points_in_camera", "project", "repeatability",
+    "residuals", "simulate", "uncertainty",
 ]

@@ -6,20 +6,28 @@ from dataclasses import dataclass, field
 import math
 import os
 import time
-from typing import Any, Callable, Iterable, Sequence
+import warnings
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
 
 import numpy as np
 
 from . import _core
+from ._identifiability import HmlvsDataWarning
+from ._uncertainty import check_noise, diagnose
 from .dataset import Dataset
 from .params import NAMES, NUM_PARAMS, Bounds, Parameters, param_index
+
+if TYPE_CHECKING:
+    from ._identifiability import IdentifiabilityReport
+    from ._uncertainty import Uncertainty
 
 METHODS = ("pso+lm", "pso", "lm", "lm-paper", "random")
 LOSSES = (None, "huber", "cauchy")
 _PSO_OPTIONS = {"swarm_size": 50, "iterations": 5000, "w_max": 0.9, "w_min": 0.4, "c1": 2.0,
                 "c2": 2.0, "vmax": 0.1, "target_fitness": 0.0, "progress_every": 100}
 _LM_OPTIONS = {"max_iterations": 0, "loss_scale": 1.0, "use_bounds": True}
-_OTHER_OPTIONS = {"evaluations": 1_000_000, "spread": None, "test": None}
+_OTHER_OPTIONS = {"evaluations": 1_000_000, "spread": None, "test": None,
+                  "pixel_noise": None, "point_noise": None}
 _GAUGE_NOTE = ("Su held fixed at {value:g} mm/px: f, Su, Sv and k form an exact scale gauge "
                "(only f/Su, f/Sv and k Su^2 are determined by laser points), so one of them "
                "must be given, e.g. from the camera's datasheet")
@@ -47,6 +55,10 @@ class CalibrationResult:
     seconds : wall-clock time of the solve
     notes : what the solver assumed (e.g. the gauge held fixed)
     warnings : problems found with the data or the solution
+    identifiability : what the data determine at the solution (Jacobian SVD, named flat
+        directions; :func:`hmlvs.identifiability`)
+    uncertainty : covariance, standard deviations, correlations and identifiable
+        combinations of the free parameters (:func:`hmlvs.uncertainty`)
     """
 
     params: Parameters
@@ -68,6 +80,8 @@ class CalibrationResult:
     notes: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     extra: dict[str, Any] = field(default_factory=dict)
+    identifiability: IdentifiabilityReport | None = None
+    uncertainty: Uncertainty | None = None
 
     @property
     def free(self) -> tuple[str, ...]:
@@ -86,6 +100,8 @@ class CalibrationResult:
         lines.append(self.params.table(truth) if truth is not None else self.params.table())
         lines += [f"note: {n}" for n in self.notes]
         lines += [f"warning: {w}" for w in self.warnings]
+        if self.uncertainty is not None:
+            lines.append(self.uncertainty.summary())
         return "\n".join(lines)
 
     def __str__(self) -> str:
@@ -231,7 +247,9 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
         return False to stop, or a tqdm-like bar
     **options : swarm_size, iterations, w_max, w_min, c1, c2, vmax, target_fitness,
         progress_every (PSO); max_iterations, loss_scale, use_bounds (LM); evaluations
-        (random search); spread (Eq. 22 spread s); test (a held-out :class:`Dataset`)
+        (random search); spread (Eq. 22 spread s); test (a held-out :class:`Dataset`);
+        pixel_noise (px), point_noise (mm): noise levels for the uncertainty (default:
+        estimated from the residuals)
 
     Returns
     -------
@@ -244,6 +262,7 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
         raise ValueError(f"loss must be None, 'huber' or 'cauchy', got {loss!r}")
     pso_o, lm_o, other = _split_options(options)
     test = other["test"]
+    check_noise(other["pixel_noise"], other["point_noise"])  # issue 4: fail before the solve
     if hasattr(dataset, "fit") and hasattr(dataset, "test") and not isinstance(dataset, Dataset):
         test = dataset.test if test is None else test
         dataset = dataset.fit
@@ -377,10 +396,21 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
     test_errors = None
     if test is not None:
         test_errors = np.array(_fitness_data(test).point_errors(q))
-    return CalibrationResult(
+    result = CalibrationResult(
         params=Parameters.from_array(q), method=method, fixed=fixed,
         fit_rms=_rms(fit_errors), test_rms=None if test_errors is None else _rms(test_errors),
         fit_errors=fit_errors, test_errors=test_errors, cost=float(data.evaluate(q)),
         history=history, run_fitness=run_fitness, iterations=iterations,
         termination=termination, seconds=time.perf_counter() - start, seed=int(seed),
         threads=threads_n, bounds=bounds, notes=notes, extra=extra)
+    # --- identifiability and uncertainty at the solution (issue 4) ---------------------------
+    try:
+        result.identifiability, result.uncertainty, data_warnings = diagnose(
+            dataset, q, fixed, bounds, other["pixel_noise"], other["point_noise"], loss)
+    except (ValueError, np.linalg.LinAlgError) as e:  # report, do not fail the calibration
+        data_warnings = [f"identifiability and uncertainty not computed: {e}"]
+    for w in data_warnings:
+        warnings.warn(w, HmlvsDataWarning, stacklevel=2)
+    result.warnings.extend(data_warnings)
+    # --- end of issue 4 ------------------------------------------------------------------------
+    return result
