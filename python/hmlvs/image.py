@@ -856,58 +856,15 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     reports: list[ImageReport] = []
     px_all, pt_all, ids_all, joints_all, pidx_all = [], [], [], [], []
     for index, rec in enumerate(records):
-        pid = str(rec.get("id", f"p{index:03d}")) if isinstance(rec, dict) else f"p{index:03d}"
-        on_name = off_name = "?"
+        pid = _record_id(rec, index)
+        on_name, off_name = _record_names(rec)
         info: dict[str, Any] = {}
         try:
-            if not isinstance(rec, dict):
-                raise _Reject(f"record {index} is not a mapping with on, off and joints")
-            for key in ("on", "off", "joints"):
-                if key not in rec:
-                    raise _Reject(f"the record lacks '{key}'")
-            on_name = rec["on"] if isinstance(rec["on"], str) else "<array>"
-            off_name = rec["off"] if isinstance(rec["off"], str) else "<array>"
-            on, on_name = _load(rec["on"], folder, "laser-on")
-            off, off_name = _load(rec["off"], folder, "laser-off")
-            joints = np.asarray(rec["joints"], dtype=float).reshape(-1)
-            if joints.shape != (robot.dof,) or not np.all(np.isfinite(joints)):
-                raise _Reject(f"joint readings must be {robot.dof} finite numbers, got "
-                              f"{np.asarray(rec['joints']).tolist()}")
-            if unit == "deg":
-                joints = np.radians(joints)
-            try:
-                on_g = _as_gray(on, "the laser-on image", channel)
-                off_g = _as_gray(off, "the laser-off image", channel)
-            except ValueError as e:
-                raise _Reject(str(e)) from None
-            if on_g.shape != off_g.shape or on_g.dtype != off_g.dtype:
-                raise _Reject(f"the laser-on image ({on_g.shape[1]} x {on_g.shape[0]}, "
-                              f"{on_g.dtype}) and the laser-off image ({off_g.shape[1]} x "
-                              f"{off_g.shape[0]}, {off_g.dtype}) differ in size or depth")
-            if size is None:
-                size = (on_g.shape[1], on_g.shape[0])
-            if (on_g.shape[1], on_g.shape[0]) != size:
-                raise _Reject(f"the images are {on_g.shape[1]} x {on_g.shape[0]} pixels but the "
-                              f"session's are {size[0]} x {size[1]}")
-            top = float(np.iinfo(off_g.dtype).max)
-            if int(off_g.max()) == 0:
-                raise _Reject("the laser-off image is all black")
-            if int(on_g.max()) == 0:
-                raise _Reject("the laser-on image is all black")
-            diff_big = np.abs(on_g.astype(np.int32) - off_g.astype(np.int32)) > 0.1 * top
-            if diff_big.mean() > 0.05:
-                raise _Reject(f"the laser-on and laser-off images differ in "
-                              f"{100 * diff_big.mean():.0f}% of the pixels, far more than a "
-                              "stripe: they are not a pair taken at the same pose")
-            d = difference_image(on_g, off_g, normalize=normalize)
-            opts = dict(stripe_options)
-            if normalize and opts.get("threshold") is None:
-                opts["threshold"] = _normalized_threshold(on_g, off_g, d)
-            stripe = extract_stripe(d, **opts)
+            pair = _read_pair(rec, index, folder, unit, robot, size, channel, normalize,
+                              stripe_options, min_stripe)
+            on_name, off_name, size, joints = pair.on_name, pair.off_name, pair.size, pair.joints
+            stripe, off_g = pair.stripe, pair.off
             info["stripe"] = stripe.counts()
-            if stripe.found.sum() < min_stripe:
-                raise _Reject(f"no laser stripe found: only {int(stripe.found.sum())} scan lines "
-                              f"have one ({_counts_text(info['stripe'])})")
             pose = robot.poses(joints[None])[0]
             try:
                 corners = find_corners(off_g, board, expected=predicted_corners(approx, pose,
@@ -945,6 +902,132 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                        "pairs": len(records), "pairs_used": sum(r.ok for r in reports),
                        "image_size": list(size) if size else None})
     return ds, reports
+
+
+def _record_id(rec: Any, index: int) -> str:
+    return str(rec.get("id", f"p{index:03d}")) if isinstance(rec, dict) else f"p{index:03d}"
+
+
+def _record_names(rec: Any) -> tuple[str, str]:
+    if not isinstance(rec, dict):
+        return "?", "?"
+    return tuple(str(rec.get(k, "?")) if not isinstance(rec.get(k), np.ndarray) else "<array>"
+                 for k in ("on", "off"))  # type: ignore[return-value]
+
+
+def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | None = None,
+                        channel: int | None = None, normalize: bool = True,
+                        min_stripe: int = 20, **stripe_options: Any
+                        ) -> tuple[list[str], list[StripeResult], np.ndarray, list[ImageReport]]:
+    """Laser on/off pairs + joint readings (a manifest or a list of records) -> stripes.
+
+    The measurement counterpart of :func:`dataset_from_images` (no checkerboard needed): for
+    each pair the same checks, difference image and stripe extraction. A pair that fails is
+    reported and skipped. Returns (ids, stripes, joints (n, dof) in rad, reports).
+    """
+    from .robot import Robot
+
+    folder = None
+    unit = joint_unit
+    if isinstance(source, (list, tuple)):
+        records = list(source)
+        unit = "rad" if unit is None else unit
+    else:
+        records, doc, folder = _read_manifest(source)
+        unit = doc.get("joint_unit", "rad") if unit is None else unit
+        if robot is None and doc.get("robot") not in (None, Robot.scorbot_er7().name):
+            raise ValueError(f"the images were taken with robot {doc.get('robot')!r}; pass "
+                             "robot=hmlvs.Robot(...) with its DH table")
+    if unit not in ("rad", "deg"):
+        raise ValueError(f"joint_unit must be 'rad' or 'deg', got {unit!r}")
+    if not records:
+        raise ValueError("the scan has no image pairs")
+    robot = Robot.scorbot_er7() if robot is None else robot
+    extract_stripe(np.zeros((4, 4), np.uint8), **stripe_options)  # option typos fail here
+    ids, stripes, joints, reports = [], [], [], []
+    size = None
+    for index, rec in enumerate(records):
+        pid = _record_id(rec, index)
+        on_name, off_name = _record_names(rec)
+        try:
+            pair = _read_pair(rec, index, folder, unit, robot, size, channel, normalize,
+                              stripe_options, min_stripe)
+        except _Reject as e:
+            reports.append(ImageReport(pid, index, on_name, off_name, False, str(e), {}, 0, 0,
+                                       {}))
+            continue
+        size = pair.size
+        ids.append(pid)
+        stripes.append(pair.stripe)
+        joints.append(pair.joints)
+        reports.append(ImageReport(pid, index, pair.on_name, pair.off_name, True, "",
+                                   pair.stripe.counts(), 0, int(pair.stripe.found.sum()), {}))
+    return ids, stripes, np.array(joints).reshape(-1, robot.dof), reports
+
+
+@dataclass
+class _Pair:
+    """One laser on/off pair after the checks shared by calibration and measurement."""
+
+    on_name: str
+    off_name: str
+    joints: np.ndarray  # rad
+    on: np.ndarray
+    off: np.ndarray
+    stripe: StripeResult
+    size: tuple[int, int]
+
+
+def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
+               size: tuple[int, int] | None, channel: int | None, normalize: bool,
+               stripe_options: dict[str, Any], min_stripe: int) -> _Pair:
+    """Load, check and extract the stripe of one manifest record; raises _Reject."""
+    if not isinstance(rec, dict):
+        raise _Reject(f"record {index} is not a mapping with on, off and joints")
+    for key in ("on", "off", "joints"):
+        if key not in rec:
+            raise _Reject(f"the record lacks '{key}'")
+    on, on_name = _load(rec["on"], folder, "laser-on")
+    off, off_name = _load(rec["off"], folder, "laser-off")
+    joints = np.asarray(rec["joints"], dtype=float).reshape(-1)
+    if joints.shape != (robot.dof,) or not np.all(np.isfinite(joints)):
+        raise _Reject(f"joint readings must be {robot.dof} finite numbers, got "
+                      f"{np.asarray(rec['joints']).tolist()}")
+    if unit == "deg":
+        joints = np.radians(joints)
+    try:
+        on_g = _as_gray(on, "the laser-on image", channel)
+        off_g = _as_gray(off, "the laser-off image", channel)
+    except ValueError as e:
+        raise _Reject(str(e)) from None
+    if on_g.shape != off_g.shape or on_g.dtype != off_g.dtype:
+        raise _Reject(f"the laser-on image ({on_g.shape[1]} x {on_g.shape[0]}, "
+                      f"{on_g.dtype}) and the laser-off image ({off_g.shape[1]} x "
+                      f"{off_g.shape[0]}, {off_g.dtype}) differ in size or depth")
+    if size is None:
+        size = (on_g.shape[1], on_g.shape[0])
+    if (on_g.shape[1], on_g.shape[0]) != size:
+        raise _Reject(f"the images are {on_g.shape[1]} x {on_g.shape[0]} pixels but the "
+                      f"session's are {size[0]} x {size[1]}")
+    top = float(np.iinfo(off_g.dtype).max)
+    if int(off_g.max()) == 0:
+        raise _Reject("the laser-off image is all black")
+    if int(on_g.max()) == 0:
+        raise _Reject("the laser-on image is all black")
+    diff_big = np.abs(on_g.astype(np.int32) - off_g.astype(np.int32)) > 0.1 * top
+    if diff_big.mean() > 0.05:
+        raise _Reject(f"the laser-on and laser-off images differ in "
+                      f"{100 * diff_big.mean():.0f}% of the pixels, far more than a "
+                      "stripe: they are not a pair taken at the same pose")
+    d = difference_image(on_g, off_g, normalize=normalize)
+    opts = dict(stripe_options)
+    if normalize and opts.get("threshold") is None:
+        opts["threshold"] = _normalized_threshold(on_g, off_g, d)
+    stripe = extract_stripe(d, **opts)
+    if stripe.found.sum() < min_stripe:
+        raise _Reject(f"no laser stripe found: only {int(stripe.found.sum())} scan lines "
+                      f"have one ({_counts_text(stripe.counts())})")
+    return _Pair(str(on_name), str(off_name), joints, on_g, off_g, stripe, size)
 
 
 def _normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray) -> float:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 import os
 from pathlib import Path
@@ -201,3 +202,27 @@ def measure_source(calibration: Any, source: str | os.PathLike) -> tuple[PointCl
         err = np.linalg.norm(cloud.points - ds.points, axis=1)[cloud.valid]
         return cloud, {"rms_mm": float(np.sqrt(np.mean(err**2))) if err.size else None}
     return measure_images(calibration, path)
+
+
+def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
+                   **options: Any) -> tuple[PointCloud, dict]:
+    """Laser on/off image pairs + joint readings (an image manifest, see docs/file-formats.md,
+    or a list of records) -> a point cloud, one stripe profile per pair.
+
+    Pairs that fail (no stripe, bad image, mismatched pair) are skipped and named in the
+    summary's ``rejected``; ``options`` go to :func:`hmlvs.image.stripes_from_images`.
+    """
+    from .image import stripes_from_images
+
+    robot = robot or getattr(calibration, "robot", None)
+    ids, stripes, joints, reports = stripes_from_images(source, robot=robot, **options)
+    rejected = {r.id: r.reason for r in reports if not r.ok}
+    if not stripes:
+        raise ValueError("no image pair gave a stripe: " +
+                         "; ".join(f"{k}: {v}" for k, v in rejected.items()))
+    cloud = measure(calibration, stripes, joints=joints, robot=robot)
+    # pose_index: the pair's index in the manifest, whatever pairs were skipped before it
+    used = np.array([r.index for r in reports if r.ok], dtype=np.int32)
+    cloud = dataclasses.replace(cloud, pose_index=used[cloud.pose_index])
+    return cloud, {"images": len(reports), "used": len(stripes), "rejected": rejected,
+                   "ids": ids}
