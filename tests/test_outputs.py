@@ -145,3 +145,22 @@ def test_cli_report_and_measure_on_a_dataset(tmp_path, capsys, calibrated):
     with pytest.raises(SystemExit) as e:
         cli_main(["measure", str(tmp_path / "nope.yaml"), str(test)])
     assert e.value.code == 2 and "nope.yaml: no such calibration file" in capsys.readouterr().err
+
+
+def test_atomic_write_keeps_old_file_on_error_and_normal_permissions(tmp_path):
+    import os
+
+    from hmlvs._io import atomic_write
+
+    p = tmp_path / "x.txt"
+    p.write_text("old")
+    with pytest.raises(RuntimeError):
+        with atomic_write(p) as fh:
+            fh.write("new, half written")
+            raise RuntimeError("crash")
+    assert p.read_text() == "old" and os.listdir(tmp_path) == ["x.txt"]
+    with atomic_write(p) as fh:
+        fh.write("new")
+    umask = os.umask(0)
+    os.umask(umask)
+    assert p.read_text() == "new" and (p.stat().st_mode & 0o777) == 0o666 & ~umask

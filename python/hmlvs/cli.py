@@ -36,6 +36,27 @@ def _guard(as_json: bool = False) -> Iterator[None]:
         raise typer.Exit(130) from None
 
 
+def _bar(description: str, quiet: bool):
+    """A rich progress bar as a callback (done, total); None when quiet (--json)."""
+    if quiet:
+        return None
+    from rich.progress import Progress
+
+    bar = Progress(transient=True)
+    state: dict = {}
+
+    def update(done: int, total: int, *_: object) -> bool:
+        if "task" not in state:
+            bar.start()
+            state["task"] = bar.add_task(description, total=total)
+        bar.update(state["task"], completed=done)
+        if done >= total:
+            bar.stop()
+        return True
+
+    return update
+
+
 def _echo_json(obj: object) -> None:
     typer.echo(json.dumps(obj, indent=2, default=float))
 
@@ -46,24 +67,32 @@ def simulate(
     poses: int = typer.Option(30, help="Number of robot poses in the session."),
     pixel_noise: float = typer.Option(0.0, help="Pixel noise, standard deviation (px)."),
     point_noise: float = typer.Option(0.0, help="Reference-point noise, std (mm)."),
+    images: Optional[Path] = typer.Option(
+        None, help="Also render laser on/off images of every pose into this folder, with a "
+        "manifest.json pairing each image pair with its joint readings."),
     seed: int = typer.Option(0, help="Random seed."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
     """Simulate a checkerboard calibration session (SCORBOT ER-VII, paper set-up).
 
-    Example: hmlvs simulate session.npz --poses 40 --pixel-noise 0.1
+    Example: hmlvs simulate session.npz --poses 24 --images session-images
     """
     from . import simulate as sim
 
-    s = sim.session(num_poses=poses, pixel_noise=pixel_noise, point_noise=point_noise,
-                    seed=seed)
-    s.dataset.save(out)
+    with _guard(as_json):
+        s = sim.session(num_poses=poses, pixel_noise=pixel_noise, point_noise=point_noise,
+                        seed=seed)
+        s.dataset.save(out)
+        manifest = None
+        if images is not None:
+            manifest = sim.render_session(s, images, progress=_bar(
+                f"rendering {poses} image pairs", as_json)).manifest
     if as_json:
-        typer.echo(json.dumps({"file": str(out), "points": len(s.dataset),
-                               "poses": s.dataset.num_poses}))
+        _echo_json({"file": str(out), "points": len(s.dataset), "poses": s.dataset.num_poses,
+                    "manifest": None if manifest is None else str(manifest)})
     else:
         typer.echo(s.summary())
-        typer.echo(f"written to {out}")
+        typer.echo(f"written to {out}" + (f" and {manifest}" if manifest else ""))
 
 
 @app.command()
@@ -103,7 +132,8 @@ def demo(
 
 @app.command()
 def calibrate(
-    data: Path = typer.Argument(..., help="Calibration data set (.npz or .json)."),
+    data: Path = typer.Argument(..., help="Calibration data set (.npz or .json), or an image "
+                                "manifest (a folder with manifest.json, or the file)."),
     out: Path = typer.Option(Path("calibration.yaml"), "--out", "-o",
                              help="Calibration file to write (.yaml or .json)."),
     method: str = typer.Option("pso+lm", help="pso+lm, pso, lm, lm-paper or random."),
@@ -119,9 +149,13 @@ def calibrate(
     seed: int = typer.Option(0, help="Random seed."),
     threads: Optional[int] = typer.Option(None, help="Threads (default: all cores)."),
     report: Optional[Path] = typer.Option(None, help="Also write an HTML report here."),
+    mode: str = typer.Option("corners", help="Calibration points from images: corners (the "
+                             "paper's) or homography (every stripe point on the board)."),
+    save_data: Optional[Path] = typer.Option(None, help="Save the data set extracted from "
+                                             "images here (.npz or .json)."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
-    """Identify the sensor parameters from a calibration data set.
+    """Identify the sensor parameters from a calibration data set or laser on/off images.
 
     Example: hmlvs calibrate session.npz --holdout 0.3 --out calibration.yaml --report report.html
     """
@@ -129,8 +163,19 @@ def calibrate(
     from .dataset import Dataset
     from .identify import calibrate as run_calibration
 
+    image_reports = []
     with _guard(as_json):
-        ds = Dataset.load(data)
+        if data.is_dir() or data.name == "manifest.json":
+            from .image import dataset_from_images
+
+            ds, image_reports = dataset_from_images(data, mode=mode)
+            if not as_json:
+                for r in image_reports:
+                    typer.echo(str(r))
+            if save_data is not None:
+                ds.save(save_data)
+        else:
+            ds = Dataset.load(data)
         test_ds = Dataset.load(test) if test is not None else None
         if test_ds is None and holdout > 0:
             ds, test_ds = ds.split(1.0 - holdout, seed=seed, by_pose=True)
@@ -150,7 +195,9 @@ def calibrate(
                     "test_rms_mm": result.test_rms, "method": method,
                     "parameters": result.params.to_dict(), "fixed": list(result.fixed),
                     "termination": result.termination, "seconds": result.seconds,
-                    "warnings": result.warnings})
+                    "warnings": result.warnings,
+                    "images": [{"id": r.id, "ok": r.ok, "reason": r.reason,
+                                "points": r.points} for r in image_reports]})
         return
     typer.echo(result.summary())
     typer.echo(f"calibration written to {path}")

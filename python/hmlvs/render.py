@@ -326,7 +326,7 @@ def board_to_dict(board: Checkerboard) -> dict[str, Any]:
 
 def render_session(session: "Session | None" = None, out_dir: str | os.PathLike | None = None,
                    *, options: RenderOptions | None = None, seed: int = 0,
-                   **session_kwargs: Any) -> RenderedSession:
+                   progress: Any = None, **session_kwargs: Any) -> RenderedSession:
     """Render laser-on / laser-off images of a simulated session, optionally writing them.
 
     Parameters
@@ -339,6 +339,7 @@ def render_session(session: "Session | None" = None, out_dir: str | os.PathLike 
         atomically. None: nothing is written.
     options : :class:`RenderOptions` (stripe width, blur, noise, glare, spurious peak, ...)
     seed : seeds the session (if made here) and the sensor noise
+    progress : optional callable (done, total) called after each rendered pose
 
     Returns
     -------
@@ -360,8 +361,10 @@ def render_session(session: "Session | None" = None, out_dir: str | os.PathLike 
     poses = session.robot.poses(session.joints)
     ids = [f"p{i:03d}" for i in range(len(poses))]
     on, off, sv = [], [], []
-    for pose in poses:
+    for k, pose in enumerate(poses):
         r = render_pose(session.truth, pose, session.board, session.image_size, o, rng)
+        if progress is not None:
+            progress(k + 1, len(poses))
         on.append(r.on)
         off.append(r.off)
         sv.append(r.stripe_v)

@@ -1,0 +1,44 @@
+"""Issue 6's end-to-end criterion: from rendered images + joint readings to a calibration.
+
+"Perfect pixel extraction with the same noise" is read as: the same calibration points, their
+exact pixels (the truth's projection) plus Gaussian noise of the pipeline's own measured pixel
+RMS per axis. Both calibrations are judged on the same held-out poses with exact pixels.
+"""
+
+import numpy as np
+import pytest
+
+import hmlvs
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    out = tmp_path_factory.mktemp("session")
+    session = hmlvs.simulate.session(num_poses=24, seed=11)
+    hmlvs.simulate.render_session(session, out)
+    return session, out
+
+
+@pytest.mark.filterwarnings("ignore::hmlvs.HmlvsDataWarning")
+@pytest.mark.parametrize("mode", ["corners", "homography"])
+def test_calibration_from_images_matches_perfect_extraction(rendered, mode):
+    session, folder = rendered
+    ds, reports = hmlvs.dataset_from_images(folder, mode=mode)
+    assert sum(r.ok for r in reports) >= 12  # partial boards are rejected, with a reason
+    assert all(r.reason for r in reports if not r.ok)
+    exact, ok = hmlvs.project(session.truth, ds.points, ds.poses)
+    assert ok.all()
+    sigma = np.sqrt(np.mean((ds.pixels - exact) ** 2, axis=0))
+    assert sigma.max() < 0.1  # sub-pixel extraction on rendered images (px)
+    perfect = hmlvs.Dataset(exact, ds.poses, ds.points, ids=ds.ids, pose_index=ds.pose_index)
+    fit, _ = ds.split(0.5, seed=1, by_pose=True)
+    in_fit = np.isin(ds.pose_index, np.unique(fit.pose_index))
+    test = perfect.subset(~in_fit)
+    from_images = hmlvs.calibrate(fit, test=test, seed=0)
+    baseline = []
+    for k in range(5):  # the noise of the baseline is random: average five draws
+        pf = perfect.subset(in_fit)
+        noisy = hmlvs.Dataset(pf.pixels + np.random.default_rng(k).normal(0, sigma, (len(pf), 2)),
+                              pf.poses, pf.points)
+        baseline.append(hmlvs.calibrate(noisy, test=test, seed=0).test_rms)
+    assert from_images.test_rms <= 1.5 * np.mean(baseline), (from_images.test_rms, baseline)
