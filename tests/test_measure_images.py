@@ -47,3 +47,58 @@ def test_cli_measure_images(rendered, tmp_path, capsys):
     assert e.value.code == 0
     s = json.loads(capsys.readouterr().out)
     assert s["used"] == 4 and s["points"] > 1000 and (tmp_path / "c.ply").exists()
+
+
+def _write(path, doc):
+    path.write_text(json.dumps(doc))
+    return path
+
+
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        (lambda d: d["poses"][2].pop("id"), r"manifest2.json: entry 2 has no id"),
+        (lambda d: d["poses"][3].update(id="p000"), r"entry 3 \(id p000\) repeats the id of "
+                                                    "entry 0"),
+        (lambda d: d["poses"][1].pop("joints"), r"entry 1 \(id p001\) must have either 'joints'"
+                                                " or 'pose'"),
+        (lambda d: d["poses"][0].update(stripe="x.csv"), r"entry 0 \(id p000\) must name either "
+                                                         "an image pair"),
+        (lambda d: d["poses"][0].pop("off"), r"entry 0 \(id p000\) names only one of"),
+        (lambda d: d.update(format="other"), "not an hmlvs image manifest"),
+        (lambda d: d["poses"][0].update(pose=[[1, 0], [0, 1]], joints=None) or
+         d["poses"][0].pop("joints"), r"'pose' must be a finite 4x4"),
+    ],
+)
+def test_malformed_manifests_name_file_and_entry(rendered, change, match):
+    session, out, _ = rendered
+    doc = json.loads((out / "manifest.json").read_text())
+    change(doc)
+    with pytest.raises(ValueError, match=match):
+        measure_images(session.truth, _write(out / "manifest2.json", doc))
+
+
+def test_pose_entries_and_stripe_lists(rendered, tmp_path):
+    session, out, _ = rendered
+    doc = json.loads((out / "manifest.json").read_text())
+    poses = session.robot.poses(session.joints)
+    ref, _ = measure_images(session.truth, out)
+    # entry 0 by pose instead of joints: the same points
+    e0 = doc["poses"][0]
+    e0["pose"] = poses[0].tolist()
+    del e0["joints"]
+    # entry 1 as a stripe list (u, v, intensity) written from the true stripe of that pose
+    pts = session.dataset.points[session.dataset.pose_index == 1]
+    px, _ = hmlvs.pixels_from_points(session.truth, pts, np.repeat(poses[1:2], len(pts), 0))
+    np.savetxt(out / "p001.csv", np.c_[px, np.ones(len(px))], delimiter=",",
+               header="u,v,intensity", comments="")
+    doc["poses"][1] = {"id": "p001", "stripe": "p001.csv", "joints": session.joints[1].tolist()}
+    cloud, info = measure_images(session.truth, _write(out / "manifest3.json", doc))
+    assert info["used"] == 4
+    np.testing.assert_allclose(cloud.points[cloud.pose_index == 0],
+                               ref.points[ref.pose_index == 0], atol=1e-9)
+    np.testing.assert_allclose(cloud.points[cloud.pose_index == 1], pts, atol=1e-6)
+    # a stripe list that is not numbers only rejects its own entry
+    (out / "p001.csv").write_text("u,v\n1,abc\n")
+    cloud, info = measure_images(session.truth, out / "manifest3.json")
+    assert list(info["rejected"]) == ["p001"] and "p001.csv" in info["rejected"]["p001"]

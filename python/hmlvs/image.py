@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import enum
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -760,29 +761,9 @@ def _load(item: Any, folder: Any, what: str) -> tuple[np.ndarray, str]:
 
 
 def _read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Any]:
-    import json
-    from pathlib import Path
-    path = Path(source)
-    if path.is_dir():
-        path = path / "manifest.json"
-    if not path.is_file():
-        raise ValueError(f"{path}: no such manifest (a folder written by "
-                         "hmlvs.simulate.render_session, or its manifest.json)")
-    try:
-        with open(path, encoding="utf-8") as fh:
-            doc = json.load(fh)
-    except (OSError, json.JSONDecodeError) as e:
-        raise ValueError(f"{path}: unreadable manifest ({type(e).__name__}: {e})") from None
-    if not isinstance(doc, dict) or doc.get("format") != "hmlvs-images":
-        raise ValueError(f"{path}: not an hmlvs image manifest (format field "
-                         f"{doc.get('format') if isinstance(doc, dict) else None!r})")
-    if int(doc.get("version", 0)) > 1:
-        raise ValueError(f"{path}: manifest version {doc.get('version')} is newer than this "
-                         "hmlvs understands (1)")
-    poses = doc.get("poses")
-    if not isinstance(poses, list):
-        raise ValueError(f"{path}: the manifest's 'poses' must be a list")
-    return poses, doc, path.parent
+    from .manifest import read_manifest
+
+    return read_manifest(source)
 
 
 def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
@@ -854,7 +835,7 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     extract_stripe(np.zeros((4, 4), np.uint8), **stripe_options)
 
     reports: list[ImageReport] = []
-    px_all, pt_all, ids_all, joints_all, pidx_all = [], [], [], [], []
+    px_all, pt_all, ids_all, joints_all, pidx_all, poses_all = [], [], [], [], [], []
     for index, rec in enumerate(records):
         pid = _record_id(rec, index)
         on_name, off_name = _record_names(rec)
@@ -863,9 +844,8 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
             pair = _read_pair(rec, index, folder, unit, robot, size, channel, normalize,
                               stripe_options, min_stripe)
             on_name, off_name, size, joints = pair.on_name, pair.off_name, pair.size, pair.joints
-            stripe, off_g = pair.stripe, pair.off
+            stripe, off_g, pose = pair.stripe, pair.off, pair.pose
             info["stripe"] = stripe.counts()
-            pose = robot.poses(joints[None])[0]
             try:
                 corners = find_corners(off_g, board, expected=predicted_corners(approx, pose,
                                                                                 board))
@@ -890,13 +870,14 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
         px_all.append(cp.pixels)
         pt_all.append(cp.points)
         ids_all += [f"{pid}:{k}" for k in cp.ids]
-        joints_all.append(np.repeat(joints[None], len(cp), axis=0))
+        joints_all.append(None if joints is None else np.repeat(joints[None], len(cp), axis=0))
+        poses_all.append(np.repeat(pose[None], len(cp), axis=0))
         pidx_all.append(np.full(len(cp), index, dtype=np.int64))
     if not px_all:
         raise ValueError("no image pair gave a calibration point:\n" +
                          "\n".join(str(r) for r in reports))
-    joints_arr = np.vstack(joints_all)
-    ds = Dataset(np.vstack(px_all), robot.poses(joints_arr), np.vstack(pt_all),
+    joints_arr = None if any(j is None for j in joints_all) else np.vstack(joints_all)
+    ds = Dataset(np.vstack(px_all), np.concatenate(poses_all), np.vstack(pt_all),
                  ids=np.array(ids_all), joints=joints_arr, pose_index=np.concatenate(pidx_all),
                  meta={"source": "images", "mode": mode, "normalize": normalize,
                        "pairs": len(records), "pairs_used": sum(r.ok for r in reports),
@@ -918,12 +899,14 @@ def _record_names(rec: Any) -> tuple[str, str]:
 def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | None = None,
                         channel: int | None = None, normalize: bool = True,
                         min_stripe: int = 20, **stripe_options: Any
-                        ) -> tuple[list[str], list[StripeResult], np.ndarray, list[ImageReport]]:
+                        ) -> tuple[list[str], list[Any], np.ndarray, list[ImageReport]]:
     """Laser on/off pairs + joint readings (a manifest or a list of records) -> stripes.
 
     The measurement counterpart of :func:`dataset_from_images` (no checkerboard needed): for
     each pair the same checks, difference image and stripe extraction. A pair that fails is
-    reported and skipped. Returns (ids, stripes, joints (n, dof) in rad, reports).
+    reported and skipped. Entries may give a stripe list (``stripe``: CSV of u, v[, intensity])
+    instead of an image pair, and a ``pose`` instead of joint readings. Returns (ids, stripes,
+    base_from_hand poses (n, 4, 4), reports).
     """
     from .robot import Robot
 
@@ -944,25 +927,43 @@ def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | Non
         raise ValueError("the scan has no image pairs")
     robot = Robot.scorbot_er7() if robot is None else robot
     extract_stripe(np.zeros((4, 4), np.uint8), **stripe_options)  # option typos fail here
-    ids, stripes, joints, reports = [], [], [], []
+    from .manifest import read_stripe_list
+
+    ids, stripes, poses, reports = [], [], [], []
     size = None
     for index, rec in enumerate(records):
         pid = _record_id(rec, index)
         on_name, off_name = _record_names(rec)
         try:
-            pair = _read_pair(rec, index, folder, unit, robot, size, channel, normalize,
-                              stripe_options, min_stripe)
+            if isinstance(rec, dict) and "stripe" in rec:
+                _, pose = _record_pose(rec, robot, unit)
+                path = Path(rec["stripe"])
+                path = path if folder is None or path.is_absolute() else Path(folder) / path
+                if not path.is_file():
+                    raise _Reject(f"the stripe list {path} does not exist")
+                try:
+                    px, inten = read_stripe_list(path)
+                except ValueError as e:
+                    raise _Reject(str(e)) from None
+                item: Any = StripeList(px, inten)
+                on_name = off_name = path.name
+                found = len(px)
+            else:
+                pair = _read_pair(rec, index, folder, unit, robot, size, channel, normalize,
+                                  stripe_options, min_stripe)
+                size, pose, item = pair.size, pair.pose, pair.stripe
+                on_name, off_name = pair.on_name, pair.off_name
+                found = int(pair.stripe.found.sum())
         except _Reject as e:
             reports.append(ImageReport(pid, index, on_name, off_name, False, str(e), {}, 0, 0,
                                        {}))
             continue
-        size = pair.size
         ids.append(pid)
-        stripes.append(pair.stripe)
-        joints.append(pair.joints)
-        reports.append(ImageReport(pid, index, pair.on_name, pair.off_name, True, "",
-                                   pair.stripe.counts(), 0, int(pair.stripe.found.sum()), {}))
-    return ids, stripes, np.array(joints).reshape(-1, robot.dof), reports
+        stripes.append(item)
+        poses.append(pose)
+        reports.append(ImageReport(pid, index, on_name, off_name, True, "",
+                                   getattr(item, "counts", lambda: {})(), 0, found, {}))
+    return ids, stripes, np.array(poses).reshape(-1, 4, 4), reports
 
 
 @dataclass
@@ -971,7 +972,8 @@ class _Pair:
 
     on_name: str
     off_name: str
-    joints: np.ndarray  # rad
+    joints: np.ndarray | None  # rad; None when the entry gives a pose
+    pose: np.ndarray  # base_from_hand (4, 4)
     on: np.ndarray
     off: np.ndarray
     stripe: StripeResult
@@ -984,17 +986,12 @@ def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
     """Load, check and extract the stripe of one manifest record; raises _Reject."""
     if not isinstance(rec, dict):
         raise _Reject(f"record {index} is not a mapping with on, off and joints")
-    for key in ("on", "off", "joints"):
+    for key in ("on", "off"):
         if key not in rec:
             raise _Reject(f"the record lacks '{key}'")
+    joints, pose = _record_pose(rec, robot, unit)
     on, on_name = _load(rec["on"], folder, "laser-on")
     off, off_name = _load(rec["off"], folder, "laser-off")
-    joints = np.asarray(rec["joints"], dtype=float).reshape(-1)
-    if joints.shape != (robot.dof,) or not np.all(np.isfinite(joints)):
-        raise _Reject(f"joint readings must be {robot.dof} finite numbers, got "
-                      f"{np.asarray(rec['joints']).tolist()}")
-    if unit == "deg":
-        joints = np.radians(joints)
     try:
         on_g = _as_gray(on, "the laser-on image", channel)
         off_g = _as_gray(off, "the laser-off image", channel)
@@ -1027,7 +1024,34 @@ def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
     if stripe.found.sum() < min_stripe:
         raise _Reject(f"no laser stripe found: only {int(stripe.found.sum())} scan lines "
                       f"have one ({_counts_text(stripe.counts())})")
-    return _Pair(str(on_name), str(off_name), joints, on_g, off_g, stripe, size)
+    return _Pair(str(on_name), str(off_name), joints, pose, on_g, off_g, stripe, size)
+
+
+def _record_pose(rec: dict[str, Any], robot: Any, unit: str) -> tuple[np.ndarray | None,
+                                                                     np.ndarray]:
+    """(joints in rad or None, base_from_hand pose) of a record; raises _Reject."""
+    if "pose" in rec:
+        pose = np.asarray(rec["pose"], dtype=float)
+        if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
+            raise _Reject("'pose' must be a finite 4x4 base_from_hand matrix")
+        return None, pose
+    if "joints" not in rec:
+        raise _Reject("the record lacks 'joints' (or 'pose')")
+    joints = np.asarray(rec["joints"], dtype=float).reshape(-1)
+    if joints.shape != (robot.dof,) or not np.all(np.isfinite(joints)):
+        raise _Reject(f"joint readings must be {robot.dof} finite numbers, got "
+                      f"{np.asarray(rec['joints']).tolist()}")
+    if unit == "deg":
+        joints = np.radians(joints)
+    return joints, robot.poses(joints[None])[0]
+
+
+@dataclass(frozen=True)
+class StripeList:
+    """Stripe pixels given as a list (a manifest's ``stripe`` CSV) instead of an image."""
+
+    pixels: np.ndarray
+    intensity: np.ndarray
 
 
 def _normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray) -> float:

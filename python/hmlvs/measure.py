@@ -215,12 +215,12 @@ def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
     from .image import stripes_from_images
 
     robot = robot or getattr(calibration, "robot", None)
-    ids, stripes, joints, reports = stripes_from_images(source, robot=robot, **options)
+    ids, stripes, poses, reports = stripes_from_images(source, robot=robot, **options)
     rejected = {r.id: r.reason for r in reports if not r.ok}
     if not stripes:
         raise ValueError("no image pair gave a stripe: " +
                          "; ".join(f"{k}: {v}" for k, v in rejected.items()))
-    cloud = measure(calibration, stripes, joints=joints, robot=robot)
+    cloud = measure(calibration, stripes, poses)
     # pose_index: the pair's index in the manifest, whatever pairs were skipped before it
     used = np.array([r.index for r in reports if r.ok], dtype=np.int32)
     cloud = dataclasses.replace(cloud, pose_index=used[cloud.pose_index])

@@ -1,0 +1,114 @@
+"""The session manifest: which images (or stripe list) belong to which joint readings or pose.
+
+Format ``hmlvs-images`` version 1, JSON (``manifest.json``) or YAML (``.yaml``/``.yml``)::
+
+    format: hmlvs-images
+    version: 1
+    image_size: [640, 480]          # optional; every pair must have this size
+    joint_unit: rad                 # or deg
+    robot: SCORBOT ER-VII           # optional name (a different arm must be passed in code)
+    board: {rows: 6, cols: 8, square: 30.0, origin: [700, 90, 0], ...}   # for calibration
+    poses:
+      - id: p000                    # unique: pairs the files with the readings explicitly
+        on: p000_on.png             # laser-on frame  } or  stripe: p000.csv  (u, v[, intensity])
+        off: p000_off.png           # laser-off frame }
+        joints: [0.1, -0.8, ...]    # joint readings, or
+        # pose: [[...4x4 base_from_hand, mm...]]
+
+File names are relative to the manifest's folder. A malformed manifest (no id, a repeated id,
+an entry with neither or both of joints/pose, or neither images nor a stripe list) raises a
+ValueError naming the file and the entry; a missing or unreadable image only rejects its own
+entry, and the rest of the session goes through.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from .dataset import check_format
+
+FORMAT = "hmlvs-images"
+VERSION = 1
+
+
+def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Path]:
+    """Read and validate a manifest (a folder holding manifest.json, or the file itself).
+
+    Returns (entries, document, folder).
+    """
+    path = Path(source)
+    if path.is_dir():
+        candidates = [path / n for n in ("manifest.json", "manifest.yaml", "manifest.yml")]
+        path = next((c for c in candidates if c.is_file()), candidates[0])
+    if not path.is_file():
+        raise ValueError(f"{path}: no such manifest (a folder written by "
+                         "hmlvs.simulate.render_session, or its manifest.json)")
+    try:
+        text = path.read_text(encoding="utf-8")
+        doc = yaml.safe_load(text) if path.suffix in (".yaml", ".yml") else json.loads(text)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, yaml.YAMLError) as e:
+        raise ValueError(f"{path}: unreadable manifest ({type(e).__name__}: {e})") from None
+    check_format(doc, FORMAT, VERSION, path, "image manifest")
+    entries = doc.get("poses")
+    if not isinstance(entries, list):
+        raise ValueError(f"{path}: the manifest's 'poses' must be a list of entries")
+    seen: dict[str, int] = {}
+    for i, e in enumerate(entries):
+        where = f"{path}: entry {i}"
+        if not isinstance(e, dict):
+            raise ValueError(f"{where} is not a mapping")
+        if "id" not in e or not str(e["id"]).strip():
+            raise ValueError(f"{where} has no id; every entry needs a unique id that pairs its "
+                             "files with its readings")
+        pid = str(e["id"])
+        where = f"{path}: entry {i} (id {pid})"
+        if pid in seen:
+            raise ValueError(f"{where} repeats the id of entry {seen[pid]}")
+        seen[pid] = i
+        if ("joints" in e) == ("pose" in e):
+            raise ValueError(f"{where} must have either 'joints' or 'pose' (not both)")
+        if "pose" in e:
+            pose = np.asarray(e["pose"], dtype=float) if _numeric(e["pose"]) else None
+            if pose is None or pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
+                raise ValueError(f"{where}: 'pose' must be a finite 4x4 base_from_hand matrix")
+        elif not _numeric(e["joints"]) or np.ndim(e["joints"]) != 1:
+            raise ValueError(f"{where}: 'joints' must be a list of numbers")
+        has_images = "on" in e or "off" in e
+        if has_images == ("stripe" in e):
+            raise ValueError(f"{where} must name either an image pair ('on' and 'off') or a "
+                             "stripe list ('stripe'), not both or neither")
+        if has_images and not ("on" in e and "off" in e):
+            raise ValueError(f"{where} names only one of 'on' and 'off'")
+    return entries, doc, path.parent
+
+
+def _numeric(x: Any) -> bool:
+    try:
+        np.asarray(x, dtype=float)
+        return True
+    except (TypeError, ValueError):
+        return False
+
+
+def read_stripe_list(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """A stripe list: CSV with columns u, v and optionally intensity (a header line is allowed).
+
+    Returns (pixels (n, 2), intensity (n,)); raises ValueError naming the file.
+    """
+    try:
+        arr = np.genfromtxt(path, delimiter=",", dtype=float)
+    except (OSError, ValueError) as e:
+        raise ValueError(f"the stripe list {path} cannot be read ({e})") from None
+    arr = np.atleast_2d(arr)
+    arr = arr[~np.all(np.isnan(arr), axis=1)]  # a header line reads as NaN
+    if arr.ndim != 2 or arr.shape[1] not in (2, 3) or arr.shape[0] == 0:
+        raise ValueError(f"the stripe list {path} must hold rows of u, v[, intensity]")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"the stripe list {path} has a non-numeric or missing value")
+    inten = arr[:, 2] if arr.shape[1] == 3 else np.zeros(arr.shape[0])
+    return arr[:, :2].copy(), inten
