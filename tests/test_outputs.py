@@ -164,3 +164,24 @@ def test_atomic_write_keeps_old_file_on_error_and_normal_permissions(tmp_path):
     umask = os.umask(0)
     os.umask(umask)
     assert p.read_text() == "new" and (p.stat().st_mode & 0o777) == 0o666 & ~umask
+
+
+@pytest.mark.parametrize("extra", [[], ["--json"]])
+def test_ctrl_c_stops_a_long_calibration_promptly(tmp_path, extra):
+    import signal
+    import sys
+    import time
+
+    data = hmlvs.simulate(seed=0).dataset.save(tmp_path / "d.npz")
+    out = tmp_path / "cal.yaml"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hmlvs", "calibrate", str(data), "--iterations", "100000000",
+         "--out", str(out), *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    time.sleep(4.0)  # imports and the start of the (hours-long) swarm
+    assert proc.poll() is None
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err.decode()[-500:]
+    assert time.monotonic() - sent < 5.0  # promptly: progress is polled every 100 iterations
+    assert b"interrupted" in err and not out.exists()  # cleanly: no partial calibration file

@@ -36,6 +36,12 @@ def _guard(as_json: bool = False) -> Iterator[None]:
         raise typer.Exit(130) from None
 
 
+def _solve_progress(quiet: bool):
+    """Progress for solves: a bar, or with --json a silent callback. Either way the solver
+    calls back into Python periodically, which is where Ctrl-C is noticed."""
+    return (lambda *_: True) if quiet else True
+
+
 def _bar(description: str, quiet: bool):
     """A rich progress bar as a callback (done, total); None when quiet (--json)."""
     if quiet:
@@ -118,7 +124,7 @@ def demo(
             typer.echo(session.summary())
             typer.echo(f"fit: {len(fit)} points from {fit.num_poses} poses; held out: "
                        f"{len(test)} points from {test.num_poses} poses\n")
-        result = run_calibration(fit, test=test, seed=seed, progress=not as_json)
+        result = run_calibration(fit, test=test, seed=seed, progress=_solve_progress(as_json))
         path = Calibration.from_result(result, fit, robot=session.robot).save(
             out / "calibration.yaml")
     if as_json:
@@ -182,7 +188,8 @@ def calibrate(
         fixed_names = () if [f.lower() for f in fixed] == ["none"] else tuple(fixed)
         result = run_calibration(ds, method=method, test=test_ds, fixed=fixed_names, runs=runs,
                                  iterations=iterations, loss=loss, loss_scale=loss_scale,
-                                 seed=seed, threads=threads, progress=not as_json)
+                                 seed=seed, threads=threads,
+                                 progress=_solve_progress(as_json))
         path = Calibration.from_result(result, ds).save(out)
         report_path = None
         if report is not None:
