@@ -253,13 +253,11 @@ def rotation_jacobian(params: Any, dataset: Dataset) -> np.ndarray:
     return np.einsum("mij,jk,mkl->mil", dataset.poses[:, :3, :3], r, _skew(cp))
 
 
+from .params import fixed_mask  # noqa: E402
+
+
 def _fixed_mask(fixed: Iterable[str] | str) -> tuple[tuple[str, ...], np.ndarray]:
-    if isinstance(fixed, str):
-        fixed = (fixed,)
-    names = tuple(dict.fromkeys(fixed))
-    mask = np.zeros(NUM_PARAMS, dtype=bool)
-    for n in names:
-        mask[param_index(n)] = True
+    names, mask = fixed_mask(fixed)
     if mask.all():
         raise ValueError("every parameter is fixed: nothing to analyse")
     return names, mask

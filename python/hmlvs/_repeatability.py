@@ -18,7 +18,7 @@ import warnings
 import numpy as np
 
 from ._identifiability import GIMBAL_PHI, HmlvsDataWarning, _EULER
-from .dataset import Dataset
+from .dataset import Dataset, fit_and_test
 from .identify import CalibrationResult, calibrate
 from .params import NAMES
 
@@ -154,13 +154,7 @@ def repeatability(dataset: Dataset | Any, runs: int = 50, method: str = "lm", se
     -------
     RepeatabilityReport
     """
-    if hasattr(dataset, "fit") and hasattr(dataset, "test") and not isinstance(dataset, Dataset):
-        test = dataset.test if test is None else test
-        dataset = dataset.fit
-    if not isinstance(dataset, Dataset):
-        raise ValueError(f"dataset must be an hmlvs.Dataset, got {type(dataset).__name__}")
-    if test is not None and not isinstance(test, Dataset):
-        raise ValueError("test must be an hmlvs.Dataset")
+    dataset, test = fit_and_test(dataset, test)
     if isinstance(runs, bool) or not isinstance(runs, (int, np.integer)) or runs < 2:
         raise ValueError(f"runs must be an integer >= 2, got {runs!r}")
     if "test" in calibrate_kwargs or "seed" in calibrate_kwargs:

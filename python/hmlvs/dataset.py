@@ -273,6 +273,18 @@ class Dataset:
                    else None, length_unit=d.get("length_unit", "mm"), meta=d.get("meta", {}))
 
 
+def fit_and_test(dataset: Any, test: Any = None) -> tuple["Dataset", "Dataset | None"]:
+    """(fit, test) from a Dataset (+ optional test set) or a simulation with ``fit``/``test``."""
+    if hasattr(dataset, "fit") and hasattr(dataset, "test") and not isinstance(dataset, Dataset):
+        test = dataset.test if test is None else test
+        dataset = dataset.fit
+    if not isinstance(dataset, Dataset):
+        raise ValueError(f"dataset must be an hmlvs.Dataset, got {type(dataset).__name__}")
+    if test is not None and not isinstance(test, Dataset):
+        raise ValueError("test must be an hmlvs.Dataset")
+    return dataset, test
+
+
 def check_format(d: Any, fmt: str, version: int, source: Any, what: str) -> None:
     """Raise ``ValueError`` unless ``d`` is a mapping with ``format == fmt`` and a version this
     hmlvs understands. Shared by the data set, calibration and manifest readers."""

@@ -14,8 +14,9 @@ import numpy as np
 from . import _core
 from ._identifiability import HmlvsDataWarning
 from ._uncertainty import check_noise, diagnose
-from .dataset import Dataset
+from .dataset import Dataset, fit_and_test
 from .params import NAMES, NUM_PARAMS, Bounds, Parameters, param_index
+from .params import fixed_mask as params_fixed_mask
 
 if TYPE_CHECKING:
     from ._identifiability import IdentifiabilityReport
@@ -263,22 +264,11 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
     pso_o, lm_o, other = _split_options(options)
     test = other["test"]
     check_noise(other["pixel_noise"], other["point_noise"])  # issue 4: fail before the solve
-    if hasattr(dataset, "fit") and hasattr(dataset, "test") and not isinstance(dataset, Dataset):
-        test = dataset.test if test is None else test
-        dataset = dataset.fit
-    if not isinstance(dataset, Dataset):
-        raise ValueError(f"dataset must be an hmlvs.Dataset, got {type(dataset).__name__}")
-    if test is not None and not isinstance(test, Dataset):
-        raise ValueError("test must be an hmlvs.Dataset")
+    dataset, test = fit_and_test(dataset, test)
     bounds = Bounds.table2() if bounds is None else bounds
     if not isinstance(bounds, Bounds):
         bounds = Bounds(*bounds)
-    if isinstance(fixed, str):
-        fixed = (fixed,)
-    fixed = tuple(dict.fromkeys(fixed))
-    fixed_mask = np.zeros(NUM_PARAMS, dtype=bool)
-    for name in fixed:
-        fixed_mask[param_index(name)] = True
+    fixed, fixed_mask = params_fixed_mask(fixed)
     n_free = int((~fixed_mask).sum())
     if n_free == 0:
         raise ValueError("every parameter is fixed: nothing to estimate")

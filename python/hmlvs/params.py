@@ -57,6 +57,20 @@ def param_index(name: str) -> int:
             from None
 
 
+def fixed_mask(fixed: Iterable[str] | str) -> tuple[tuple[str, ...], np.ndarray]:
+    """Parameter names to hold fixed -> (unique names in order, boolean mask over the 14).
+
+    A single name may be given as a string; an unknown name raises ``ValueError``.
+    """
+    if isinstance(fixed, str):
+        fixed = (fixed,)
+    names = tuple(dict.fromkeys(fixed))
+    mask = np.zeros(NUM_PARAMS, dtype=bool)
+    for n in names:
+        mask[param_index(n)] = True
+    return names, mask
+
+
 @dataclass(frozen=True)
 class Parameters:
     """The 14 HMLVS parameters in the paper's order (Eq. 10). Units: mm, rad, pixels.
