@@ -5,6 +5,7 @@ base frame."""
 from . import _core
 from . import design
 from . import simulate
+from . import study
 from .board import Checkerboard
 from .identify import CalibrationResult, calibrate, initial_candidates
 from .dataset import Dataset
@@ -28,5 +29,5 @@ __all__ = [
     "Robot", "__version__", "calibrate", "design", "hand_from_camera", "initial_candidates",
     "laser_plane_distance", "objective",
     "pixels_from_points", "points_in_base", "points_in_camera", "project", "residuals",
-    "simulate",
+    "simulate", "study",
 ]
