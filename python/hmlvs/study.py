@@ -383,7 +383,7 @@ class _Reporter:
             from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                        TimeElapsedColumn)
 
-            self.bar = Progress(TextColumn("{task.description:<28}"), BarColumn(),
+            self.bar = Progress(TextColumn("{task.description:<32}"), BarColumn(),
                                 MofNCompleteColumn(), TimeElapsedColumn(),
                                 console=Console(stderr=True), transient=True)
             self.overall = self.bar.add_task("study (method x s)", total=steps)
@@ -562,8 +562,8 @@ def _method_label(r: StudyResult, m: str) -> str:
 
 
 VALLEY_PARAMS: tuple[tuple[str, str], ...] = (
-    ("f", "mm"), ("Sv", "mm/px"), ("Cv", "px"), ("H", "mm"), ("ty", "mm"), ("tz", "mm"),
-    ("omega", "rad"), ("omega + varphi", "rad"), ("f / Su", "px"))
+    ("f", "mm"), ("Sv", "mm/px"), ("Cv", "px"), ("H", "mm"), ("theta", "rad"), ("ty", "mm"),
+    ("tz", "mm"), ("omega", "rad"), ("phi", "rad"), ("omega + varphi", "rad"), ("f / Su", "px"))
 
 
 def _valley_values(params: np.ndarray, name: str) -> np.ndarray:
