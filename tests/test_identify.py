@@ -155,3 +155,53 @@ def test_too_few_points():
     ds = hmlvs.simulate(seed=0).dataset.subset(range(12))
     with pytest.raises(ValueError, match="too few points: 12 calibration points for 13 free"):
         hmlvs.calibrate(ds)
+
+
+def test_lm_runs_progress_and_cancel():
+    sim = hmlvs.simulate(seed=3)
+    calls = []
+
+    def cb(done, total, best):
+        calls.append((done, total, best))
+        return done < 6
+
+    r = hmlvs.calibrate(sim, method="lm-paper", initial=sim.truth, spread=0.2, runs=60,
+                        fixed=(), seed=1, progress=cb, threads=2)
+    assert r.termination == "cancelled"
+    solved = int(np.isfinite(r.run_fitness).sum())
+    # member 0 stops taking starts after its report of >= 6; the other finishes its solve
+    assert 6 <= solved < 30, solved
+    assert r.extra["run_termination"].count("cancelled") == 60 - solved
+    assert np.isnan(r.extra["run_params"][~np.isfinite(r.run_fitness)]).all()
+    assert calls[-1][0] >= 6 and all(t == 60 for _, t, _ in calls)
+    assert all(b2 <= b1 for (_, _, b1), (_, _, b2) in zip(calls, calls[1:]))
+
+
+def test_lm_runs_interrupt_propagates():
+    def cb(done, total, best):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        hmlvs.calibrate(hmlvs.simulate(seed=0), method="lm-paper", spread=0.2, runs=50,
+                        fixed=(), progress=cb, threads=2)
+
+
+def test_per_run_details():
+    sim = hmlvs.simulate(seed=3)
+    d = _fitness_data(sim.fit)
+    kw = {"initial": sim.truth, "spread": 0.2, "runs": 20, "fixed": (), "seed": 4}
+    paper = hmlvs.calibrate(sim, method="lm-paper", **kw)
+    modern = hmlvs.calibrate(sim, method="lm", use_bounds=False, **kw)
+    # the same Eq. 22 starts for both modes; unbounded modern LM does not clip them to Table 2
+    starts = paper.extra["starts"]
+    np.testing.assert_array_equal(modern.extra["starts"], starts)
+    np.testing.assert_array_equal(starts, hmlvs.initial_candidates(sim.truth, 0.2, 20, seed=4))
+    assert (~((starts[:, 3] >= 300) & (starts[:, 3] <= 340))).any()  # Cu outside Table 2
+    pso = hmlvs.calibrate(sim, method="pso+lm", iterations=500, **{**kw, "runs": 3})
+    for r in (paper, modern, pso):
+        assert r.extra["run_params"].shape == (r.run_fitness.size, 14)
+        for q, f in zip(r.extra["run_params"], r.run_fitness):
+            assert d.evaluate(q) == pytest.approx(f, rel=1e-9, abs=1e-30)
+    assert modern.extra["run_iterations"].max() < 50
+    assert set(modern.extra["run_termination"]) == {"CONVERGENCE"}
+    assert paper.extra["run_iterations"].max() == 4200  # some paper-mode runs hit the limit

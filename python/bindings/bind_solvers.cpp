@@ -5,7 +5,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <limits>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -204,28 +206,60 @@ void BindSolvers(py::module_& m) {
       [](const FitnessData& data,
          const Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, kNumParams,
                                               Eigen::RowMajor>>& initials,
-         const LmOptions& o, int threads) {
-        // Independent LM solves from many starts (the paper's 1000 runs), in parallel.
-        std::vector<LmResult> out(initials.rows());
-        std::vector<std::string> errors(initials.rows());
+         const LmOptions& o, int threads, py::object progress) {
+        // Independent LM solves from many starts (the paper's 1000 runs), in parallel. The
+        // optional progress callable (done, total, best_cost) is called by member 0 (the
+        // caller's thread) after each of its solves; when it returns False or raises (Ctrl-C
+        // included), no further start is taken and the starts not solved get the error
+        // "cancelled". A solve under way runs to its end.
+        const Eigen::Index n = initials.rows();
+        std::vector<LmResult> out(n);
+        std::vector<std::string> errors(n);
+        PyProgress wrapper(std::move(progress));
+        ProgressCallback cb = wrapper.callback();
         {
           py::gil_scoped_release release;
-          const int team = std::max(1, std::min<int>(ResolveThreads(threads),
-                                                     static_cast<int>(initials.rows())));
+          const int team = std::max(1, std::min<int>(ResolveThreads(threads), static_cast<int>(n)));
           std::atomic<Eigen::Index> next(0);
-          RunTeam(team, [&](int, SpinBarrier&) {
-            for (Eigen::Index i = next.fetch_add(1); i < initials.rows(); i = next.fetch_add(1)) {
+          std::atomic<long long> done(0);
+          std::atomic<bool> cancel(false);
+          std::vector<std::atomic<bool>> started(n);
+          for (auto& s : started) s.store(false);
+          std::mutex best_mutex;
+          double best = std::numeric_limits<double>::infinity();
+          RunTeam(team, [&](int member, SpinBarrier&) {
+            for (Eigen::Index i = next.fetch_add(1); i < n && !cancel.load();
+                 i = next.fetch_add(1)) {
+              started[i].store(true);
               try {
                 out[i] = RunLm(data, initials.row(i).transpose(), o);
+                std::lock_guard<std::mutex> lock(best_mutex);
+                best = std::min(best, out[i].final_cost);
               } catch (const std::exception& e) {
                 errors[i] = e.what();
               }
+              const long long d = done.fetch_add(1) + 1;
+              if (member == 0 && cb) {
+                Progress p;
+                p.done = d;
+                p.total = n;
+                {
+                  std::lock_guard<std::mutex> lock(best_mutex);
+                  p.best_fitness = best;
+                }
+                if (!cb(p)) cancel.store(true);
+              }
             }
           });
+          for (Eigen::Index i = 0; i < n; ++i) {
+            if (!started[i].load()) errors[i] = "cancelled";
+          }
         }
+        wrapper.rethrow();
         return std::make_pair(out, errors);
       },
-      py::arg("data"), py::arg("initials"), py::arg("options"), py::arg("threads") = 0);
+      py::arg("data"), py::arg("initials"), py::arg("options"), py::arg("threads") = 0,
+      py::arg("progress") = py::none());
 }
 
 }  // namespace hmlvs::python

@@ -8,6 +8,7 @@ from . import simulate
 from ._identifiability import Direction, HmlvsDataWarning, IdentifiabilityReport, identifiability
 from ._repeatability import RepeatabilityReport, Spread, repeatability
 from ._uncertainty import Combination, Uncertainty, uncertainty
+from . import study
 from .board import Checkerboard
 from .calibration_file import Calibration, load_calibration
 from .dataset import Dataset
@@ -49,5 +50,5 @@ __all__ = [
     "extract_stripe", "find_corners", "hand_from_camera", "identifiability",
     "initial_candidates", "laser_plane_distance", "load_calibration", "measure", "objective",
     "pixels_from_points", "points_in_base", "points_in_camera", "project", "repeatability",
-    "residuals", "simulate", "uncertainty",
+    "residuals", "simulate", "study", "uncertainty",
 ]

@@ -60,6 +60,10 @@ class CalibrationResult:
         directions; :func:`hmlvs.identifiability`)
     uncertainty : covariance, standard deviations, correlations and identifiable
         combinations of the free parameters (:func:`hmlvs.uncertainty`)
+    extra : per-run details of several runs: ``run_params`` ((runs, 14), each run's final
+        parameters, in the order of ``run_fitness``; NaN rows for LM starts that failed),
+        ``starts`` ((runs, 14), the LM starts), ``run_iterations`` and ``run_termination``
+        (LM), ``pso_seconds`` and ``pso_histories`` (PSO)
     """
 
     params: Parameters
@@ -245,7 +249,8 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
     threads : worker threads (default: all cores)
     loss : robust loss for LM, None, "huber" or "cauchy", with ``loss_scale`` in mm
     progress : None, True (a progress bar), a callable ``(done, total, best_fitness)`` that may
-        return False to stop, or a tqdm-like bar
+        return False to stop, or a tqdm-like bar. Counts PSO iterations (summed over runs),
+        random-search evaluations or LM starts solved
     **options : swarm_size, iterations, w_max, w_min, c1, c2, vmax, target_fitness,
         progress_every (PSO); max_iterations, loss_scale, use_bounds (LM); evaluations
         (random search); spread (Eq. 22 spread s); test (a held-out :class:`Dataset`);
@@ -326,6 +331,7 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
             q = np.array(best.best)
             history = np.array(best.history)
             run_fitness = np.array([r.best_fitness for r in res.runs])
+            run_params = np.array([r.best for r in res.runs])
             iterations, termination = int(best.iterations), str(best.termination)
             extra["pso_seconds"] = res.seconds
             extra["pso_histories"] = [np.array(r.history) for r in res.runs]
@@ -341,9 +347,14 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
                     q = np.array(lms[k].params)
                     iterations += int(lms[k].iterations)
                     termination = f"{termination}; LM: {lms[k].termination}"
-                    run_fitness = costs
+                    # each run keeps the better of its swarm's best and the polished one
+                    better = costs <= run_fitness
+                    run_params = np.where(better[:, None],
+                                          np.array([r.params for r in lms]), run_params)
+                    run_fitness = np.where(better, costs, run_fitness)
                 else:
                     notes.append("LM polishing did not improve the swarm's best")
+            extra["run_params"] = run_params
         elif method in ("lm", "lm-paper"):
             mode = "modern" if method == "lm" else "paper"
             lo = _lm_options(mode, fixed_mask, search, loss, lm_o)
@@ -352,20 +363,34 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
                     raise ValueError("several LM runs need spread=s to draw starts by Eq. 22")
                 starts = np.random.default_rng(seed).uniform(init_box.lower, init_box.upper,
                                                              size=(runs, NUM_PARAMS))
-                if mode == "modern":  # starts must lie inside the bounds LM keeps
+                if mode == "modern" and lm_o["use_bounds"]:  # inside the bounds LM keeps
                     starts = np.clip(starts, search.lower, search.upper)
             else:
                 starts = q0[None, :]
-            lms, errs = _core._run_lm_many(data, np.ascontiguousarray(starts), lo, threads_n)
+            starts = np.ascontiguousarray(starts)
+            lms, errs = _core._run_lm_many(data, starts, lo, threads_n, cb)
             costs = np.array([r.final_cost if not e else np.inf for r, e in zip(lms, errs)])
+            cancelled = any(e == "cancelled" for e in errs)
             if not np.isfinite(costs).any():
+                if cancelled:
+                    raise ValueError("LM was cancelled before any start was solved")
                 raise ValueError(f"LM could not start: {next(e for e in errs if e)}")
             k = int(np.argmin(costs))
             q = np.array(lms[k].params)
             iterations, termination = int(lms[k].iterations), str(lms[k].termination)
+            if cancelled:
+                termination = "cancelled"
             run_fitness = costs
             extra["lm_message"] = lms[k].message
             extra["lm_errors"] = [e for e in errs if e]
+            extra["starts"] = starts
+            extra["run_params"] = np.array([r.params if not e else np.full(NUM_PARAMS, np.nan)
+                                            for r, e in zip(lms, errs)])
+            extra["run_iterations"] = np.array([r.iterations if not e else 0
+                                                for r, e in zip(lms, errs)])
+            extra["run_termination"] = [r.termination if not e else
+                                        ("cancelled" if e == "cancelled" else "error")
+                                        for r, e in zip(lms, errs)]
         else:  # random search
             o = _core._RandomSearchOptions()
             o.evaluations = int(other["evaluations"])
