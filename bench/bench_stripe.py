@@ -48,10 +48,18 @@ def rate(fn, seconds: float) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=2.0, help="time per measurement")
+    ap.add_argument("--markdown", action="store_true", help="print a Markdown section")
     args = ap.parse_args()
     img = make_image()
-    print(f"image {img.shape[1]} x {img.shape[0]} uint8, single thread")
-    print(f"{'method':24s} {'C++ fps':>10s} {'NumPy fps':>10s} {'ratio':>8s}")
+    md = args.markdown
+    if md:
+        print("## Stripe extraction\n")
+        print(f"One {img.shape[1]} x {img.shape[0]} 8-bit image, single thread, C++ against the "
+              "NumPy reference of `tests/reference_stripe.py` in the same run (frames/s).\n")
+        print("| method | C++ fps | NumPy fps | ratio |\n|---|---:|---:|---:|")
+    else:
+        print(f"image {img.shape[1]} x {img.shape[0]} uint8, single thread")
+        print(f"{'method':24s} {'C++ fps':>10s} {'NumPy fps':>10s} {'ratio':>8s}")
     for method in ("centroid", "gaussian", "steger"):
         for kw, label in (({}, ""), ({"threshold": 40.0, "noise": 2.0}, " (given thr.)")):
             a = hmlvs.extract_stripe(img, method=method, **kw)
@@ -59,12 +67,15 @@ def main() -> None:
             assert np.array_equal(a.status, b["status"]), "C++ and NumPy disagree"
             cpp = rate(lambda: hmlvs.extract_stripe(img, method=method, **kw), args.seconds)
             ref = rate(lambda: reference_stripe.extract(img, method=method, **kw), args.seconds)
-            print(f"{method + label:24s} {cpp:10.0f} {ref:10.1f} {cpp / ref:8.1f}")
+            if md:
+                print(f"| {method + label} | {cpp:.0f} | {ref:.1f} | {cpp / ref:.0f}x |")
+            else:
+                print(f"{method + label:24s} {cpp:10.0f} {ref:10.1f} {cpp / ref:8.1f}")
     d_on = np.clip(img.astype(int) + 60, 0, 255).astype(np.uint8)
     d_off = np.full_like(img, 60)
     fps = rate(lambda: hmlvs.difference_image(d_on, d_off), args.seconds)
     fpn = rate(lambda: hmlvs.difference_image(d_on, d_off, normalize=True), args.seconds)
-    print(f"difference image: {fps:.0f} fps, normalised {fpn:.0f} fps")
+    print(f"{chr(10) if md else ''}difference image: {fps:.0f} fps, normalised {fpn:.0f} fps")
 
 
 if __name__ == "__main__":

@@ -205,3 +205,12 @@ def test_per_run_details():
     assert modern.extra["run_iterations"].max() < 50
     assert set(modern.extra["run_termination"]) == {"CONVERGENCE"}
     assert paper.extra["run_iterations"].max() == 4200  # some paper-mode runs hit the limit
+
+
+def test_analyze_false_skips_identifiability_and_uncertainty():
+    sim = hmlvs.simulate(seed=0)
+    r = hmlvs.calibrate(sim, method="lm", initial=sim.truth, analyze=False)
+    assert r.identifiability is None and r.uncertainty is None and r.warnings == []
+    full = hmlvs.calibrate(sim, method="lm", initial=sim.truth)
+    assert full.identifiability is not None and full.uncertainty is not None
+    np.testing.assert_array_equal(r.params.to_array(), full.params.to_array())

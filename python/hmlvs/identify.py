@@ -28,7 +28,7 @@ _PSO_OPTIONS = {"swarm_size": 50, "iterations": 5000, "w_max": 0.9, "w_min": 0.4
                 "c2": 2.0, "vmax": 0.1, "target_fitness": 0.0, "progress_every": 100}
 _LM_OPTIONS = {"max_iterations": 0, "loss_scale": 1.0, "use_bounds": True}
 _OTHER_OPTIONS = {"evaluations": 1_000_000, "spread": None, "test": None,
-                  "pixel_noise": None, "point_noise": None}
+                  "pixel_noise": None, "point_noise": None, "analyze": True}
 _GAUGE_NOTE = ("Su held fixed at {value:g} mm/px: f, Su, Sv and k form an exact scale gauge "
                "(only f/Su, f/Sv and k Su^2 are determined by laser points), so one of them "
                "must be given, e.g. from the camera's datasheet")
@@ -255,7 +255,8 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
         progress_every (PSO); max_iterations, loss_scale, use_bounds (LM); evaluations
         (random search); spread (Eq. 22 spread s); test (a held-out :class:`Dataset`);
         pixel_noise (px), point_noise (mm): noise levels for the uncertainty (default:
-        estimated from the residuals)
+        estimated from the residuals); analyze (default True): compute identifiability and
+        uncertainty at the solution (False: the solve alone, e.g. for timing)
 
     Returns
     -------
@@ -419,6 +420,8 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
         termination=termination, seconds=time.perf_counter() - start, seed=int(seed),
         threads=threads_n, bounds=bounds, notes=notes, extra=extra)
     # --- identifiability and uncertainty at the solution (issue 4) ---------------------------
+    if not other["analyze"]:
+        return result
     try:
         result.identifiability, result.uncertainty, data_warnings = diagnose(
             dataset, q, fixed, bounds, other["pixel_noise"], other["point_noise"], loss)
