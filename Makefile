@@ -6,6 +6,8 @@
 PYTHON ?= python3
 APT_PACKAGES ?= libeigen3-dev libceres-dev
 TEST_APT_PACKAGES ?= chromium
+# CI (CI=true) builds with warnings as errors.
+PIP_FLAGS := --quiet $(if $(CI),--config-settings=cmake.define.HMLVS_WERROR=ON,)
 SUDO := $(shell if [ "$$(id -u)" != 0 ] && command -v sudo >/dev/null 2>&1; then echo sudo; fi)
 
 .PHONY: deps test-deps install demo test bench clean
@@ -28,7 +30,7 @@ test-deps: deps
 	-$(call apt_install,$(TEST_APT_PACKAGES))
 
 install: deps
-	$(PYTHON) -m pip install --quiet ".[test]"
+	$(PYTHON) -m pip install $(PIP_FLAGS) ".[test]"
 
 demo: install
 	$(PYTHON) -m hmlvs demo
@@ -37,7 +39,7 @@ test: test-deps install
 	$(PYTHON) -m pytest -q
 
 bench: deps
-	$(PYTHON) -m pip install --quiet ".[test]" --config-settings=cmake.define.HMLVS_BUILD_BENCH=ON
+	$(PYTHON) -m pip install $(PIP_FLAGS) ".[test]"
 	$(PYTHON) bench/run_bench.py
 
 clean:
