@@ -4,6 +4,7 @@ base frame."""
 
 from . import _core
 from . import design
+from . import scenes
 from . import simulate
 from ._identifiability import Direction, HmlvsDataWarning, IdentifiabilityReport, identifiability
 from ._repeatability import RepeatabilityReport, Spread, repeatability
@@ -50,5 +51,5 @@ __all__ = [
     "extract_stripe", "find_corners", "hand_from_camera", "identifiability",
     "initial_candidates", "laser_plane_distance", "load_calibration", "measure", "objective",
     "pixels_from_points", "points_in_base", "points_in_camera", "project", "repeatability",
-    "residuals", "simulate", "study", "uncertainty",
+    "residuals", "scenes", "simulate", "study", "uncertainty",
 ]

@@ -146,6 +146,32 @@ def _sample_rays(q: np.ndarray, image_size: tuple[int, int], s: int) -> np.ndarr
     return _RAY_CACHE[key]
 
 
+_RAY_JACOBIAN_CACHE: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _sample_ray_jacobian(q: np.ndarray, image_size: tuple[int, int], s: int
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """d ray / du and d ray / dv (each (h*s, w*s, 3), camera frame, per pixel) at the
+    supersample positions of :func:`_sample_rays`, by central differences of the model's
+    own rays (:func:`hmlvs.model.rays_in_camera`); cached for the last call."""
+    key = (tuple(q.tolist()), tuple(image_size), s)
+    if key not in _RAY_JACOBIAN_CACHE:
+        w, h = image_size
+        off = (np.arange(s) + 0.5) / s - 0.5
+        us = (np.arange(w)[:, None] + off[None, :]).ravel()
+        vs = (np.arange(h)[:, None] + off[None, :]).ravel()
+        uu, vv = np.meshgrid(us, vs)
+        px = np.stack([uu.ravel(), vv.ravel()], axis=1)
+        eps = 1e-3
+        out = []
+        for step in ([eps, 0.0], [0.0, eps]):
+            d = (rays_in_camera(q, px + step) - rays_in_camera(q, px - step)) / (2 * eps)
+            out.append(d.reshape(h * s, w * s, 3))
+        _RAY_JACOBIAN_CACHE.clear()
+        _RAY_JACOBIAN_CACHE[key] = (out[0], out[1])
+    return _RAY_JACOBIAN_CACHE[key]
+
+
 def _board_from_camera(q: np.ndarray, pose: np.ndarray, board: Checkerboard) -> np.ndarray:
     base_from_camera = np.asarray(pose, float) @ hand_from_camera(q)
     return np.linalg.inv(board.base_from_board()) @ base_from_camera
@@ -298,17 +324,23 @@ def render_pose(params: Any, pose: np.ndarray, board: Checkerboard | None = None
         vv, uu = np.mgrid[0:h, 0:w]
         ambient = ambient + 400.0 * np.exp(-0.5 * ((uu - u0) ** 2 + (vv - v0) ** 2)
                                            / o.glare_radius ** 2)
-    off = ambient
-    on = ambient + laser
+    on, off = _finish_frames(ambient, laser, o, rng)
+    return RenderedPose(on, off, stripe_v)
+
+
+def _finish_frames(ambient: np.ndarray, laser: np.ndarray, o: RenderOptions,
+                   rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Exposure (h, w) of the ambient light and of the laser -> the 8-bit laser-on and
+    laser-off frames: optics blur, independent sensor noise per frame, rounding."""
     import cv2
     frames = []
-    for img in (on, off):
+    for img in (ambient + laser, ambient):
         if o.blur_sigma > 0:
             img = cv2.GaussianBlur(img, (0, 0), o.blur_sigma, borderType=cv2.BORDER_REFLECT)
         if o.noise > 0:
             img = img + rng.normal(0.0, o.noise, img.shape)
         frames.append(np.clip(np.rint(img), 0, 255).astype(np.uint8))
-    return RenderedPose(frames[0], frames[1], stripe_v)
+    return frames[0], frames[1]
 
 
 def _write_png(path: Path, image: np.ndarray) -> None:
@@ -373,25 +405,39 @@ def render_session(session: "Session | None" = None, out_dir: str | os.PathLike 
     files: dict[str, Any] = {}
     if out_dir is not None:
         out = Path(out_dir)
-        out.mkdir(parents=True, exist_ok=True)
-        entries = []
-        for i, pid in enumerate(ids):
-            names = {"on": f"{pid}_on.png", "off": f"{pid}_off.png"}
-            _write_png(out / names["on"], on[i])
-            _write_png(out / names["off"], off[i])
-            entries.append({"id": pid, **names, "joints": session.joints[i].tolist()})
-        doc = {"format": MANIFEST_FORMAT, "version": MANIFEST_VERSION,
-               "image_size": list(session.image_size), "joint_unit": "rad",
-               "robot": session.robot.name, "board": board_to_dict(session.board),
-               "render_options": asdict(o), "poses": entries}
         with atomic_write(out / "truth.npz", "wb") as fh:
             np.savez_compressed(fh, params=session.truth.to_array(), stripe_v=stripe_v,
                                 joints=session.joints, ids=np.array(ids))
-        manifest = out / MANIFEST_NAME
-        with atomic_write(manifest, "w") as fh:
-            json.dump(doc, fh, indent=1)
+        manifest = write_image_manifest(
+            out, ids, on, off, session.joints, session.image_size, session.robot.name,
+            board=board_to_dict(session.board), render_options=asdict(o))
         files = {"manifest": manifest, "truth": out / "truth.npz"}
     return RenderedSession(session, o, ids, on, off, stripe_v, manifest, files)
+
+
+def write_image_manifest(out_dir: str | os.PathLike, ids: list[str], on: list[np.ndarray],
+                         off: list[np.ndarray], joints: np.ndarray,
+                         image_size: tuple[int, int], robot_name: str,
+                         **extra: Any) -> Path:
+    """Write ``<id>_on.png``, ``<id>_off.png`` per pose and ``manifest.json`` (format
+    ``hmlvs-images``: pose ids, image files, joint readings in rad) into ``out_dir``, every
+    file atomically, the manifest last. ``extra`` entries (JSON-able) go into the manifest's
+    top level. Returns the manifest's path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    entries = []
+    for i, pid in enumerate(ids):
+        names = {"on": f"{pid}_on.png", "off": f"{pid}_off.png"}
+        _write_png(out / names["on"], on[i])
+        _write_png(out / names["off"], off[i])
+        entries.append({"id": pid, **names, "joints": np.asarray(joints[i], float).tolist()})
+    doc = {"format": MANIFEST_FORMAT, "version": MANIFEST_VERSION,
+           "image_size": list(image_size), "joint_unit": "rad", "robot": robot_name,
+           **extra, "poses": entries}
+    manifest = out / MANIFEST_NAME
+    with atomic_write(manifest, "w") as fh:
+        json.dump(doc, fh, indent=1)
+    return manifest
 
 
 def predicted_corners(params: Any, pose: np.ndarray, board: Checkerboard) -> np.ndarray:

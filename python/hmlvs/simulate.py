@@ -134,13 +134,17 @@ def _camera_pose(robot: Robot, hfc: np.ndarray, joints: np.ndarray) -> np.ndarra
 
 
 def _ik_look_at(robot: Robot, hfc: np.ndarray, cam_pos: np.ndarray, cam_axis: np.ndarray,
-                seeds: list[np.ndarray]) -> np.ndarray | None:
-    """Joint readings putting the camera at ``cam_pos`` looking along ``cam_axis``."""
+                seeds: list[np.ndarray], cam_x: np.ndarray | None = None) -> np.ndarray | None:
+    """Joint readings putting the camera at ``cam_pos`` looking along ``cam_axis`` (and, if
+    given, with its x axis, the stripe's direction, as near ``cam_x`` as the arm allows)."""
     lim = robot.joint_limits
 
     def res(j: np.ndarray) -> np.ndarray:
         t = _camera_pose(robot, hfc, j)
-        return np.concatenate([t[:3, 3] - cam_pos, 300.0 * (t[:3, 2] - cam_axis)])
+        r = [t[:3, 3] - cam_pos, 300.0 * (t[:3, 2] - cam_axis)]
+        if cam_x is not None:
+            r.append(100.0 * (t[:3, 0] - cam_x))
+        return np.concatenate(r)
 
     best = None
     for s in seeds:
