@@ -34,6 +34,15 @@ def test_calibration_file_roundtrip(tmp_path, calibrated):
                                    hmlvs.Robot.scorbot_er7().poses(np.zeros(5)))
     d = json.loads((tmp_path / "cal.json").read_text())
     np.testing.assert_allclose(d["hand_from_camera"], hmlvs.hand_from_camera(result.params))
+    # standard deviations: from the uncertainty analysis, None when fixed or not determined
+    u = result.uncertainty
+    assert d["std"]["Su"] is None
+    for n in u.free:
+        if u.determined[n]:
+            assert d["std"][n] == pytest.approx(u.std[n])
+        else:
+            assert d["std"][n] is None
+    assert any(v is not None for v in d["std"].values())
 
 
 @pytest.mark.parametrize(
@@ -86,7 +95,7 @@ def test_report_html_and_screenshot(tmp_path, calibrated):
                         truth=sim.truth)
     text = path.read_text()
     for needle in ("Residual histogram", "PSO convergence", "Su held fixed", "paper best fit",
-                   "data:image/png;base64,"):
+                   "data:image/png;base64,", "flat direction"):
         assert needle in text
     assert text.count("<img") == 4 and "http" not in text.split("<body>")[1][:2000]
     browser = shutil.which("chromium") or shutil.which("chromium-browser")

@@ -75,7 +75,7 @@ class Calibration:
                     robot: Robot | None = None) -> "Calibration":
         from . import __version__
 
-        std_src = getattr(result, "std", None) or {}
+        std_src = result.parameter_std() if hasattr(result, "parameter_std") else {}
         std = {n: (None if n in result.fixed or std_src.get(n) is None
                    or not math.isfinite(std_src[n]) else float(std_src[n])) for n in NAMES}
         return cls(params=result.params, std=std, fixed=tuple(result.fixed),

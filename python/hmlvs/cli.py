@@ -294,8 +294,7 @@ def report(
         test_ds = Dataset.load(test) if test is not None else None
         result = evaluate(cal.params, ds, test_ds, method=cal.method or "loaded",
                           fixed=cal.fixed)
-        result.std = cal.std  # shown in the parameter table
-        path = write_report(result, ds, out, test=test_ds)
+        path = write_report(result, ds, out, test=test_ds, std=cal.std)
     if as_json:
         _echo_json({"report": str(path), "fit_rms_mm": result.fit_rms,
                     "test_rms_mm": result.test_rms})

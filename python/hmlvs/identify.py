@@ -88,6 +88,15 @@ class CalibrationResult:
     identifiability: IdentifiabilityReport | None = None
     uncertainty: Uncertainty | None = None
 
+    def parameter_std(self) -> dict[str, float | None]:
+        """Standard deviation of each parameter from the uncertainty analysis; None for fixed
+        parameters and for those the data do not determine (their std is meaningless)."""
+        u = self.uncertainty
+        if u is None:
+            return {}
+        return {n: (float(u.std[n]) if n in u.std and u.determined.get(n, False) else None)
+                for n in NAMES}
+
     @property
     def free(self) -> tuple[str, ...]:
         return tuple(n for n in NAMES if n not in self.fixed)

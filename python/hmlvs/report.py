@@ -92,15 +92,18 @@ def _figures(result: Any, ds: Dataset, test: Dataset | None) -> dict[str, str]:
 
 
 def render_report(result: Any, ds: Dataset, test: Dataset | None = None,
-                  truth: Parameters | None = None, title: str = "hmlvs calibration report") -> str:
-    """The report as an HTML string."""
+                  truth: Parameters | None = None, title: str = "hmlvs calibration report",
+                  std: dict[str, float | None] | None = None) -> str:
+    """The report as an HTML string; ``std`` overrides the result's standard deviations (e.g.
+    those stored in a calibration file). "n.d.": not determined by the data."""
     figs = _figures(result, ds, test)
-    std = getattr(result, "std", None) or {}
+    std = result.parameter_std() if std is None and hasattr(result, "parameter_std") else (
+        std or {})
     rows = []
     for i, n in enumerate(NAMES):
         v = getattr(result.params, n)
         s = std.get(n)
-        s_txt = "fixed" if n in result.fixed else ("-" if s is None or not math.isfinite(s)
+        s_txt = "fixed" if n in result.fixed else ("n.d." if s is None or not math.isfinite(s)
                                                     else f"{s:.3g}")
         cells = [n, UNITS[n], html.escape(DESCRIPTIONS[n]), f"{v:.6g}", s_txt,
                  f"{TABLE2_LOWER[i]:.4g}", f"{TABLE2_UPPER[i]:.4g}", f"{PAPER_TABLE2_BEST[i]:.4g}"]
@@ -154,12 +157,13 @@ img {{ max-width: 520px; border: 1px solid #ddd; }}
 
 
 def write_report(result: Any, ds: Dataset, path: str | os.PathLike, test: Dataset | None = None,
-                 truth: Parameters | None = None) -> Path:
+                 truth: Parameters | None = None,
+                 std: dict[str, float | None] | None = None) -> Path:
     """Write the report atomically; returns its path."""
     path = Path(path)
     if path.suffix not in (".html", ".htm"):
         raise ValueError(f"{path}: the report is an .html file")
-    text = render_report(result, ds, test, truth)
+    text = render_report(result, ds, test, truth, std=std)
     with atomic_write(path) as fh:
         fh.write(text)
     return path
