@@ -102,3 +102,15 @@ def test_pose_entries_and_stripe_lists(rendered, tmp_path):
     (out / "p001.csv").write_text("u,v\n1,abc\n")
     cloud, info = measure_images(session.truth, out / "manifest3.json")
     assert list(info["rejected"]) == ["p001"] and "p001.csv" in info["rejected"]["p001"]
+
+
+def test_measure_accepts_image_pairs(rendered):
+    import cv2
+
+    session, out, _ = rendered
+    poses = session.robot.poses(session.joints)
+    pairs = [(cv2.imread(str(out / f"p{i:03d}_on.png"), cv2.IMREAD_UNCHANGED),
+              cv2.imread(str(out / f"p{i:03d}_off.png"), cv2.IMREAD_UNCHANGED)) for i in range(4)]
+    cloud = hmlvs.measure(session.truth, pairs, poses)
+    z = cloud.valid_points()[:, 2]  # the board plane z = 0
+    assert cloud.num_valid > 1000 and np.sqrt(np.mean(z**2)) < 0.1

@@ -1016,15 +1016,28 @@ def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
         raise _Reject(f"the laser-on and laser-off images differ in "
                       f"{100 * diff_big.mean():.0f}% of the pixels, far more than a "
                       "stripe: they are not a pair taken at the same pose")
-    d = difference_image(on_g, off_g, normalize=normalize)
-    opts = dict(stripe_options)
-    if normalize and opts.get("threshold") is None:
-        opts["threshold"] = _normalized_threshold(on_g, off_g, d)
-    stripe = extract_stripe(d, **opts)
+    stripe = stripe_from_pair(on_g, off_g, normalize=normalize, **stripe_options)
     if stripe.found.sum() < min_stripe:
         raise _Reject(f"no laser stripe found: only {int(stripe.found.sum())} scan lines "
                       f"have one ({_counts_text(stripe.counts())})")
     return _Pair(str(on_name), str(off_name), joints, pose, on_g, off_g, stripe, size)
+
+
+def stripe_from_pair(on: np.ndarray, off: np.ndarray, *, normalize: bool = True,
+                     channel: int | None = None, **stripe_options: Any) -> StripeResult:
+    """The stripe of one laser on/off pair, as the session pipeline extracts it.
+
+    Difference image (paper Eq. 23; divided by the laser-off frame with ``normalize``, which
+    removes the pull of the board's edges on the stripe) and :func:`extract_stripe` with
+    ``stripe_options``; for a normalised image without a given threshold, a noise-aware one.
+    """
+    on_g = _as_gray(on, "the laser-on image", channel)
+    off_g = _as_gray(off, "the laser-off image", channel)
+    d = difference_image(on_g, off_g, normalize=normalize)
+    opts = dict(stripe_options)
+    if normalize and opts.get("threshold") is None:
+        opts["threshold"] = _normalized_threshold(on_g, off_g, d)
+    return extract_stripe(d, **opts)
 
 
 def _record_pose(rec: dict[str, Any], robot: Any, unit: str) -> tuple[np.ndarray | None,

@@ -132,15 +132,17 @@ def _params_of(calibration: Any) -> Parameters:
 
 def measure(calibration: Any, stripes: Sequence[Any] | np.ndarray, poses: Any = None, *,
             joints: Any = None, robot: Robot | None = None, degrees: bool = False,
-            on_invalid: str = "mask") -> PointCloud:
+            on_invalid: str = "mask", stripe_options: dict[str, Any] | None = None) -> PointCloud:
     """Stripe pixels seen at hand poses -> a point cloud in the robot base frame.
 
     Parameters
     ----------
     calibration : a :class:`Calibration`, a ``CalibrationResult``, :class:`Parameters` or the
         path of a calibration file
-    stripes : one entry per pose: an (k, 2) array of stripe pixels (u, v), or an object with
-        ``pixels`` (and optionally ``intensity``) such as :class:`hmlvs.image.StripeResult`
+    stripes : one entry per pose: an (k, 2) array of stripe pixels (u, v), an object with
+        ``pixels`` (and optionally ``intensity``) such as :class:`hmlvs.image.StripeResult`,
+        or a tuple ``(laser_on, laser_off)`` of images whose stripe is extracted as the
+        session pipeline does (:func:`hmlvs.image.stripe_from_pair` with ``stripe_options``)
     poses : (n_poses, 4, 4) base_from_hand poses, or
     joints : (n_poses, dof) joint readings, with ``robot`` (default: the calibration's robot,
         else SCORBOT ER-VII); ``degrees`` for readings in degrees
@@ -167,6 +169,10 @@ def measure(calibration: Any, stripes: Sequence[Any] | np.ndarray, poses: Any = 
                          "stripe (image)")
     px_all, pose_idx, inten = [], [], []
     for k, s in enumerate(stripes):
+        if isinstance(s, tuple) and len(s) == 2 and all(np.ndim(x) >= 2 for x in s):
+            from .image import stripe_from_pair  # an image pair (laser on, laser off)
+
+            s = stripe_from_pair(s[0], s[1], **(stripe_options or {}))
         px = s.pixels if hasattr(s, "pixels") else s
         px = as_matrix(px, 2, f"stripe {k} pixels") if np.size(px) else np.empty((0, 2))
         it = getattr(s, "intensity", None)
