@@ -194,3 +194,12 @@ def test_ctrl_c_stops_a_long_calibration_promptly(tmp_path, extra):
     assert proc.returncode == 130, err.decode()[-500:]
     assert time.monotonic() - sent < 5.0  # promptly: progress is polled every 100 iterations
     assert b"interrupted" in err and not out.exists()  # cleanly: no partial calibration file
+
+
+@pytest.mark.parametrize("command", ["simulate", "demo", "calibrate", "design", "report",
+                                     "measure", "study", "scenario"])
+def test_every_command_has_help_with_an_example(command, capsys):
+    with pytest.raises(SystemExit) as e:
+        cli_main([command, "--help"])
+    assert e.value.code == 0
+    assert "Example: hmlvs " + command in " ".join(capsys.readouterr().out.split())
