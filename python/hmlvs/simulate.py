@@ -17,7 +17,8 @@ from scipy.optimize import least_squares
 from ._arrays import as_params
 from .board import Checkerboard
 from .dataset import Dataset
-from .model import hand_from_camera, laser_plane_distance, points_in_base, project
+from .model import (hand_from_camera, laser_plane_distance, points_in_base, points_in_camera,
+                    project)
 from .params import Parameters
 from .robot import Robot
 
@@ -42,7 +43,6 @@ def _random_valid_pixels(q: np.ndarray, n: int, image_size: tuple[int, int],
     out = np.empty((0, 2))
     for _ in range(100):
         cand = rng.uniform([0, 0], [w - 1, h - 1], size=(2 * n, 2))
-        from .model import points_in_camera
         _, ok = points_in_camera(q, cand, on_invalid="mask")
         out = np.vstack([out, cand[ok]])
         if len(out) >= n:
