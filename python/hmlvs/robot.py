@@ -79,7 +79,21 @@ class Robot:
     def dof(self) -> int:
         return len(self.links)
 
+    def __getstate__(self) -> dict:
+        return {k: v for k, v in self.__dict__.items() if k != "_native_robot"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+
     def _native(self) -> Any:
+        """The C++ robot, built once per Robot (its fields are frozen)."""
+        r = self.__dict__.get("_native_robot")
+        if r is None:
+            r = self._build_native()
+            object.__setattr__(self, "_native_robot", r)
+        return r
+
+    def _build_native(self) -> Any:
         r = _core._DHRobot()
         joints = []
         for lk in self.links:

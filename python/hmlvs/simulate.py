@@ -7,12 +7,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 import sys
 import types
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ._arrays import as_params
 from .board import Checkerboard
@@ -129,51 +129,152 @@ class Session:
                 + self.dataset.summary())
 
 
-def _camera_pose(robot: Robot, hfc: np.ndarray, joints: np.ndarray) -> np.ndarray:
-    return robot.poses(joints)[0] @ hfc
+# Session generation must give the same poses on every CPU. BLAS and LAPACK results differ in
+# the last bits between machines (the kernel OpenBLAS picks for the CPU), and a solver's path
+# can amplify that into another solution (elbow up on one machine, elbow down on another). So
+# the pose solves below use no BLAS: forward kinematics is the C++ core's, and the small
+# products, sums and linear solves are written out in elementwise IEEE operations, which give
+# the same bits everywhere. In addition each pose attempt draws from its own random stream,
+# solves take short steps (no jumps between basins), IK solutions are snapped to a grid of
+# 2**-20 rad, ties between equally good solutions go to the first start, and the acceptance
+# tests have margins of orders of magnitude over the solvers' rounding.
+_JOINT_GRID = 2.0 ** -20  # rad (about 1e-6)
+_IK_EXACT_MM = 1e-6  # an IK residual below this is an exact solution
+_IK_MAX_MM = 20.0  # an IK residual above this is no solution
+_SNAP_TOL_MM = 1e-6  # converged snaps reach ~1e-12 mm; failed ones stay far above
+_ON_PLANE_MM = 1e-5  # corners on the snapped line lie within ~1e-12 mm; others ~mm away
+
+
+def _on_grid(robot: Robot, joints: np.ndarray) -> np.ndarray:
+    j = np.round(joints / _JOINT_GRID) * _JOINT_GRID
+    lim = robot.joint_limits
+    return j if lim is None else np.clip(j, lim[:, 0], lim[:, 1])
+
+
+def _matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a @ b for (..., n, k) @ (k, m) in elementwise operations (no BLAS, same bits on every
+    CPU)."""
+    out = a[..., :, 0, None] * b[0]
+    for i in range(1, b.shape[0]):
+        out = out + a[..., :, i, None] * b[i]
+    return out
+
+
+def _solve(a: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """Solve a x = g (small, symmetric positive definite) by Gaussian elimination with
+    partial pivoting, in elementwise operations (no LAPACK)."""
+    m = np.hstack([a, g[:, None]])
+    n = len(g)
+    for k in range(n):
+        p = k + int(np.argmax(np.abs(m[k:, k])))
+        if p != k:
+            m[[k, p]] = m[[p, k]]
+        m[k + 1:] = m[k + 1:] - (m[k + 1:, k] / m[k, k])[:, None] * m[k]
+    x = np.zeros(n)
+    for k in range(n - 1, -1, -1):
+        acc = m[k, n]
+        for j in range(k + 1, n):
+            acc = acc - m[k, j] * x[j]
+        x[k] = acc / m[k, k]
+    return x
+
+
+def _sumsq(r: np.ndarray) -> float:
+    acc = 0.0
+    for v in r.tolist():
+        acc += v * v
+    return acc
+
+
+def _damped_solve(res, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                  max_step: float = 0.2, iterations: int = 200) -> tuple[np.ndarray, float]:
+    """Minimise ||res(x)|| from x0 within [lo, hi] by Levenberg-Marquardt with steps of at
+    most ``max_step`` rad, in BLAS-free arithmetic. Short steps keep the solve in the basin of
+    its start. ``res`` maps (m, n) points to (m, k) residuals. Returns (x, ||res(x)||)."""
+    x = np.clip(np.asarray(x0, dtype=float), lo, hi)
+    n = x.size
+    h = 1e-6 * np.eye(n)
+    r = res(x[None])[0]
+    cost = _sumsq(r)
+    lam = 1e-3
+    for _ in range(iterations):
+        rr = res(np.vstack([x + h, x - h]))
+        jac = (rr[:n] - rr[n:]) / 2e-6  # (n, k): central differences, accurate to ~1e-10
+        a = np.zeros((n, n))
+        g = np.zeros(n)
+        for k in range(jac.shape[1]):
+            a = a + jac[:, k, None] * jac[None, :, k]
+            g = g + jac[:, k] * r[k]
+        d = np.diag(a) + 1e-9
+        while True:
+            step = -_solve(a + np.diag(lam * d), g)
+            norm = np.sqrt(_sumsq(step))
+            if norm > max_step:
+                step = step * (max_step / norm)
+            xn = np.clip(x + step, lo, hi)
+            rn = res(xn[None])[0]
+            cn = _sumsq(rn)
+            if cn < cost:
+                done = cost - cn < 1e-14 * cost or norm < 1e-13
+                x, r, cost = xn, rn, cn
+                lam = max(lam / 4.0, 1e-12)
+                break
+            lam *= 8.0
+            if lam > 1e10:  # no step lowers the cost: converged to rounding
+                return x, float(np.sqrt(cost))
+        if done:
+            break
+    return x, float(np.sqrt(cost))
 
 
 def _ik_look_at(robot: Robot, hfc: np.ndarray, cam_pos: np.ndarray, cam_axis: np.ndarray,
                 seeds: list[np.ndarray], cam_x: np.ndarray | None = None) -> np.ndarray | None:
     """Joint readings putting the camera at ``cam_pos`` looking along ``cam_axis`` (and, if
-    given, with its x axis, the stripe's direction, as near ``cam_x`` as the arm allows)."""
+    given, with its x axis, the stripe's direction, as near ``cam_x`` as the arm allows).
+
+    The solution is snapped to a grid of 2**-20 rad so that it is the same on every CPU."""
     lim = robot.joint_limits
+    lo = lim[:, 0] if lim is not None else np.full(robot.dof, -np.inf)
+    hi = lim[:, 1] if lim is not None else np.full(robot.dof, np.inf)
 
     def res(j: np.ndarray) -> np.ndarray:
-        t = _camera_pose(robot, hfc, j)
-        r = [t[:3, 3] - cam_pos, 300.0 * (t[:3, 2] - cam_axis)]
+        t = _matmul(robot.poses(j), hfc)
+        r = [t[:, :3, 3] - cam_pos, 300.0 * (t[:, :3, 2] - cam_axis)]
         if cam_x is not None:
-            r.append(100.0 * (t[:3, 0] - cam_x))
-        return np.concatenate(r)
+            r.append(100.0 * (t[:, :3, 0] - cam_x))
+        return np.concatenate(r, axis=1)
 
-    best = None
+    best, best_err = None, np.inf
     for s in seeds:
-        r = least_squares(res, s, bounds=(lim[:, 0], lim[:, 1]) if lim is not None else
-                          (-np.inf, np.inf), xtol=1e-10, ftol=1e-10)
-        if best is None or r.cost < best.cost:
-            best = r
-    if best is None or np.sqrt(2 * best.cost) > 20.0:
+        x, err = _damped_solve(res, s, lo, hi)
+        if err < _IK_EXACT_MM:
+            best, best_err = x, err  # the first exact solution, in the order of the seeds
+            break
+        if err < best_err * (1.0 - 1e-6):  # clearly better: mirror solutions tie exactly
+            best, best_err = x, err
+    if best is None or best_err > _IK_MAX_MM:
         return None
-    return best.x
+    return _on_grid(robot, best)
 
 
 def _snap(robot: Robot, q: np.ndarray, joints: np.ndarray, targets: np.ndarray,
           free: list[int]) -> np.ndarray | None:
     """Move the ``free`` joints so that every target point lies exactly on the laser plane."""
     def res(x: np.ndarray) -> np.ndarray:
-        j = joints.copy()
-        j[free] = x
+        j = np.repeat(joints[None], len(x), axis=0)
+        j[:, free] = x
         poses = np.repeat(robot.poses(j), len(targets), axis=0)
-        return laser_plane_distance(q, targets, poses)
+        d = laser_plane_distance(q, np.tile(targets, (len(x), 1)), poses)
+        return np.nan_to_num(d, nan=1e6).reshape(len(x), len(targets))
 
-    r = least_squares(res, joints[free], xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    if np.max(np.abs(r.fun)) > 1e-9:
+    lim = robot.joint_limits
+    lo = lim[free, 0] if lim is not None else np.full(len(free), -np.inf)
+    hi = lim[free, 1] if lim is not None else np.full(len(free), np.inf)
+    x, err = _damped_solve(res, joints[free], lo, hi)
+    if not err <= _SNAP_TOL_MM:
         return None
     out = joints.copy()
-    out[free] = r.x
-    lim = robot.joint_limits
-    if lim is not None and (np.any(out < lim[:, 0]) or np.any(out > lim[:, 1])):
-        return None
+    out[free] = x
     return out
 
 
@@ -197,7 +298,9 @@ def session(params: Any = None, *, robot: Robot | None = None,
     board = Checkerboard() if board is None else board
     if num_poses < 1:
         raise ValueError(f"num_poses must be >= 1, got {num_poses}")
-    rng = np.random.default_rng(seed)
+    # One stream for the noise, and one per pose attempt: a decision that went differently
+    # on another machine could change only its own attempt, never the poses after it.
+    noise_stream, attempt_streams = np.random.SeedSequence(seed).spawn(2)
     hfc = hand_from_camera(q)
     corners = board.corners()
     ids = board.corner_ids()
@@ -209,20 +312,23 @@ def session(params: Any = None, *, robot: Robot | None = None,
     seed_joints = [np.zeros(dof), np.array([0.1, -0.8, 1.2, 0.0, 0.0][:dof] + [0.0] * (dof - 5)),
                    np.array([0.1, -1.2, 1.6, 0.4, 0.0][:dof] + [0.0] * (dof - 5))]
 
+    e1 = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0])
+    e1 = e1 / math.sqrt(_sumsq(e1))
+    e2 = np.cross(normal, e1)
     all_joints, px_list, pt_list, id_list, pidx = [], [], [], [], []
     attempts = 0
     while len(all_joints) < num_poses:
         attempts += 1
+        rng = np.random.default_rng(attempt_streams.spawn(1)[0])
         if attempts > 50 * num_poses:
             raise ValueError(f"could place only {len(all_joints)} of {num_poses} poses on the "
                              "board: is it within the robot's reach?")
         target = rng.uniform(lo, hi)
         tilt = np.radians(rng.uniform(0, max_tilt_deg))
         az = rng.uniform(0, 2 * np.pi)
-        e1 = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0])
-        e1 /= np.linalg.norm(e1)
-        e2 = np.cross(normal, e1)
-        view = -(np.cos(tilt) * normal + np.sin(tilt) * (np.cos(az) * e1 + np.sin(az) * e2))
+        # math.sin/cos, not numpy's: numpy picks SIMD variants by CPU (e.g. AVX-512)
+        view = -(math.cos(tilt) * normal + math.sin(tilt) * (math.cos(az) * e1 +
+                                                             math.sin(az) * e2))
         dist = rng.uniform(*standoff)
         joints = _ik_look_at(robot, hfc, target - dist * view, view, seed_joints)
         if joints is None:
@@ -253,7 +359,7 @@ def session(params: Any = None, *, robot: Robot | None = None,
             continue
         pose = robot.poses(new)
         rep = np.repeat(pose, len(corners), axis=0)
-        on = np.abs(laser_plane_distance(q, corners, rep)) < 1e-7
+        on = np.abs(laser_plane_distance(q, corners, rep)) < _ON_PLANE_MM
         pix, vis = project(q, corners, rep)
         keep = on & vis & (pix[:, 0] >= 0) & (pix[:, 0] <= w - 1) & (pix[:, 1] >= 0) & \
             (pix[:, 1] <= h - 1)
@@ -271,6 +377,7 @@ def session(params: Any = None, *, robot: Robot | None = None,
     pidx_arr = np.array(pidx, dtype=np.int64)
     pixels = np.array(px_list)
     points = np.array(pt_list)
+    rng = np.random.default_rng(noise_stream)
     if pixel_noise:
         pixels = pixels + rng.normal(0.0, pixel_noise, pixels.shape)
     if point_noise:
