@@ -1,8 +1,11 @@
 """Simulated data: the random-pixel protocol and the checkerboard session."""
 
 import numpy as np
+import pytest
 
 import hmlvs
+
+pytestmark = pytest.mark.scene  # simulated sessions or rendered images
 
 
 def test_simulate_defaults_and_seed():
@@ -61,3 +64,64 @@ def test_split_and_metres():
     poses_m[:, :3, 3] /= 1000
     in_m = hmlvs.Dataset(ds.pixels, poses_m, ds.points / 1000, length_unit="m")
     np.testing.assert_allclose(in_m.points, ds.points, rtol=1e-12)
+
+
+# What the subprocesses below compute: sessions, and IK solves with a stripe direction as the
+# scenes use them, written to an .npy file.
+_SESSIONS_SCRIPT = """
+import sys
+import numpy as np
+import hmlvs
+from hmlvs.simulate import _ik_look_at
+out = []
+for seed in range(3):
+    s = hmlvs.simulate.session(num_poses=6, seed=seed, pixel_noise=0.1)
+    out += [s.joints.ravel(), s.dataset.pixels.ravel(), s.dataset.poses.ravel()]
+robot = hmlvs.Robot.scorbot_er7()
+hfc = hmlvs.hand_from_camera(hmlvs.Parameters.nominal())
+home = np.array([0.0, -0.8, 1.2, 0.0, 0.0])
+for x, y in [(650.0, 0.0), (700.0, 60.0), (600.0, -80.0)]:
+    j = _ik_look_at(robot, hfc, np.array([x, y, 300.0]), np.array([0.0, 0.0, -1.0]), [home],
+                    cam_x=np.array([0.0, 1.0, 0.0]))
+    out.append(np.full(5, np.nan) if j is None else j)
+np.save(sys.argv[1], np.concatenate(out))
+"""
+
+
+def _blas_kernels():
+    """Two OpenBLAS kernels this CPU can run: Prescott (SSE3) and Haswell (AVX2) where the
+    CPU has AVX2, else Nehalem."""
+    try:
+        flags = open("/proc/cpuinfo").read()
+    except OSError:
+        flags = ""
+    return ["Prescott", "Haswell" if " avx2" in flags else "Nehalem"]
+
+
+def test_session_is_the_same_under_every_blas_kernel(tmp_path):
+    """The session generator solves IK; BLAS results differ in the last bits between CPUs
+    (the kernel OpenBLAS picks), and a decision that flips on one changes the scene. The
+    generator must give the same poses, pixels and IK solutions under every kernel."""
+    import os
+    import subprocess
+    import sys
+
+    runs = {}
+    procs = []
+    for kernel in _blas_kernels() + [None]:
+        env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
+        if kernel:
+            env["OPENBLAS_CORETYPE"] = kernel
+        path = tmp_path / f"{kernel or 'default'}.npy"
+        procs.append((kernel, path, subprocess.Popen(
+            [sys.executable, "-c", _SESSIONS_SCRIPT, str(path)], env=env,
+            stderr=subprocess.PIPE, text=True)))
+    for kernel, path, p in procs:
+        _, err = p.communicate(timeout=300)
+        assert p.returncode == 0, (kernel, err)
+        runs[kernel] = np.load(path)
+    ref = runs[None]
+    assert np.isfinite(ref).all() and ref.size > 300
+    for kernel, got in runs.items():
+        assert got.shape == ref.shape, kernel
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9, err_msg=str(kernel))
