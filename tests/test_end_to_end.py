@@ -9,6 +9,10 @@ import numpy as np
 import pytest
 
 import hmlvs
+from hmlvs.render import predicted_corners
+from scene_checks import shows_block
+
+pytestmark = pytest.mark.scene  # simulated sessions or rendered images
 
 
 @pytest.fixture(scope="module")
@@ -24,21 +28,34 @@ def rendered(tmp_path_factory):
 def test_calibration_from_images_matches_perfect_extraction(rendered, mode):
     session, folder = rendered
     ds, reports = hmlvs.dataset_from_images(folder, mode=mode)
-    assert sum(r.ok for r in reports) >= 12  # partial boards are rejected, with a reason
+    # every view showing a whole 3 x 3 block of the board is used; partial boards without
+    # one are rejected, with a reason
+    poses = session.robot.poses(session.joints)
+    clear = [shows_block(predicted_corners(session.truth, p, session.board), session.board)
+             for p in poses]
+    assert sum(clear) >= 12
+    assert all(r.ok for r, v in zip(reports, clear) if v)
     assert all(r.reason for r in reports if not r.ok)
     exact, ok = hmlvs.project(session.truth, ds.points, ds.poses)
     assert ok.all()
     sigma = np.sqrt(np.mean((ds.pixels - exact) ** 2, axis=0))
     assert sigma.max() < 0.1  # sub-pixel extraction on rendered images (px)
     perfect = hmlvs.Dataset(exact, ds.poses, ds.points, ids=ds.ids, pose_index=ds.pose_index)
-    fit, _ = ds.split(0.5, seed=1, by_pose=True)
-    in_fit = np.isin(ds.pose_index, np.unique(fit.pose_index))
-    test = perfect.subset(~in_fit)
-    from_images = hmlvs.calibrate(fit, test=test, seed=0)
-    baseline = []
-    for k in range(5):  # the noise of the baseline is random: average five draws
+    # One split and a few noise draws give a ratio that scatters 0.5-1.5 from split to split
+    # (measured on two sessions: 0.54-1.17 per split with a 10-draw baseline). The criterion
+    # is on the mean over three splits, each against a baseline averaged over six draws.
+    ratios = []
+    for split in (1, 2, 3):
+        fit, _ = ds.split(0.5, seed=split, by_pose=True)
+        in_fit = np.isin(ds.pose_index, np.unique(fit.pose_index))
+        test = perfect.subset(~in_fit)
+        from_images = hmlvs.calibrate(fit, test=test, seed=0)
         pf = perfect.subset(in_fit)
-        noisy = hmlvs.Dataset(pf.pixels + np.random.default_rng(k).normal(0, sigma, (len(pf), 2)),
-                              pf.poses, pf.points)
-        baseline.append(hmlvs.calibrate(noisy, test=test, seed=0).test_rms)
-    assert from_images.test_rms <= 1.5 * np.mean(baseline), (from_images.test_rms, baseline)
+        baseline = []
+        for k in range(6):  # the noise of the baseline is random: average six draws
+            noisy = hmlvs.Dataset(pf.pixels + np.random.default_rng(k).normal(0, sigma,
+                                                                              (len(pf), 2)),
+                                  pf.poses, pf.points)
+            baseline.append(hmlvs.calibrate(noisy, test=test, seed=0).test_rms)
+        ratios.append(from_images.test_rms / np.mean(baseline))
+    assert np.mean(ratios) <= 1.5 and max(ratios) <= 2.0, ratios

@@ -7,6 +7,8 @@ import pytest
 
 import hmlvs
 
+pytestmark = pytest.mark.scene  # simulated sessions or rendered images
+
 WELL_POSED = ("Su", "Sv", "Cu", "Cv")
 GENERIC = dict(omega=0.1, phi=0.12, varphi=-0.07)
 
@@ -61,16 +63,23 @@ def test_flat_directions_wander_while_heldout_rms_does_not():
 
 
 def test_by_pose_resampling_on_a_session():
-    s = hmlvs.simulate.session(num_poses=12, pixel_noise=0.1, seed=1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", hmlvs.HmlvsDataWarning)
-        rep = hmlvs.repeatability(s.dataset, runs=15, fixed=WELL_POSED, initial=s.truth,
-                                  threads=1, use_bounds=False)
-    assert rep.by_pose and rep.heldout_kind == "out-of-bag" and rep.runs == 15
-    assert np.all(np.isfinite(rep.heldout_rms)) and np.all(rep.heldout_rms < 1.0)
-    # 15 resamples of 12 poses: a rough spread (measured 0.0117 mm, predicted 0.0114 mm)
-    assert rep.parameters["f"].std == pytest.approx(rep.reference.uncertainty.std["f"],
-                                                    rel=0.5)
+    """By-pose bootstrap on sessions of 12 poses, over 5 seeds. 15 resamples estimate a
+    standard deviation to about +-20 %, and resampling whole poses adds pose-to-pose spread
+    the linearised prediction does not hold: measured on seeds 0-7, run std of f over its
+    predicted std 0.83-1.59 (mean 1.23). Bounds: each seed within [0.5, 2], the mean of the
+    five within [0.8, 1.6]."""
+    ratios = []
+    for seed in range(5):
+        s = hmlvs.simulate.session(num_poses=12, pixel_noise=0.1, seed=seed)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", hmlvs.HmlvsDataWarning)
+            rep = hmlvs.repeatability(s.dataset, runs=15, fixed=WELL_POSED, initial=s.truth,
+                                      threads=1, use_bounds=False)
+        assert rep.by_pose and rep.heldout_kind == "out-of-bag" and rep.runs == 15
+        assert np.all(np.isfinite(rep.heldout_rms)) and np.all(rep.heldout_rms < 1.0)
+        ratios.append(rep.parameters["f"].std / rep.reference.uncertainty.std["f"])
+    assert all(0.5 < r < 2.0 for r in ratios), ratios
+    assert 0.8 < np.mean(ratios) < 1.6, ratios
 
 
 @pytest.mark.parametrize("kwargs, match", [

@@ -397,9 +397,17 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
         if res.max() > 0.1 * spacing:
             raise ValueError(f"the matched corners do not form a board grid (homography "
                              f"residual {res.max():.1f} px): numbering is unreliable")
+        # A mirror image of the board is a homography too, so a mirrored expectation can match
+        # every corner with every label wrong (a small view of a symmetric grid): only the
+        # board's handedness, as the camera sees it, tells.
+        if _orientation(px, idx, board) != _handedness(board):
+            raise ValueError("the expected corner pixels are a mirror image of the board as "
+                             "the camera sees it (its rows and columns swapped or one of "
+                             "them reversed): numbering them would label every corner wrong")
         rule = "expected"
     else:
-        ok, found = cv2.findChessboardCornersSB(gray, (board.cols, board.rows), flags)
+        # by keyword: the Python signature takes ``corners`` third
+        ok, found = cv2.findChessboardCornersSB(gray, (board.cols, board.rows), flags=flags)
         if not ok or found is None:
             raise ValueError(f"no fully visible {board.rows} x {board.cols} checkerboard found "
                              "in the image; for a partly visible board pass the expected "
