@@ -9,6 +9,8 @@ import hmlvs
 from hmlvs.cli import main as cli_main
 from hmlvs.measure import measure_images
 
+pytestmark = pytest.mark.scene  # simulated sessions or rendered images
+
 
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):

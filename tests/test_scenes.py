@@ -18,6 +18,8 @@ from hmlvs.render import RenderOptions
 from hmlvs.scenes import Box, Cylinder, Hole, Scene, Table
 from hmlvs.simulate import _ik_look_at
 
+pytestmark = pytest.mark.scene  # simulated sessions or rendered images
+
 
 def rms(x):
     return float(np.sqrt(np.mean(np.square(x))))
