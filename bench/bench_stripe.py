@@ -65,8 +65,10 @@ def main() -> None:
             a = hmlvs.extract_stripe(img, method=method, **kw)
             b = reference_stripe.extract(img, method=method, **kw)
             assert np.array_equal(a.status, b["status"]), "C++ and NumPy disagree"
-            cpp = rate(lambda: hmlvs.extract_stripe(img, method=method, **kw), args.seconds)
-            ref = rate(lambda: reference_stripe.extract(img, method=method, **kw), args.seconds)
+            cpp = rate(lambda m=method, k=kw: hmlvs.extract_stripe(img, method=m, **k),
+                       args.seconds)
+            ref = rate(lambda m=method, k=kw: reference_stripe.extract(img, method=m, **k),
+                       args.seconds)
             if md:
                 print(f"| {method + label} | {cpp:.0f} | {ref:.1f} | {cpp / ref:.0f}x |")
             else:

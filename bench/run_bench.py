@@ -28,7 +28,6 @@ sys.path.insert(0, str(HERE))
 
 import hmlvs  # noqa: E402
 from hmlvs._io import atomic_write  # noqa: E402
-from hmlvs.identify import _fitness_data  # noqa: E402
 import numpy_pso  # noqa: E402
 
 
@@ -87,7 +86,6 @@ def main() -> None:
     # Same data for both PSOs: the paper's 50 fitting points, Table 2 bounds.
     sim = hmlvs.simulate(seed=1)
     fit = sim.fit
-    data = _fitness_data(fit)
     b = hmlvs.Bounds.table2()
     h = np.einsum("mji,mj->mi", fit.poses[:, :3, :3], fit.points - fit.poses[:, :3, 3])
     u, v = fit.pixels[:, 0], fit.pixels[:, 1]
@@ -139,7 +137,7 @@ def main() -> None:
 
     def scipy_jac(q: np.ndarray) -> np.ndarray:
         try:
-            return hmlvs.model.residual_jacobian(q, fit.pixels, fit.poses,
+            return hmlvs.models.paper.residual_jacobian(q, fit.pixels, fit.poses,
                                                  fit.points)[1].reshape(-1, 14)
         except ValueError:
             return np.zeros((3 * len(fit), 14))

@@ -1,12 +1,12 @@
-import sys
 from pathlib import Path
+import sys
 
 import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from hmlvs.params import TABLE2_LOWER, TABLE2_UPPER  # noqa: E402
+from hmlvs.models.params import TABLE2_LOWER, TABLE2_UPPER  # noqa: E402
 
 
 @pytest.fixture

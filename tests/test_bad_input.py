@@ -1,9 +1,8 @@
 """Every bad input raises a ValueError that names the problem."""
 
+import hmlvs
 import numpy as np
 import pytest
-
-import hmlvs
 import reference_model as ref
 
 Q = hmlvs.Parameters.nominal()

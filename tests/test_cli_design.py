@@ -2,10 +2,9 @@
 
 import json
 
+from hmlvs.cli import app
 import pytest
 from typer.testing import CliRunner
-
-from hmlvs.cli import app
 
 runner = CliRunner()
 

@@ -5,11 +5,10 @@ exact pixels (the truth's projection) plus Gaussian noise of the pipeline's own 
 RMS per axis. Both calibrations are judged on the same held-out poses with exact pixels.
 """
 
+import hmlvs
+from hmlvs.image.corners import predicted_corners
 import numpy as np
 import pytest
-
-import hmlvs
-from hmlvs.render import predicted_corners
 from scene_checks import shows_block
 
 pytestmark = pytest.mark.scene  # simulated sessions or rendered images

@@ -3,15 +3,19 @@
 import math
 import warnings
 
-import numpy as np
-import pytest
-
 import hmlvs
-from hmlvs._identifiability import (
-    NULL_TOL, WEAK_TOL, camera_y_tangent, euler_rate_map, gimbal_tangent, rotation_jacobian,
+from hmlvs.diagnostics.identifiability import (
+    NULL_TOL,
+    WEAK_TOL,
+    camera_y_tangent,
+    euler_rate_map,
+    gimbal_tangent,
+    rotation_jacobian,
     scale_gauge_tangent,
 )
-from hmlvs.model import residual_jacobian
+from hmlvs.models.paper import residual_jacobian
+import numpy as np
+import pytest
 
 GENERIC = dict(omega=0.1, phi=0.12, varphi=-0.07, Cu=318.0, Cv=247.0, ty=3.0)
 KNOWN = {"scale_gauge", "gimbal_lock", "camera_y_shift"}

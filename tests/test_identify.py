@@ -1,10 +1,9 @@
 """Parameter identification: accuracy, determinism, the paper's finding, robustness, bad input."""
 
+import hmlvs
+from hmlvs.calibration.solvers import _fitness_data
 import numpy as np
 import pytest
-
-import hmlvs
-from hmlvs.identify import _fitness_data
 
 FAST_PSO = {"iterations": 1500}  # enough for the tests' assertions; 5000 in the benchmark
 

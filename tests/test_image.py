@@ -5,14 +5,14 @@ sessions of image files to a data set."""
 import json
 
 import cv2
+import hmlvs
+from hmlvs.image.corners import predicted_corners
+from hmlvs.image.stripe import StripeStatus
+from hmlvs.sim.render import RenderOptions, render_pose
 import numpy as np
 import pytest
-
-import hmlvs
 import reference_stripe as ref
 from scene_checks import shows_block
-from hmlvs.image import StripeStatus
-from hmlvs.render import RenderOptions, predicted_corners, render_pose
 
 pytestmark = pytest.mark.scene  # simulated sessions or rendered images
 
@@ -253,7 +253,7 @@ def test_stripe_reflection_and_glare_are_reported_not_guessed():
             # reflection; only on the albedo-normalised image, as in the plain one a
             # reflection off a white square can outshine the stripe on a black one
             dn = hmlvs.difference_image(r.on[i], r.off[i], normalize=True)
-            thr = hmlvs.image._normalized_threshold(r.on[i], r.off[i], dn)
+            thr = hmlvs.image.stripe._normalized_threshold(r.on[i], r.off[i], dn)
             s2 = hmlvs.extract_stripe(dn, dominance=1.3, threshold=thr)
             ok = s2.found[band]
             assert ok.mean() > 0.8

@@ -2,10 +2,9 @@
 
 import math
 
+import hmlvs
 import numpy as np
 import pytest
-
-import hmlvs
 import reference_model as ref
 
 

@@ -2,12 +2,11 @@
 
 import json
 
-import numpy as np
-import pytest
-
 import hmlvs
 from hmlvs.cli import main as cli_main
-from hmlvs.measure import measure_images
+from hmlvs.measurement.measure import measure_images
+import numpy as np
+import pytest
 
 pytestmark = pytest.mark.scene  # simulated sessions or rendered images
 

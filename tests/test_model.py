@@ -1,11 +1,10 @@
 """The C++ sensor model against the independent NumPy oracle, its inverse and its Jacobian."""
 
+from conftest import random_params
+import hmlvs
 import numpy as np
 import pytest
-
-import hmlvs
 import reference_model as ref
-from conftest import random_params
 
 
 @pytest.mark.parametrize("trial", range(5))
@@ -82,7 +81,7 @@ def test_jacobian_matches_central_differences(rng):
     pixels = rng.uniform([50, 50], [590, 430], size=(m, 2))
     poses = ref.random_poses(rng, m)
     refs = ref.base_points(q, pixels, poses)
-    _, jac = hmlvs.model.residual_jacobian(q, pixels, poses, refs)
+    _, jac = hmlvs.models.paper.residual_jacobian(q, pixels, poses, refs)
     for i in range(14):
         h = 1e-6 * max(1.0, abs(q[i]))
         qp, qm = q.copy(), q.copy()
@@ -117,12 +116,12 @@ def test_one_million_points_evaluate(rng):
 def test_rays_pass_through_the_triangulated_points(rng):
     q = random_params(rng)
     pixels = rng.uniform([0, 0], [640, 480], size=(300, 2))
-    rays = hmlvs.model.rays_in_camera(q, pixels)
+    rays = hmlvs.models.paper.rays_in_camera(q, pixels)
     pts, ok = hmlvs.points_in_camera(q, pixels, on_invalid="mask")
     np.testing.assert_allclose(rays[:, 2], q[0])
     t = pts[ok, 2] / rays[ok, 2]
     np.testing.assert_allclose(pts[ok], t[:, None] * rays[ok], rtol=1e-12)
     camera_as_base = np.linalg.inv(hmlvs.hand_from_camera(q))  # base frame == camera frame
-    back, valid = hmlvs.model.pixels_from_points(q, pts[ok],
+    back, valid = hmlvs.models.paper.pixels_from_points(q, pts[ok],
                                                  np.tile(camera_as_base, (ok.sum(), 1, 1)))
     assert np.abs(back - pixels[ok]).max() < 1e-7

@@ -5,14 +5,13 @@ import os
 import shutil
 import subprocess
 
+import hmlvs
+from hmlvs.cli import main as cli_main
+from hmlvs.data.calibration_file import Calibration, dataset_hash
+from hmlvs.measurement.measure import PointCloud, measure, read_ply
+from hmlvs.report.html import write_report
 import numpy as np
 import pytest
-
-import hmlvs
-from hmlvs.calibration_file import Calibration, dataset_hash
-from hmlvs.cli import main as cli_main
-from hmlvs.measure import PointCloud, measure, read_ply
-from hmlvs.report import write_report
 
 
 @pytest.fixture(scope="module")

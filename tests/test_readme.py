@@ -1,7 +1,7 @@
 """The README's Python quickstart runs as written."""
 
-import re
 from pathlib import Path
+import re
 
 import pytest
 

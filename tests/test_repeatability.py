@@ -2,10 +2,9 @@
 
 import warnings
 
+import hmlvs
 import numpy as np
 import pytest
-
-import hmlvs
 
 pytestmark = pytest.mark.scene  # simulated sessions or rendered images
 

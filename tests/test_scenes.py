@@ -7,16 +7,15 @@ but fewer of them): the cylinder scan covers only the 20 mm hole (9 image pairs 
 
 import json
 
+import hmlvs
+from hmlvs.cli import main as cli_main
+from hmlvs.measurement.measure import read_ply
+from hmlvs.paper import scenarios as scenes
+from hmlvs.sim.render import RenderOptions
+from hmlvs.sim.scene import Box, Cylinder, Hole, Scene, Table
+from hmlvs.sim.sessions import _ik_look_at
 import numpy as np
 import pytest
-
-import hmlvs
-from hmlvs import scenes
-from hmlvs.cli import main as cli_main
-from hmlvs.measure import read_ply
-from hmlvs.render import RenderOptions
-from hmlvs.scenes import Box, Cylinder, Hole, Scene, Table
-from hmlvs.simulate import _ik_look_at
 
 pytestmark = pytest.mark.scene  # simulated sessions or rendered images
 

@@ -1,9 +1,8 @@
 """Simulated data: the random-pixel protocol and the checkerboard session."""
 
+import hmlvs
 import numpy as np
 import pytest
-
-import hmlvs
 
 pytestmark = pytest.mark.scene  # simulated sessions or rendered images
 
@@ -72,7 +71,7 @@ _SESSIONS_SCRIPT = """
 import sys
 import numpy as np
 import hmlvs
-from hmlvs.simulate import _ik_look_at
+from hmlvs.sim.sessions import _ik_look_at
 out = []
 for seed in range(3):
     s = hmlvs.simulate.session(num_poses=6, seed=seed, pixel_noise=0.1)

@@ -3,13 +3,12 @@ its files; determinism; progress and Ctrl-C; the ``hmlvs study`` command; bad in
 
 import json
 
+import hmlvs
+from hmlvs.cli import app
+from hmlvs.paper.study import METHODS, PAPER_S, StudyResult, paper_value
 import numpy as np
 import pytest
 from typer.testing import CliRunner
-
-import hmlvs
-from hmlvs.cli import app
-from hmlvs.study import METHODS, PAPER_S, StudyResult, paper_value
 
 # Tiny settings for the tests that do not check the findings (one s, a few runs).
 TINY = {"s_values": (0.01,), "runs_lm": 4, "runs_pso": 2, "evaluations": 10_000,
@@ -162,9 +161,15 @@ def test_progress_callable_and_interrupt():
     assert any(m == "random" and total == 10_000 for m, _, _, total in seen)
 
 
-def test_progress_bar_runs():
-    r = hmlvs.study(**{**TINY, "progress": True})
-    assert r.get("pso", 0.01).runs == 2
+def test_progress_bar_leaves_results_alone_and_closes():
+    """The rich bar changes nothing in the results, and it is stopped when the study ends:
+    a bar left running makes the next one fail ("Only one live display may be active")."""
+    quiet = hmlvs.study(**TINY)
+    for _ in range(2):
+        r = hmlvs.study(**{**TINY, "progress": True})
+        for m in ("random", "lm-paper", "pso"):
+            a, b = r.get(m, 0.01), quiet.get(m, 0.01)
+            np.testing.assert_array_equal(a.fit_rms, b.fit_rms)
 
 
 @pytest.mark.parametrize(

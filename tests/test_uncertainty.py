@@ -2,10 +2,9 @@
 
 import warnings
 
+import hmlvs
 import numpy as np
 import pytest
-
-import hmlvs
 
 WELL_POSED = ("Su", "Sv", "Cu", "Cv")
 GENERIC = dict(omega=0.1, phi=0.12, varphi=-0.07)

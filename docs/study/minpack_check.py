@@ -5,7 +5,7 @@ tolerances 1.49012e-8 as in hmlvs' paper mode, at most 4200 function evaluations
 first N starts that ``hmlvs study`` gives both LM modes at s = 0.2, on the same data, with
   1. the paper's scalar residual ||E_i|| per point, forward differences, Euler angles;
   2. the 3 components of E_i, forward differences, Euler angles;
-  3. the 3 components of E_i, exact Jacobian (hmlvs.model.residual_jacobian), Euler angles,
+  3. the 3 components of E_i, exact Jacobian (hmlvs.models.paper.residual_jacobian), Euler angles,
 and prints the held-out RMS over the 50 test points (success: < 0.01 mm, as in the study).
 
     PYTHONPATH=python python docs/study/minpack_check.py [N]     # N = 100 by default
@@ -17,12 +17,11 @@ import sys
 import time
 import warnings
 
+import hmlvs
+from hmlvs.calibration.solvers import _fitness_data
+from hmlvs.paper.study import SUCCESS_THRESHOLD, _seed
 import numpy as np
 from scipy.optimize import least_squares
-
-import hmlvs
-from hmlvs.identify import _fitness_data
-from hmlvs.study import SUCCESS_THRESHOLD, _seed
 
 
 def main(n: int) -> None:
@@ -43,7 +42,7 @@ def main(n: int) -> None:
 
     def jacobian(q: np.ndarray) -> np.ndarray:
         try:
-            return hmlvs.model.residual_jacobian(q, fit.pixels, fit.poses,
+            return hmlvs.models.paper.residual_jacobian(q, fit.pixels, fit.poses,
                                                  fit.points)[1].reshape(-1, 14)
         except ValueError:
             return np.zeros((3 * len(fit), 14))

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from .params import NUM_PARAMS, Parameters
+from .models.params import NUM_PARAMS, Parameters
 
 
 def as_params(params: Any) -> np.ndarray:

@@ -83,7 +83,7 @@ def simulate(
 
     Example: hmlvs simulate session.npz --poses 24 --images session-images
     """
-    from . import simulate as sim
+    from . import sim
 
     with _guard(as_json):
         s = sim.session(num_poses=poses, pixel_noise=pixel_noise, point_noise=point_noise,
@@ -113,9 +113,9 @@ def demo(
 
     Example: hmlvs demo --seed 1 --poses 40
     """
-    from . import simulate as sim
-    from .calibration_file import Calibration
-    from .identify import calibrate as run_calibration
+    from . import sim
+    from .calibration.solvers import calibrate as run_calibration
+    from .data.calibration_file import Calibration
 
     with _guard(as_json):
         session = sim.session(num_poses=poses, pixel_noise=pixel_noise, seed=seed)
@@ -165,14 +165,14 @@ def calibrate(
 
     Example: hmlvs calibrate session.npz --holdout 0.3 --out calibration.yaml --report report.html
     """
-    from .calibration_file import Calibration
-    from .dataset import Dataset
-    from .identify import calibrate as run_calibration
+    from .calibration.solvers import calibrate as run_calibration
+    from .data.calibration_file import Calibration
+    from .data.dataset import Dataset
 
     image_reports = []
     with _guard(as_json):
         if data.is_dir() or data.name == "manifest.json":
-            from .image import dataset_from_images
+            from .image.session import dataset_from_images
 
             ds, image_reports = dataset_from_images(data, mode=mode)
             if not as_json:
@@ -193,7 +193,7 @@ def calibrate(
         path = Calibration.from_result(result, ds).save(out)
         report_path = None
         if report is not None:
-            from .report import write_report
+            from .report.html import write_report
 
             report_path = write_report(result, ds, report, test=test_ds)
     if as_json:
@@ -236,7 +236,7 @@ def design(
     """
     import math
 
-    from . import design as dsg
+    from .paper import design as dsg
 
     try:
         sensor = dsg.Sensor.make(f=f, pixel_pitch=pitch, image_size=(width, height), H=baseline,
@@ -283,10 +283,10 @@ def report(
 
     Example: hmlvs report calibration.yaml session.npz --out report.html
     """
-    from .calibration_file import Calibration
-    from .dataset import Dataset
-    from .identify import evaluate
-    from .report import write_report
+    from .calibration.solvers import evaluate
+    from .data.calibration_file import Calibration
+    from .data.dataset import Dataset
+    from .report.html import write_report
 
     with _guard(as_json):
         cal = Calibration.load(calibration)
@@ -318,8 +318,8 @@ def measure(
 
     Example: hmlvs measure calibration.yaml scan/ --out cloud.ply
     """
-    from .calibration_file import Calibration
-    from .measure import measure_source
+    from .data.calibration_file import Calibration
+    from .measurement.measure import measure_source
 
     with _guard(as_json):
         cal = Calibration.load(calibration)
@@ -368,7 +368,7 @@ def study(
 
     Example: hmlvs study --quick --out study-out
     """
-    from . import study as st
+    from .paper import study as st
 
     try:
         result = st.study(s_values=st.PAPER_S if not spreads else spreads, runs_lm=runs_lm,
@@ -407,8 +407,8 @@ def scenario(
 
     Example: hmlvs scenario gauge-block --out gauge-out --seed 0
     """
-    from . import scenes
-    from .calibration_file import Calibration
+    from .data.calibration_file import Calibration
+    from .paper import scenarios as scenes
 
     with _guard(as_json):
         if name not in ("gauge-block", "cylinder"):

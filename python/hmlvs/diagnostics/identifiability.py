@@ -28,10 +28,17 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from .dataset import Dataset
-from .model import hand_from_camera, points_in_camera, residual_jacobian
-from .params import NAMES, NUM_PARAMS, TABLE2_LOWER, TABLE2_UPPER, Bounds, Parameters, \
-    param_index
+from ..data.dataset import Dataset
+from ..models.paper import hand_from_camera, points_in_camera, residual_jacobian
+from ..models.params import (
+    NAMES,
+    NUM_PARAMS,
+    TABLE2_LOWER,
+    TABLE2_UPPER,
+    Bounds,
+    Parameters,
+    param_index,
+)
 
 #: A singular value below NULL_TOL times the largest one spans a null direction. The
 #: Jacobian is exact (automatic differentiation), so the known exact degeneracies come out at
@@ -253,7 +260,7 @@ def rotation_jacobian(params: Any, dataset: Dataset) -> np.ndarray:
     return np.einsum("mij,jk,mkl->mil", dataset.poses[:, :3, :3], r, _skew(cp))
 
 
-from .params import fixed_mask  # noqa: E402
+from ..models.params import fixed_mask  # noqa: E402
 
 
 def _fixed_mask(fixed: Iterable[str] | str) -> tuple[tuple[str, ...], np.ndarray]:
@@ -567,7 +574,6 @@ def _unnamed_directions(an: _Analysis, known: list[Direction]) -> list[Direction
     out = []
     for c in range(count):
         x = u[:, c] / np.linalg.norm(u[:, c])
-        gain = float(np.linalg.norm(a @ x) / an.sv[0])
         top = sorted(zip(an.free_idx, x), key=lambda t: -abs(t[1]))
         lead = [(an.coordinates[i], v) for i, v in top if abs(v) > 0.05][:4]
         label = ", ".join(f"{_ROTATION_DESCRIPTION.get(n, n)}" for n, _ in lead)

@@ -13,10 +13,10 @@ from typing import Any
 
 import numpy as np
 
-from ._io import atomic_write
-from .dataset import Dataset
-from .model import points_in_base
-from .params import DESCRIPTIONS, NAMES, TABLE2_LOWER, TABLE2_UPPER, UNITS, Parameters
+from .._io import atomic_write
+from ..data.dataset import Dataset
+from ..models.paper import points_in_base
+from ..models.params import DESCRIPTIONS, NAMES, TABLE2_LOWER, TABLE2_UPPER, UNITS, Parameters
 
 # The paper's Table 2: nominal values, PSO bounds and its best-fit parameters.
 PAPER_TABLE2_BEST = [7.70, 0.0074, 0.0075, 323.8, 238.3, 4.8e-4, 137.3, 0.47, -1.8e-3, -0.05,
@@ -117,6 +117,9 @@ def render_report(result: Any, ds: Dataset, test: Dataset | None = None,
         f"<li>{html.escape(n)}</li>" for n in notes)
     test_txt = ("-" if result.test_rms is None else
                 f"{result.test_rms:.4g} mm over {result.test_errors.size} points")
+    fit_txt = f"{result.fit_rms:.4g} mm over {result.fit_errors.size} points"
+    run_txt = (f"{result.iterations}, {result.seconds:.3f} s on {result.threads} threads "
+               f"(seed {result.seed})")
     captions = {"hist": "Residual histogram", "points": "Per-point distance errors",
                 "convergence": "PSO convergence (paper Fig. 11)",
                 "cloud": "Reference against measured points"}
@@ -139,9 +142,9 @@ img {{ max-width: 520px; border: 1px solid #ddd; }}
 <h1>{html.escape(title)}</h1>
 <table class="summary">
 <tr><td>method</td><td>{html.escape(result.method)} ({html.escape(result.termination)})</td></tr>
-<tr><td>fit RMS of ||E_i||</td><td>{result.fit_rms:.4g} mm over {result.fit_errors.size} points</td></tr>
+<tr><td>fit RMS of ||E_i||</td><td>{fit_txt}</td></tr>
 <tr><td>held-out RMS</td><td>{test_txt}</td></tr>
-<tr><td>iterations, time</td><td>{result.iterations}, {result.seconds:.3f} s on {result.threads} threads (seed {result.seed})</td></tr>
+<tr><td>iterations, time</td><td>{run_txt}</td></tr>
 <tr><td>written</td><td>{now}</td></tr>
 </table>
 <h2>Warnings and notes</h2>

@@ -10,8 +10,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from . import _core
-from ._arrays import as_matrix, as_params, as_poses, same_rows
+from .. import _core
+from .._arrays import as_matrix, as_params, as_poses, same_rows
 
 OnInvalid = Literal["raise", "mask"]
 

@@ -17,10 +17,10 @@ import warnings
 
 import numpy as np
 
-from ._identifiability import GIMBAL_PHI, HmlvsDataWarning, _EULER
-from .dataset import Dataset, fit_and_test
-from .identify import CalibrationResult, calibrate
-from .params import NAMES
+from ..calibration.solvers import CalibrationResult, calibrate
+from ..data.dataset import Dataset, fit_and_test
+from ..models.params import NAMES
+from .identifiability import _EULER, GIMBAL_PHI, HmlvsDataWarning
 
 
 @dataclass(frozen=True)

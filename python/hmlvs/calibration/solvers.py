@@ -6,21 +6,21 @@ from dataclasses import dataclass, field
 import math
 import os
 import time
-import warnings
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
+import warnings
 
 import numpy as np
 
-from . import _core
-from ._identifiability import HmlvsDataWarning
-from ._uncertainty import check_noise, diagnose
-from .dataset import Dataset, fit_and_test
-from .params import NAMES, NUM_PARAMS, Bounds, Parameters, param_index
-from .params import fixed_mask as params_fixed_mask
+from .. import _core
+from ..data.dataset import Dataset, fit_and_test
+from ..diagnostics.identifiability import HmlvsDataWarning
+from ..diagnostics.uncertainty import check_noise, diagnose
+from ..models.params import NAMES, NUM_PARAMS, Bounds, Parameters, param_index
+from ..models.params import fixed_mask as params_fixed_mask
 
 if TYPE_CHECKING:
-    from ._identifiability import IdentifiabilityReport
-    from ._uncertainty import Uncertainty
+    from ..diagnostics.identifiability import IdentifiabilityReport
+    from ..diagnostics.uncertainty import Uncertainty
 
 METHODS = ("pso+lm", "pso", "lm", "lm-paper", "random")
 LOSSES = (None, "huber", "cauchy")
@@ -138,7 +138,8 @@ def _resolve_progress(progress: Any) -> tuple[ProgressFn | None, Callable[[], No
         from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
         bar = Progress(TextColumn("{task.description}"), BarColumn(),
-                       TextColumn("{task.completed}/{task.total}"), TextColumn("best F {task.fields[best]}"),
+                       TextColumn("{task.completed}/{task.total}"),
+                       TextColumn("best F {task.fields[best]}"),
                        TimeRemainingColumn(), transient=True)
         bar.start()
         task = bar.add_task("calibrating", total=None, best="-")

@@ -25,17 +25,15 @@ import io
 import math
 import os
 from pathlib import Path
-import sys
 import time
-import types
 from typing import Any, Callable, Iterable, Optional, Sequence
 import zlib
 
 import numpy as np
 
-from ._io import atomic_write
-from .identify import _fitness_data, calibrate
-from .params import NUM_PARAMS, Bounds
+from .._io import atomic_write
+from ..calibration.solvers import _fitness_data, calibrate
+from ..models.params import NUM_PARAMS, Bounds
 
 PAPER_S: tuple[float, ...] = (1e-4, 1e-3, 1e-2, 0.1, 0.2)
 METHODS: tuple[str, ...] = ("random", "lm-paper", "pso", "lm", "pso+lm")
@@ -380,8 +378,13 @@ class _Reporter:
         self.fn: Optional[StudyProgress] = None
         if progress is True:
             from rich.console import Console
-            from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
-                                       TimeElapsedColumn)
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                TextColumn,
+                TimeElapsedColumn,
+            )
 
             self.bar = Progress(TextColumn("{task.description:<32}"), BarColumn(),
                                 MofNCompleteColumn(), TimeElapsedColumn(),
@@ -450,7 +453,7 @@ def study(s_values: Sequence[float] = PAPER_S, runs_lm: Optional[int] = None,
     >>> r.get("pso+lm", 0.2).success_rate
     1.0
     """
-    from .simulate import simulate
+    from ..sim.sessions import simulate
 
     defaults = QUICK if quick else FULL
     s_vals = _check_s(s_values)
@@ -567,7 +570,7 @@ VALLEY_PARAMS: tuple[tuple[str, str], ...] = (
 
 
 def _valley_values(params: np.ndarray, name: str) -> np.ndarray:
-    from .params import param_index
+    from ..models.params import param_index
 
     if name == "omega + varphi":
         return params[:, param_index("omega")] + params[:, param_index("varphi")]
@@ -583,7 +586,7 @@ def _valley_lines(r: StudyResult) -> list[str]:
     ok = lm.test_rms < lm.threshold
     if ok.sum() < 2:
         return []
-    from .params import Parameters
+    from ..models.params import Parameters
 
     truth = Parameters.nominal().to_array()[None, :]  # the study simulates at the nominal
     lines = ["", f"## Same RMS, different parameters: modern LM at s = {s:g}", "",
@@ -830,13 +833,3 @@ def _plot_fig8(r: StudyResult, path: Path) -> Path:
     fig.suptitle("Fig. 8: error at each of the 50 held-out points for the PSO solutions with "
                  "the best and the worst fitness")
     return _save(fig, path)
-
-
-class _CallableModule(types.ModuleType):
-    """Lets ``hmlvs.study(...)`` call :func:`study` while the module keeps its members."""
-
-    def __call__(self, *args: Any, **kwargs: Any) -> StudyResult:
-        return study(*args, **kwargs)
-
-
-sys.modules[__name__].__class__ = _CallableModule

@@ -11,9 +11,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ._arrays import as_matrix, same_rows
-from ._io import atomic_write
-from .model import validate_poses
+from .._arrays import as_matrix, same_rows
+from .._io import atomic_write
+from ..models.paper import validate_poses
 
 FORMAT = "hmlvs-dataset"
 FORMAT_VERSION = 1
@@ -261,8 +261,8 @@ class Dataset:
                 if "pose_index" in e:
                     pidx.append(int(e["pose_index"]))
             except (KeyError, TypeError) as err:
-                raise ValueError(f"entry {i} (id {e.get('id', '?') if isinstance(e, dict) else '?'})"
-                                 f" lacks field {err}") from None
+                eid = e.get("id", "?") if isinstance(e, dict) else "?"
+                raise ValueError(f"entry {i} (id {eid}) lacks field {err}") from None
         if joints and len(joints) != len(entries):
             raise ValueError("some entries have joint readings and some do not")
         return cls(np.array(pixels, float).reshape(-1, 2), np.array(poses, float).reshape(-1, 4, 4),

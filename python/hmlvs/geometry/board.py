@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
@@ -56,6 +57,10 @@ class Checkerboard:
 
     def corner_ids(self) -> list[str]:
         return [f"r{r}c{c}" for r in range(self.rows) for c in range(self.cols)]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The board as plain values (for manifests and calibration files)."""
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
 
     def base_from_board(self) -> np.ndarray:
         """4x4 transform from board coordinates (x along rows, y along columns) to base."""

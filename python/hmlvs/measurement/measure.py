@@ -10,12 +10,12 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ._arrays import as_matrix
-from ._io import atomic_write
-from .calibration_file import Calibration
-from .model import points_in_base
-from .params import Parameters
-from .robot import Robot
+from .._arrays import as_matrix
+from .._io import atomic_write
+from ..data.calibration_file import Calibration
+from ..geometry.robot import Robot
+from ..models.paper import points_in_base
+from ..models.params import Parameters
 
 
 @dataclass(frozen=True)
@@ -170,7 +170,7 @@ def measure(calibration: Any, stripes: Sequence[Any] | np.ndarray, poses: Any = 
     px_all, pose_idx, inten = [], [], []
     for k, s in enumerate(stripes):
         if isinstance(s, tuple) and len(s) == 2 and all(np.ndim(x) >= 2 for x in s):
-            from .image import stripe_from_pair  # an image pair (laser on, laser off)
+            from ..image.session import stripe_from_pair
 
             s = stripe_from_pair(s[0], s[1], **(stripe_options or {}))
         px = s.pixels if hasattr(s, "pixels") else s
@@ -199,7 +199,7 @@ def measure_source(calibration: Any, source: str | os.PathLike) -> tuple[PointCl
     Returns the cloud and a summary; for a data set with reference points the summary holds
     the RMS distance between measured and reference points (``rms_mm``).
     """
-    from .dataset import Dataset
+    from ..data.dataset import Dataset
 
     path = Path(source)
     if path.suffix in (".npz", ".json") and path.is_file() and path.name != "manifest.json":
@@ -216,9 +216,9 @@ def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
     or a list of records) -> a point cloud, one stripe profile per pair.
 
     Pairs that fail (no stripe, bad image, mismatched pair) are skipped and named in the
-    summary's ``rejected``; ``options`` go to :func:`hmlvs.image.stripes_from_images`.
+    summary's ``rejected``; ``options`` go to :func:`hmlvs.image.session.stripes_from_images`.
     """
-    from .image import stripes_from_images
+    from ..image.session import stripes_from_images
 
     robot = robot or getattr(calibration, "robot", None)
     ids, stripes, poses, reports = stripes_from_images(source, robot=robot, **options)

@@ -38,9 +38,17 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from ._identifiability import GIMBAL_PHI, _EULER, _analyse, _Analysis, _check_inputs, \
-    _report, NULL_TOL, WEAK_TOL
-from .params import NAMES, Bounds, Parameters, param_index
+from ..models.params import NAMES, Bounds, Parameters, param_index
+from .identifiability import (
+    _EULER,
+    GIMBAL_PHI,
+    NULL_TOL,
+    WEAK_TOL,
+    _analyse,
+    _Analysis,
+    _check_inputs,
+    _report,
+)
 
 _DETERMINED_TOL = 1e-6  # fraction of a gradient inside the null space still "determined"
 
@@ -380,7 +388,7 @@ def uncertainty(dataset: Any, params: Parameters | Any, fixed: Iterable[str] | s
     point_noise : standard deviation of each coordinate of the reference points (mm)
     bounds : the fit's bounds (for the column scaling and a note on parameters at a bound)
     null_tol : relative singular value below which a direction is null (see
-        :data:`hmlvs._identifiability.NULL_TOL`)
+        :data:`hmlvs.diagnostics.identifiability.NULL_TOL`)
 
     Returns
     -------

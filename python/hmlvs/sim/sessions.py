@@ -8,19 +8,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
-import sys
-import types
 from typing import Any
 
 import numpy as np
 
-from ._arrays import as_params
-from .board import Checkerboard
-from .dataset import Dataset
-from .model import (hand_from_camera, laser_plane_distance, points_in_base, points_in_camera,
-                    project)
-from .params import Parameters
-from .robot import Robot
+from .._arrays import as_params
+from ..data.dataset import Dataset
+from ..geometry.board import Checkerboard
+from ..geometry.robot import Robot
+from ..models.paper import (
+    hand_from_camera,
+    laser_plane_distance,
+    points_in_base,
+    points_in_camera,
+    project,
+)
+from ..models.params import Parameters
 
 DEFAULT_IMAGE_SIZE = (640, 480)
 
@@ -389,16 +392,3 @@ def session(params: Any = None, *, robot: Robot | None = None,
                        "pixel_noise": pixel_noise, "point_noise": point_noise,
                        "image_size": list(image_size)})
     return Session(Parameters.from_array(q), ds, robot, board, joints_arr, tuple(image_size))
-
-
-class _CallableModule(types.ModuleType):
-    """Lets ``hmlvs.simulate(...)`` call :func:`simulate` while the module keeps its members."""
-
-    def __call__(self, *args: Any, **kwargs: Any) -> Simulation:
-        return simulate(*args, **kwargs)
-
-
-sys.modules[__name__].__class__ = _CallableModule
-
-# Rendered images of a session (imported last: render.py uses this module's session()).
-from .render import RenderOptions, render_session  # noqa: E402

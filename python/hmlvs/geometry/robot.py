@@ -8,7 +8,7 @@ from typing import Any, Literal, Sequence
 
 import numpy as np
 
-from . import _core
+from .. import _core
 
 Convention = Literal["standard", "modified"]
 

@@ -24,16 +24,19 @@ entry, and the rest of the session goes through.
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
 
+from .._io import atomic_write
 from .dataset import check_format
 
 FORMAT = "hmlvs-images"
 VERSION = 1
+NAME = "manifest.json"
 
 
 def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Path]:
@@ -112,3 +115,37 @@ def read_stripe_list(path: Path) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError(f"the stripe list {path} has a non-numeric or missing value")
     inten = arr[:, 2] if arr.shape[1] == 3 else np.zeros(arr.shape[0])
     return arr[:, :2].copy(), inten
+
+
+def _write_png(path: Path, image: np.ndarray) -> None:
+    import cv2
+    ok, buf = cv2.imencode(".png", image)
+    if not ok:
+        raise ValueError(f"could not encode {path.name} as PNG")
+    with atomic_write(path, "wb") as fh:
+        fh.write(buf.tobytes())
+
+
+def write_image_manifest(out_dir: str | os.PathLike, ids: list[str], on: list[np.ndarray],
+                         off: list[np.ndarray], joints: np.ndarray,
+                         image_size: tuple[int, int], robot_name: str,
+                         **extra: Any) -> Path:
+    """Write ``<id>_on.png``, ``<id>_off.png`` per pose and ``manifest.json`` (format
+    ``hmlvs-images``: pose ids, image files, joint readings in rad) into ``out_dir``, every
+    file atomically, the manifest last. ``extra`` entries (JSON-able) go into the manifest's
+    top level. Returns the manifest's path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    entries = []
+    for i, pid in enumerate(ids):
+        names = {"on": f"{pid}_on.png", "off": f"{pid}_off.png"}
+        _write_png(out / names["on"], on[i])
+        _write_png(out / names["off"], off[i])
+        entries.append({"id": pid, **names, "joints": np.asarray(joints[i], float).tolist()})
+    doc = {"format": FORMAT, "version": VERSION,
+           "image_size": list(image_size), "joint_unit": "rad", "robot": robot_name,
+           **extra, "poses": entries}
+    manifest = out / NAME
+    with atomic_write(manifest, "w") as fh:
+        json.dump(doc, fh, indent=1)
+    return manifest

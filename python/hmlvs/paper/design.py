@@ -29,7 +29,8 @@ Definitions (the paper does not give them; these are ours):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace as dc_replace
+from dataclasses import dataclass, field
+from dataclasses import replace as dc_replace
 import io
 import math
 import os
@@ -38,9 +39,9 @@ from typing import Any, Iterable, Optional, Sequence
 
 import numpy as np
 
-from ._io import atomic_write
-from .model import points_in_camera
-from .params import Parameters
+from .._io import atomic_write
+from ..models.paper import points_in_camera
+from ..models.params import Parameters
 
 #: The paper's ranges (section 2) for f = 8 mm, 7.4 um pixels, 640 x 480, H = 100 mm,
 #: theta = 25 deg, in mm.

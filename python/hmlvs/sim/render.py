@@ -1,7 +1,8 @@
 """Rendered laser-on / laser-off images of a checkerboard session, with known truth.
 
 Every pixel is ray-traced through the sensor model of MODEL.md: the pixel's (distorted)
-position gives an undistorted camera ray (:func:`hmlvs.model.rays_in_camera`), the ray meets
+position gives an undistorted camera ray (:func:`hmlvs.models.paper.rays_in_camera`), the ray
+meets
 the board plane (the board lies on a table in that plane), the point's albedo comes from the
 checkerboard pattern and the laser adds a Gaussian of the pixel's distance to the
 laser-plane / board intersection curve. Pixels are supersampled for anti-aliasing, then
@@ -21,24 +22,22 @@ corner squares are black for the paper's 6 x 8 inner corners). A white border of
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
-import json
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._arrays import as_params
-from ._io import atomic_write
-from .board import Checkerboard
-from .model import hand_from_camera, project, rays_in_camera
+from .._arrays import as_params
+from .._io import atomic_write
+from ..data.manifest import write_image_manifest
+from ..geometry.board import Checkerboard
+from ..models.paper import hand_from_camera, rays_in_camera
+from .scene import _TINY, Scene, Table, _soft_sign
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .simulate import Session
+    from .sessions import Session
 
-MANIFEST_FORMAT = "hmlvs-images"
-MANIFEST_VERSION = 1
-MANIFEST_NAME = "manifest.json"
 
 
 @dataclass(frozen=True)
@@ -153,7 +152,7 @@ def _sample_ray_jacobian(q: np.ndarray, image_size: tuple[int, int], s: int
                          ) -> tuple[np.ndarray, np.ndarray]:
     """d ray / du and d ray / dv (each (h*s, w*s, 3), camera frame, per pixel) at the
     supersample positions of :func:`_sample_rays`, by central differences of the model's
-    own rays (:func:`hmlvs.model.rays_in_camera`); cached for the last call."""
+    own rays (:func:`hmlvs.models.paper.rays_in_camera`); cached for the last call."""
     key = (tuple(q.tolist()), tuple(image_size), s)
     if key not in _RAY_JACOBIAN_CACHE:
         w, h = image_size
@@ -175,13 +174,6 @@ def _sample_ray_jacobian(q: np.ndarray, image_size: tuple[int, int], s: int
 def _board_from_camera(q: np.ndarray, pose: np.ndarray, board: Checkerboard) -> np.ndarray:
     base_from_camera = np.asarray(pose, float) @ hand_from_camera(q)
     return np.linalg.inv(board.base_from_board()) @ base_from_camera
-
-
-def _soft_sign(t_px: np.ndarray, width: float) -> np.ndarray:
-    """-1 -> 1 across an edge at signed pixel distance 0: a cubic (C1) ramp over +-width px,
-    a cheap stand-in for a Gaussian-smoothed step."""
-    t = np.clip(t_px / width, -1.0, 1.0)
-    return t * (1.5 - 0.5 * t * t)
 
 
 def _albedo(x: np.ndarray, y: np.ndarray, gx: np.ndarray, gy: np.ndarray,
@@ -343,19 +335,6 @@ def _finish_frames(ambient: np.ndarray, laser: np.ndarray, o: RenderOptions,
     return frames[0], frames[1]
 
 
-def _write_png(path: Path, image: np.ndarray) -> None:
-    import cv2
-    ok, buf = cv2.imencode(".png", image)
-    if not ok:
-        raise ValueError(f"could not encode {path.name} as PNG")
-    with atomic_write(path, "wb") as fh:
-        fh.write(buf.tobytes())
-
-
-def board_to_dict(board: Checkerboard) -> dict[str, Any]:
-    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(board).items()}
-
-
 def render_session(session: "Session | None" = None, out_dir: str | os.PathLike | None = None,
                    *, options: RenderOptions | None = None, seed: int = 0,
                    progress: Any = None, **session_kwargs: Any) -> RenderedSession:
@@ -382,7 +361,7 @@ def render_session(session: "Session | None" = None, out_dir: str | os.PathLike 
     >>> r = hmlvs.simulate.render_session(num_poses=4, seed=1, out_dir="session1")
     >>> ds, report = hmlvs.dataset_from_images("session1")
     """
-    from .simulate import session as make_session
+    from .sessions import session as make_session
     if session is None:
         session = make_session(seed=seed, **session_kwargs)
     elif session_kwargs:
@@ -410,41 +389,150 @@ def render_session(session: "Session | None" = None, out_dir: str | os.PathLike 
                                 joints=session.joints, ids=np.array(ids))
         manifest = write_image_manifest(
             out, ids, on, off, session.joints, session.image_size, session.robot.name,
-            board=board_to_dict(session.board), render_options=asdict(o))
+            board=session.board.to_dict(), render_options=asdict(o))
         files = {"manifest": manifest, "truth": out / "truth.npz"}
     return RenderedSession(session, o, ids, on, off, stripe_v, manifest, files)
 
 
-def write_image_manifest(out_dir: str | os.PathLike, ids: list[str], on: list[np.ndarray],
-                         off: list[np.ndarray], joints: np.ndarray,
-                         image_size: tuple[int, int], robot_name: str,
-                         **extra: Any) -> Path:
-    """Write ``<id>_on.png``, ``<id>_off.png`` per pose and ``manifest.json`` (format
-    ``hmlvs-images``: pose ids, image files, joint readings in rad) into ``out_dir``, every
-    file atomically, the manifest last. ``extra`` entries (JSON-able) go into the manifest's
-    top level. Returns the manifest's path."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    entries = []
-    for i, pid in enumerate(ids):
-        names = {"on": f"{pid}_on.png", "off": f"{pid}_off.png"}
-        _write_png(out / names["on"], on[i])
-        _write_png(out / names["off"], off[i])
-        entries.append({"id": pid, **names, "joints": np.asarray(joints[i], float).tolist()})
-    doc = {"format": MANIFEST_FORMAT, "version": MANIFEST_VERSION,
-           "image_size": list(image_size), "joint_unit": "rad", "robot": robot_name,
-           **extra, "poses": entries}
-    manifest = out / MANIFEST_NAME
-    with atomic_write(manifest, "w") as fh:
-        json.dump(doc, fh, indent=1)
-    return manifest
 
 
-def predicted_corners(params: Any, pose: np.ndarray, board: Checkerboard) -> np.ndarray:
-    """Pixels (rows*cols, 2) where the board's corners appear at a base_from_hand pose
-    (row-major corner order, NaN behind the camera); for identifying detected corners."""
-    corners = board.corners()
-    px, ok = project(params, corners, np.repeat(np.asarray(pose, float)[None], len(corners),
-                                                axis=0))
-    px[~ok] = np.nan
-    return px
+
+# ------------------------------------------------------------------------------------------
+# Rendering
+
+
+@dataclass(frozen=True)
+class RenderedScene:
+    """One rendered pose of a scene.
+
+    ``surface[v, u]`` is the index of the primitive seen at the pixel's centre (-1: none);
+    ``lit[v, u]`` whether the laser reaches the point seen there (not in laser shadow).
+    """
+
+    on: np.ndarray
+    off: np.ndarray
+    surface: np.ndarray
+    lit: np.ndarray
+
+
+def laser_origin(params: Any, pose: np.ndarray) -> np.ndarray:
+    """The laser projector's position in the base frame: the point ``(0, H, 0)`` of the
+    camera frame, on the laser plane's baseline."""
+    q = as_params(params)
+    bfc = np.asarray(pose, float) @ hand_from_camera(q)
+    return bfc[:3, :3] @ np.array([0.0, q[6], 0.0]) + bfc[:3, 3]
+
+
+def render_scene(params: Any, pose: np.ndarray, scene: Scene,
+                 image_size: tuple[int, int] = (640, 480),
+                 options: RenderOptions | None = None,
+                 rng: np.random.Generator | None = None,
+                 laser_shadows: bool = True) -> RenderedScene:
+    """Render the laser-on and laser-off images of a scene at one base_from_hand pose.
+
+    Parameters
+    ----------
+    params : the true sensor parameters (:class:`hmlvs.Parameters` or 14-vector)
+    pose : (4, 4) base_from_hand transform
+    scene : the :class:`Scene`
+    image_size : (width, height) px
+    options : :class:`hmlvs.simulate.RenderOptions` (supersample, stripe_sigma, blur_sigma,
+        laser, ambient, noise are used)
+    rng : random generator for the sensor noise (default: seeded with 0)
+    laser_shadows : test every stripe point's segment to the projector for occlusion
+    """
+    q = as_params(params)
+    o = RenderOptions() if options is None else options
+    rng = np.random.default_rng(0) if rng is None else rng
+    w, h = int(image_size[0]), int(image_size[1])
+    if w < 8 or h < 8:
+        raise ValueError(f"image_size must be at least 8 x 8 pixels, got {image_size}")
+    s = o.supersample
+    rays = _sample_rays(q, (w, h), s)
+    ray_du, ray_dv = _sample_ray_jacobian(q, (w, h), s)
+    bfc = np.asarray(pose, float) @ hand_from_camera(q)
+    rot, centre = bfc[:3, :3], bfc[:3, 3]
+    emitter = laser_origin(q, pose)
+    light = np.asarray(scene.light)
+    th = q[7]
+    lvec = np.array([0.0, np.cos(th), np.sin(th)])  # gradient of the laser-plane distance
+    width = 1.5 / s
+    cut = 5.0 * o.stripe_sigma  # px: the profile is below 4e-6 beyond
+    # only samples this close to the laser plane (mm) get the pixel distance; a surface seen
+    # at more than near_mm / cut mm per px (grazing) loses the profile's far tails
+    near_mm = 12.0
+    ambient = np.empty((h, w))
+    laser = np.empty((h, w))
+    surface = np.empty((h, w), np.int64)
+    lit_map = np.zeros((h, w), bool)
+    chunk = 8  # pixel rows per block: small blocks keep the temporaries in the cache
+    for r0 in range(0, h, chunk):
+        r1 = min(h, r0 + chunk)
+        shape = ((r1 - r0) * s, w * s)
+        ray = rays[r0 * s:r1 * s].reshape(-1, 3)
+        dirs = ray @ rot.T
+        t, nrm, which = scene.intersect(centre, dirs)
+        hit = np.isfinite(t)
+        tt = np.where(hit, t, 0.0)
+        pb = centre + dirs * tt[:, None]  # base frame
+
+        def footprint(sel: np.ndarray, ray: np.ndarray = ray, r0: int = r0, r1: int = r1,
+                      nrm: np.ndarray = nrm, tt: np.ndarray = tt
+                      ) -> tuple[np.ndarray, np.ndarray]:
+            """Derivative per pixel (u, v) of the hit point on its tangent plane (camera
+            frame) for the samples ``sel``."""
+            rr = ray[sel]
+            du = ray_du[r0 * s:r1 * s].reshape(-1, 3)[sel]
+            dv = ray_dv[r0 * s:r1 * s].reshape(-1, 3)[sel]
+            nc = nrm[sel] @ rot
+            ndr = np.einsum("ij,ij->i", nc, rr)
+            ndr = np.where(np.abs(ndr) > _TINY, ndr, _TINY)
+            ts = tt[sel, None]
+            return (ts * (du - rr * (np.einsum("ij,ij->i", nc, du) / ndr)[:, None]),
+                    ts * (dv - rr * (np.einsum("ij,ij->i", nc, dv) / ndr)[:, None]))
+
+        alb = np.zeros(t.shape[0])
+        for i, prim in enumerate(scene.primitives):
+            sel = np.nonzero(which == i)[0]
+            if not sel.size:
+                continue
+            if isinstance(prim, Table) and prim.texture is not None:
+                gu, gv = footprint(sel)
+                gu, gv = gu @ rot.T, gv @ rot.T
+                alb[sel] = prim._albedo(pb[sel], np.hypot(gu[:, 0], gv[:, 0]),
+                                        np.hypot(gu[:, 1], gv[:, 1]), width)
+            else:
+                alb[sel] = prim._albedo(pb[sel], None, None, width)
+        shade = scene.ambient_fraction + (1 - scene.ambient_fraction) * np.maximum(
+            nrm @ light, 0.0)
+        amb = np.where(hit, o.ambient * alb * shade, 0.0)
+        lz = np.zeros(t.shape[0])
+        lit = np.zeros(t.shape[0], bool)
+        dist = _laser_distance(q, ray * tt[:, None])
+        near = np.nonzero(hit & (np.abs(dist) < near_mm))[0]
+        if near.size:
+            gu, gv = footprint(near)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                dpx = dist[near] / np.hypot(gu @ lvec, gv @ lvec)
+            bi = near[np.abs(dpx) < cut]
+            dpx = dpx[np.abs(dpx) < cut]
+            to_laser = emitter - pb[bi]
+            cos_inc = np.einsum("ij,ij->i", nrm[bi], to_laser) / np.linalg.norm(to_laser,
+                                                                                 axis=1)
+            ok = cos_inc > 0
+            if laser_shadows and ok.any():
+                oi = bi[ok]
+                ts, _, _ = scene.intersect(pb[oi] + 1e-4 * nrm[oi], emitter - pb[oi], 1e-9)
+                ok[ok] = ~(ts < 1.0 - 1e-6)
+            lit[bi] = ok
+            lz[bi] = np.where(ok, o.laser * alb[bi] * cos_inc *
+                              np.exp(-0.5 * (dpx / o.stripe_sigma) ** 2), 0.0)
+        rows = r1 - r0
+        ambient[r0:r1] = amb.reshape(shape).reshape(rows, s, w, s).mean(axis=(1, 3))
+        laser[r0:r1] = lz.reshape(shape).reshape(rows, s, w, s).mean(axis=(1, 3))
+        surface[r0:r1] = which.reshape(shape)[s // 2::s, s // 2::s]
+        lit_map[r0:r1] = lit.reshape(shape)[s // 2::s, s // 2::s]
+    on, off = _finish_frames(ambient, laser, o, rng)
+    return RenderedScene(on, off, surface, lit_map)
+
+

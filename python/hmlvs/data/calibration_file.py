@@ -35,11 +35,11 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ._io import atomic_write
+from .._io import atomic_write
+from ..geometry.robot import Robot
+from ..models.paper import hand_from_camera
+from ..models.params import NAMES, UNITS, Parameters
 from .dataset import Dataset, check_format
-from .model import hand_from_camera
-from .params import NAMES, UNITS, Parameters
-from .robot import Robot
 
 FORMAT = "hmlvs-calibration"
 FORMAT_VERSION = 1
@@ -73,7 +73,7 @@ class Calibration:
     @classmethod
     def from_result(cls, result: Any, dataset: Dataset | None = None,
                     robot: Robot | None = None) -> "Calibration":
-        from . import __version__
+        from .. import __version__
 
         std_src = result.parameter_std() if hasattr(result, "parameter_std") else {}
         std = {n: (None if n in result.fixed or std_src.get(n) is None

@@ -1,0 +1,1 @@
+"""Parameter identification: the solvers facade (PSO, LM, random search) and its results."""

@@ -1,0 +1,1 @@
+"""Files and data sets: calibration data sets, image manifests, calibration files."""

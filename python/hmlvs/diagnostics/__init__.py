@@ -1,0 +1,1 @@
+"""What a calibration determines: identifiability, uncertainty and repeatability."""

@@ -1,0 +1,1 @@
+"""The physical set-up: the robot arm's kinematics (``robot``) and the checkerboard (``board``)."""

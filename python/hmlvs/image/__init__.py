@@ -1,0 +1,4 @@
+"""The image pipeline: laser on/off images -> stripe centres (``stripe``), board corners
+(``corners``), calibration points (``points``) and whole sessions (``session``).
+
+It never imports the renderer (``hmlvs.sim``): it works on any images."""

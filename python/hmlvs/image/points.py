@@ -1,0 +1,253 @@
+"""Calibration points: stripe pixels paired with reference points of one image."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from .corners import Corners
+from .stripe import StripeResult
+
+# ------------------------------------------------------------------------------------------
+# Calibration points
+
+Mode = Literal["corners", "homography"]
+
+
+@dataclass(frozen=True)
+class CalibrationPoints:
+    """Stripe pixels paired with reference points of one image.
+
+    Attributes
+    ----------
+    pixels : (m, 2) stripe pixels (u, v)
+    points : (m, 3) reference points in the robot base frame (mm)
+    board_xy : (m, 2) the same points in board coordinates (mm)
+    ids : (m,) point ids within the image: the corner id (``"r2c4"``) in "corners" mode,
+        ``"u312"`` / ``"v87"`` (the scan line) in "homography" mode
+    sigma : (m,) 1-sigma uncertainty (px) of the stripe pixel across the stripe, from noise
+    distance : (m,) signed distance (px) from the corner to the stripe centre line
+        ("corners" mode; 0 in "homography" mode)
+    mode : "corners" or "homography"
+    rejected : reasons why candidate corners near the stripe (or stripe pixels) were not
+        used, e.g. ``{"r1c3": "stripe not found on both sides of the corner"}``
+    """
+
+    pixels: np.ndarray
+    points: np.ndarray
+    board_xy: np.ndarray
+    ids: np.ndarray
+    sigma: np.ndarray
+    distance: np.ndarray
+    mode: str
+    rejected: dict[str, str] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.pixels.shape[0])
+
+
+def _to_base(board: Any, xy: np.ndarray) -> np.ndarray:
+    t = board.base_from_board()
+    return xy @ t[:3, :2].T + t[:3, 3]
+
+
+def _scan_coords(stripe: StripeResult, pts: np.ndarray) -> np.ndarray:
+    """(u, v) pixels -> (scan position, across) coordinates of the stripe's scan lines."""
+    return pts if stripe.direction == "columns" else pts[:, ::-1]
+
+
+def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None,
+                       mode: Mode = "corners", tolerance: float = 0.5, window: int = 4,
+                       step: int = 8) -> CalibrationPoints:
+    """Pair the stripe's pixels with reference points on the board.
+
+    Parameters
+    ----------
+    stripe : stripe centres of the image (:func:`extract_stripe`)
+    corners : numbered corners of the same image (:func:`find_corners`)
+    board : the board (default: ``corners.board``)
+    mode :
+        "corners" (the paper's procedure): a corner is on the stripe when the stripe's
+        centre line passes within ``tolerance`` px of it. The centre line near the corner is
+        a weighted straight-line fit to the found centres within ``window`` scan lines on
+        either side (both sides required, which also cancels the opposite biases the
+        stripe picks up on the two sides of a corner); the pixel is the foot of the
+        perpendicular from the corner onto that line and the reference point is the
+        corner. A corner within ``tolerance`` that is not exactly on the laser plane
+        gives an error of up to ``tolerance`` px, so keep it small.
+        "homography" (beyond the paper): every ``step``-th found stripe centre on the board
+        is mapped to board coordinates by the homography of the four corners of the square
+        it lies in (all four must have been found), then to the base frame; the reference
+        points are points of the board plane where the stripe is, many per image. Radial
+        distortion is taken out first: the division model of MODEL.md about the image
+        centre, its coefficient fitted so that all corners obey one homography.
+    """
+    if mode not in ("corners", "homography"):
+        raise ValueError(f"mode must be 'corners' or 'homography', got {mode!r}")
+    if not isinstance(stripe, StripeResult):
+        raise ValueError("stripe must be the StripeResult of extract_stripe")
+    if not isinstance(corners, Corners):
+        raise ValueError("corners must be the Corners of find_corners")
+    board = corners.board if board is None else board
+    if (board.rows, board.cols) != (corners.board.rows, corners.board.cols):
+        raise ValueError(f"the corners were numbered on a {corners.board.rows} x "
+                         f"{corners.board.cols} board, not this {board.rows} x {board.cols} one")
+    if not tolerance > 0:
+        raise ValueError(f"tolerance must be > 0 px, got {tolerance}")
+    if int(window) < 1 or int(step) < 1:
+        raise ValueError(f"window and step must be >= 1, got {window} and {step}")
+    found = stripe.found
+    pos = stripe.position[found].astype(float)
+    cen = stripe.centre[found]
+    sig = stripe.sigma[found]
+    rejected: dict[str, str] = {}
+    if mode == "corners":
+        rows = []
+        cs = _scan_coords(stripe, corners.pixels)
+        all_lines = stripe.position.astype(float)
+        for k, cid in enumerate(corners.ids):
+            s0, a0 = cs[k]
+            near = np.abs(pos - s0) <= window
+            # is the stripe near this corner at all? use any line within the window
+            lines = np.abs(all_lines - s0) <= window
+            if not lines.any():
+                continue
+            if near.sum() < 3 or not ((pos[near] < s0).any() and (pos[near] > s0).any()):
+                c_near = stripe.centre[lines & found] if (lines & found).any() else None
+                if c_near is not None and np.nanmin(np.abs(c_near - a0)) <= tolerance + 2:
+                    rejected[cid] = "stripe not found on both sides of the corner"
+                continue
+            x = pos[near] - s0
+            wts = 1.0 / np.maximum(sig[near], 1e-3) ** 2
+            A = np.stack([np.ones_like(x), x], axis=1)
+            cov = np.linalg.inv(A.T @ (A * wts[:, None]))
+            a, b = cov @ (A.T @ (wts * cen[near]))
+            dist = (a0 - a) / np.hypot(1.0, b)
+            if abs(dist) > tolerance:
+                if abs(dist) <= 3 * tolerance:
+                    rejected[cid] = f"stripe passes {dist:+.2f} px from the corner (tolerance " \
+                                    f"{tolerance:g})"
+                continue
+            foot_s = s0 + (a0 - a) * b / (1.0 + b * b)
+            foot_a = a + b * (foot_s - s0)
+            rows.append((k, cid, foot_s, foot_a, float(np.sqrt(cov[0, 0])), dist))
+        if not rows:
+            return _empty_points(mode, rejected)
+        k_idx = np.array([r[0] for r in rows])
+        sa = np.array([[r[2], r[3]] for r in rows])
+        px = sa if stripe.direction == "columns" else sa[:, ::-1]
+        xy = corners.board_xy[k_idx]
+        return CalibrationPoints(px, corners.points[k_idx], xy, np.array([r[1] for r in rows]),
+                                 np.array([r[4] for r in rows]), np.array([r[5] for r in rows]),
+                                 mode, rejected)
+
+    import cv2
+    if len(corners) < 4:
+        return _empty_points(mode, {"board": "fewer than 4 corners"})
+    sel = np.arange(0, pos.size, int(step))
+    spx = np.stack([pos[sel], cen[sel]], axis=1) if stripe.direction == "columns" else \
+        np.stack([cen[sel], pos[sel]], axis=1)
+    ssig = sig[sel]
+    sq = board.square
+    # Radial distortion bends the board's lines, which a homography cannot follow. Fit the
+    # model's division distortion p_u = c + (p - c) / (1 + k |p - c|^2) about the image
+    # centre so that the corners best fit one homography, and map undistorted pixels.
+    centre, k_px = _fit_division_distortion(corners)
+    cpx = _undistort(corners.pixels, centre, k_px)
+    spx_u = _undistort(spx, centre, k_px)
+    lookup = {int(i): cpx[j] for j, i in enumerate(corners.index)}
+    hmat, _ = cv2.findHomography(cpx, corners.board_xy, 0)
+    if hmat is None:
+        return _empty_points(mode, {"board": "no homography from the corners"})
+    rough = cv2.perspectiveTransform(spx_u.reshape(-1, 1, 2), hmat).reshape(-1, 2)
+    out_px, out_xy, out_ids, out_sig = [], [], [], []
+    cache: dict[tuple[int, int], np.ndarray | None] = {}
+
+    def cell_h(i: int, j: int) -> np.ndarray | None:
+        if (i, j) not in cache:
+            ids4 = [(i + di) * board.cols + (j + dj) for di, dj in ((0, 0), (1, 0), (1, 1), (0, 1))]
+            ok = 0 <= i < board.rows - 1 and 0 <= j < board.cols - 1 and \
+                all(k in lookup for k in ids4)
+            cache[(i, j)] = cv2.getPerspectiveTransform(
+                np.array([lookup[k] for k in ids4], np.float32),
+                (np.array([(0, 0), (1, 0), (1, 1), (0, 1)], np.float32) +
+                 np.array([i, j], np.float32)) * np.float32(sq)) if ok else None
+        return cache[(i, j)]
+
+    n_outside = n_missing = 0
+    for p, pu, rxy, sg in zip(spx, spx_u, rough, ssig):
+        i, j = int(np.floor(rxy[0] / sq)), int(np.floor(rxy[1] / sq))
+        placed = None
+        for _ in range(2):  # the rough (global) homography may pick a neighbouring square
+            hm = cell_h(i, j)
+            if hm is None:
+                break
+            xy = cv2.perspectiveTransform(pu.reshape(1, 1, 2), hm).reshape(2)
+            ii, jj = int(np.floor(xy[0] / sq)), int(np.floor(xy[1] / sq))
+            if (ii, jj) == (i, j):
+                placed = xy
+                break
+            i, j = ii, jj
+        if placed is None:
+            if 0 <= i < board.rows - 1 and 0 <= j < board.cols - 1:
+                n_missing += 1
+            else:
+                n_outside += 1
+            continue
+        out_px.append(p)
+        out_xy.append(placed)
+        out_ids.append(f"u{int(round(p[0]))}" if stripe.direction == "columns"
+                       else f"v{int(round(p[1]))}")
+        out_sig.append(sg)
+    if n_missing:
+        rejected["squares"] = f"{n_missing} stripe pixels in squares without all four corners"
+    if n_outside:
+        rejected["outside"] = f"{n_outside} stripe pixels outside the inner corners' area"
+    if not out_px:
+        return _empty_points(mode, rejected)
+    xy = np.array(out_xy)
+    return CalibrationPoints(np.array(out_px), _to_base(board, xy), xy, np.array(out_ids),
+                             np.array(out_sig), np.zeros(len(out_px)), mode, rejected)
+
+
+def _undistort(px: np.ndarray, centre: np.ndarray, k: float) -> np.ndarray:
+    d = px - centre
+    return centre + d / (1.0 + k * np.sum(d * d, axis=1, keepdims=True))
+
+
+def _fit_division_distortion(corners: Corners) -> tuple[np.ndarray, float]:
+    """(centre, k) of the division model (MODEL.md step 2, in pixels: k_px = k Su^2) that
+    makes the corners fit one homography best; k = 0 with fewer than 9 corners."""
+    import cv2
+    from scipy.optimize import minimize_scalar
+    if corners.image_size is not None:
+        w, h = corners.image_size
+        centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+    else:
+        centre = corners.pixels.mean(axis=0)
+    if len(corners) < 9:
+        return centre, 0.0
+    r2max = float(np.max(np.sum((corners.pixels - centre) ** 2, axis=1)))
+    xy = corners.board_xy
+
+    def cost(kn: float) -> float:
+        u = _undistort(corners.pixels, centre, kn / r2max)
+        hm, _ = cv2.findHomography(xy, u, 0)
+        if hm is None:
+            return np.inf
+        return float(np.sum((cv2.perspectiveTransform(xy.reshape(-1, 1, 2), hm).reshape(-1, 2)
+                             - u) ** 2))
+
+    # |k r^2| up to 10 % at the farthest corner
+    res = minimize_scalar(cost, bounds=(-0.1, 0.1), method="bounded",
+                          options={"xatol": 1e-7})
+    return centre, float(res.x) / r2max
+
+
+def _empty_points(mode: str, rejected: dict[str, str]) -> CalibrationPoints:
+    return CalibrationPoints(np.zeros((0, 2)), np.zeros((0, 3)), np.zeros((0, 2)),
+                             np.array([], dtype=str), np.zeros(0), np.zeros(0), mode, rejected)
+
+

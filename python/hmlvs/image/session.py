@@ -1,0 +1,388 @@
+"""A session of laser on/off images -> stripes and a calibration data set."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .corners import find_corners
+from .points import Mode, calibration_points
+from .stripe import StripeResult, _as_gray, _normalized_threshold, difference_image, extract_stripe
+
+# ------------------------------------------------------------------------------------------
+# A session of images -> a calibration data set
+
+
+@dataclass(frozen=True)
+class ImageReport:
+    """What :func:`dataset_from_images` found in one image pair, and what it rejected.
+
+    Attributes
+    ----------
+    id : the pose id (``"p003"``)
+    index : position of the pair in the session (the data set's ``pose_index``)
+    on, off : the image files (or ``"<array>"``)
+    ok : True when the pair gave at least one calibration point
+    reason : why the whole pair was rejected ("" when ok)
+    stripe : scan lines per stripe status (``{"FOUND": 612, "MULTIPLE": 3, ...}``)
+    corners : corners found and numbered
+    points : calibration points contributed
+    rejected : candidate points not used, with the reason for each
+    """
+
+    id: str
+    index: int
+    on: str
+    off: str
+    ok: bool
+    reason: str = ""
+    stripe: dict[str, int] = field(default_factory=dict)
+    corners: int = 0
+    points: int = 0
+    rejected: dict[str, str] = field(default_factory=dict)
+
+    def __str__(self) -> str:
+        if not self.ok:
+            return f"{self.id}: rejected: {self.reason}"
+        extra = f"; not used: {len(self.rejected)}" if self.rejected else ""
+        return (f"{self.id}: {self.points} points, {self.corners} corners, stripe in "
+                f"{self.stripe.get('FOUND', 0)} scan lines{extra}")
+
+
+class _Reject(Exception):
+    """A whole image pair is unusable (the message says why)."""
+
+
+def _load(item: Any, folder: Any, what: str) -> tuple[np.ndarray, str]:
+    from pathlib import Path
+
+    import cv2
+    if isinstance(item, np.ndarray):
+        return item, "<array>"
+    if not isinstance(item, (str, Path)):
+        raise _Reject(f"the {what} image must be a file name or an array, got "
+                      f"{type(item).__name__}")
+    path = Path(item)
+    if folder is not None and not path.is_absolute():
+        path = Path(folder) / path
+    if not path.is_file():
+        raise _Reject(f"the {what} image file {path} does not exist")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise _Reject(f"the {what} image file {path.name} cannot be read as an image")
+    return img, path.name
+
+
+def _read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Any]:
+    from ..data.manifest import read_manifest
+
+    return read_manifest(source)
+
+
+def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
+                        params: Any = None, mode: Mode = "corners", normalize: bool = True,
+                        channel: int | None = None, tolerance: float = 0.5, step: int = 8,
+                        min_stripe: int = 20, joint_unit: str | None = None,
+                        **stripe_options: Any) -> tuple[Any, list[ImageReport]]:
+    """Laser on/off image pairs + joint readings -> a calibration :class:`~hmlvs.Dataset`.
+
+    For every pair: difference image (albedo-normalised unless ``normalize=False``), stripe
+    centres (:func:`extract_stripe` with ``stripe_options``), corners of the laser-off image
+    numbered with the corners predicted from ``params`` and the pose
+    (:func:`find_corners`), then :func:`calibration_points` in ``mode``. A pair that fails
+    is reported and skipped; the rest of the session goes through.
+
+    Parameters
+    ----------
+    source : a folder (or its ``manifest.json``) written by
+        :func:`hmlvs.simulate.render_session` or in that format, or a list of records
+        ``{"id": "p000", "on": file or array, "off": file or array, "joints": [...]}``
+    robot : the arm (default: SCORBOT ER-VII); poses are ``robot.poses(joints)``
+    board : the board (default: the manifest's, else the paper's)
+    params : approximate sensor parameters, to predict where the corners are (default: the
+        nominal Table 2 values). They need to place the corners within about a third of a
+        square.
+    mode : "corners" or "homography", see :func:`calibration_points`
+    tolerance, step : passed to :func:`calibration_points`
+    min_stripe : fewest scan lines with a stripe for a usable pair
+    joint_unit : "rad" or "deg" for records (a manifest says its unit)
+
+    Returns
+    -------
+    (dataset, report) : the data set (ids ``"<pose id>:<point id>"``, ``pose_index`` = pair
+        index, joints in rad) and one :class:`ImageReport` per pair.
+    """
+    from ..data.dataset import Dataset
+    from ..geometry.board import Checkerboard
+    from ..geometry.robot import Robot
+    from ..models.params import Parameters
+    from .corners import predicted_corners
+
+    folder = None
+    unit = joint_unit
+    size = None
+    if isinstance(source, (list, tuple)):
+        records = list(source)
+        if unit is None:
+            unit = "rad"
+    else:
+        records, doc, folder = _read_manifest(source)
+        unit = doc.get("joint_unit", "rad") if unit is None else unit
+        if board is None and isinstance(doc.get("board"), dict):
+            b = doc["board"]
+            board = Checkerboard(**{k: tuple(v) if isinstance(v, list) else v
+                                    for k, v in b.items()})
+        if robot is None and doc.get("robot") not in (None, Robot.scorbot_er7().name):
+            raise ValueError(f"the images were taken with robot {doc.get('robot')!r}; pass "
+                             "robot=hmlvs.Robot(...) with its DH table")
+        if isinstance(doc.get("image_size"), list) and len(doc["image_size"]) == 2:
+            size = (int(doc["image_size"][0]), int(doc["image_size"][1]))
+    if unit not in ("rad", "deg"):
+        raise ValueError(f"joint_unit must be 'rad' or 'deg', got {unit!r}")
+    if not records:
+        raise ValueError("the session has no image pairs")
+    robot = Robot.scorbot_er7() if robot is None else robot
+    board = Checkerboard() if board is None else board
+    approx = Parameters.nominal() if params is None else params
+    # Check the stripe options once, up front: a typo is the caller's error, not the image's.
+    extract_stripe(np.zeros((4, 4), np.uint8), **stripe_options)
+
+    reports: list[ImageReport] = []
+    px_all, pt_all, ids_all, joints_all, pidx_all, poses_all = [], [], [], [], [], []
+    for index, rec in enumerate(records):
+        pid = _record_id(rec, index)
+        on_name, off_name = _record_names(rec)
+        info: dict[str, Any] = {}
+        try:
+            pair = _read_pair(rec, index, folder, unit, robot, size, channel, normalize,
+                              stripe_options, min_stripe)
+            on_name, off_name, size, joints = pair.on_name, pair.off_name, pair.size, pair.joints
+            stripe, off_g, pose = pair.stripe, pair.off, pair.pose
+            info["stripe"] = stripe.counts()
+            try:
+                corners = find_corners(off_g, board, expected=predicted_corners(approx, pose,
+                                                                                board))
+            except ValueError as e:
+                raise _Reject(f"checkerboard: {e}") from None
+            info["corners"] = len(corners)
+            cp = calibration_points(stripe, corners, board, mode=mode, tolerance=tolerance,
+                                    step=step)
+            info["rejected"] = dict(cp.rejected)
+            if len(cp) == 0:
+                raise _Reject("no calibration points: " + (
+                    "; ".join(f"{k}: {v}" for k, v in cp.rejected.items()) or
+                    ("no corner lies on the stripe" if mode == "corners" else
+                     "the stripe does not cross a square with four found corners")))
+        except _Reject as e:
+            reports.append(ImageReport(pid, index, str(on_name), str(off_name), False, str(e),
+                                       info.get("stripe", {}), info.get("corners", 0), 0,
+                                       info.get("rejected", {})))
+            continue
+        reports.append(ImageReport(pid, index, str(on_name), str(off_name), True, "",
+                                   info["stripe"], info["corners"], len(cp), info["rejected"]))
+        px_all.append(cp.pixels)
+        pt_all.append(cp.points)
+        ids_all += [f"{pid}:{k}" for k in cp.ids]
+        joints_all.append(None if joints is None else np.repeat(joints[None], len(cp), axis=0))
+        poses_all.append(np.repeat(pose[None], len(cp), axis=0))
+        pidx_all.append(np.full(len(cp), index, dtype=np.int64))
+    if not px_all:
+        raise ValueError("no image pair gave a calibration point:\n" +
+                         "\n".join(str(r) for r in reports))
+    joints_arr = None if any(j is None for j in joints_all) else np.vstack(joints_all)
+    ds = Dataset(np.vstack(px_all), np.concatenate(poses_all), np.vstack(pt_all),
+                 ids=np.array(ids_all), joints=joints_arr, pose_index=np.concatenate(pidx_all),
+                 meta={"source": "images", "mode": mode, "normalize": normalize,
+                       "pairs": len(records), "pairs_used": sum(r.ok for r in reports),
+                       "image_size": list(size) if size else None})
+    return ds, reports
+
+
+def _record_id(rec: Any, index: int) -> str:
+    return str(rec.get("id", f"p{index:03d}")) if isinstance(rec, dict) else f"p{index:03d}"
+
+
+def _record_names(rec: Any) -> tuple[str, str]:
+    if not isinstance(rec, dict):
+        return "?", "?"
+    return tuple(str(rec.get(k, "?")) if not isinstance(rec.get(k), np.ndarray) else "<array>"
+                 for k in ("on", "off"))  # type: ignore[return-value]
+
+
+def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | None = None,
+                        channel: int | None = None, normalize: bool = True,
+                        min_stripe: int = 20, **stripe_options: Any
+                        ) -> tuple[list[str], list[Any], np.ndarray, list[ImageReport]]:
+    """Laser on/off pairs + joint readings (a manifest or a list of records) -> stripes.
+
+    The measurement counterpart of :func:`dataset_from_images` (no checkerboard needed): for
+    each pair the same checks, difference image and stripe extraction. A pair that fails is
+    reported and skipped. Entries may give a stripe list (``stripe``: CSV of u, v[, intensity])
+    instead of an image pair, and a ``pose`` instead of joint readings. Returns (ids, stripes,
+    base_from_hand poses (n, 4, 4), reports).
+    """
+    from ..geometry.robot import Robot
+
+    folder = None
+    unit = joint_unit
+    if isinstance(source, (list, tuple)):
+        records = list(source)
+        unit = "rad" if unit is None else unit
+    else:
+        records, doc, folder = _read_manifest(source)
+        unit = doc.get("joint_unit", "rad") if unit is None else unit
+        if robot is None and doc.get("robot") not in (None, Robot.scorbot_er7().name):
+            raise ValueError(f"the images were taken with robot {doc.get('robot')!r}; pass "
+                             "robot=hmlvs.Robot(...) with its DH table")
+    if unit not in ("rad", "deg"):
+        raise ValueError(f"joint_unit must be 'rad' or 'deg', got {unit!r}")
+    if not records:
+        raise ValueError("the scan has no image pairs")
+    robot = Robot.scorbot_er7() if robot is None else robot
+    extract_stripe(np.zeros((4, 4), np.uint8), **stripe_options)  # option typos fail here
+    from ..data.manifest import read_stripe_list
+
+    ids, stripes, poses, reports = [], [], [], []
+    size = None
+    for index, rec in enumerate(records):
+        pid = _record_id(rec, index)
+        on_name, off_name = _record_names(rec)
+        try:
+            if isinstance(rec, dict) and "stripe" in rec:
+                _, pose = _record_pose(rec, robot, unit)
+                path = Path(rec["stripe"])
+                path = path if folder is None or path.is_absolute() else Path(folder) / path
+                if not path.is_file():
+                    raise _Reject(f"the stripe list {path} does not exist")
+                try:
+                    px, inten = read_stripe_list(path)
+                except ValueError as e:
+                    raise _Reject(str(e)) from None
+                item: Any = StripeList(px, inten)
+                on_name = off_name = path.name
+                found = len(px)
+            else:
+                pair = _read_pair(rec, index, folder, unit, robot, size, channel, normalize,
+                                  stripe_options, min_stripe)
+                size, pose, item = pair.size, pair.pose, pair.stripe
+                on_name, off_name = pair.on_name, pair.off_name
+                found = int(pair.stripe.found.sum())
+        except _Reject as e:
+            reports.append(ImageReport(pid, index, on_name, off_name, False, str(e), {}, 0, 0,
+                                       {}))
+            continue
+        ids.append(pid)
+        stripes.append(item)
+        poses.append(pose)
+        reports.append(ImageReport(pid, index, on_name, off_name, True, "",
+                                   getattr(item, "counts", lambda: {})(), 0, found, {}))
+    return ids, stripes, np.array(poses).reshape(-1, 4, 4), reports
+
+
+@dataclass
+class _Pair:
+    """One laser on/off pair after the checks shared by calibration and measurement."""
+
+    on_name: str
+    off_name: str
+    joints: np.ndarray | None  # rad; None when the entry gives a pose
+    pose: np.ndarray  # base_from_hand (4, 4)
+    on: np.ndarray
+    off: np.ndarray
+    stripe: StripeResult
+    size: tuple[int, int]
+
+
+def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
+               size: tuple[int, int] | None, channel: int | None, normalize: bool,
+               stripe_options: dict[str, Any], min_stripe: int) -> _Pair:
+    """Load, check and extract the stripe of one manifest record; raises _Reject."""
+    if not isinstance(rec, dict):
+        raise _Reject(f"record {index} is not a mapping with on, off and joints")
+    for key in ("on", "off"):
+        if key not in rec:
+            raise _Reject(f"the record lacks '{key}'")
+    joints, pose = _record_pose(rec, robot, unit)
+    on, on_name = _load(rec["on"], folder, "laser-on")
+    off, off_name = _load(rec["off"], folder, "laser-off")
+    try:
+        on_g = _as_gray(on, "the laser-on image", channel)
+        off_g = _as_gray(off, "the laser-off image", channel)
+    except ValueError as e:
+        raise _Reject(str(e)) from None
+    if on_g.shape != off_g.shape or on_g.dtype != off_g.dtype:
+        raise _Reject(f"the laser-on image ({on_g.shape[1]} x {on_g.shape[0]}, "
+                      f"{on_g.dtype}) and the laser-off image ({off_g.shape[1]} x "
+                      f"{off_g.shape[0]}, {off_g.dtype}) differ in size or depth")
+    if size is None:
+        size = (on_g.shape[1], on_g.shape[0])
+    if (on_g.shape[1], on_g.shape[0]) != size:
+        raise _Reject(f"the images are {on_g.shape[1]} x {on_g.shape[0]} pixels but the "
+                      f"session's are {size[0]} x {size[1]}")
+    top = float(np.iinfo(off_g.dtype).max)
+    if int(off_g.max()) == 0:
+        raise _Reject("the laser-off image is all black")
+    if int(on_g.max()) == 0:
+        raise _Reject("the laser-on image is all black")
+    diff_big = np.abs(on_g.astype(np.int32) - off_g.astype(np.int32)) > 0.1 * top
+    if diff_big.mean() > 0.05:
+        raise _Reject(f"the laser-on and laser-off images differ in "
+                      f"{100 * diff_big.mean():.0f}% of the pixels, far more than a "
+                      "stripe: they are not a pair taken at the same pose")
+    stripe = stripe_from_pair(on_g, off_g, normalize=normalize, **stripe_options)
+    if stripe.found.sum() < min_stripe:
+        raise _Reject(f"no laser stripe found: only {int(stripe.found.sum())} scan lines "
+                      f"have one ({_counts_text(stripe.counts())})")
+    return _Pair(str(on_name), str(off_name), joints, pose, on_g, off_g, stripe, size)
+
+
+def stripe_from_pair(on: np.ndarray, off: np.ndarray, *, normalize: bool = True,
+                     channel: int | None = None, **stripe_options: Any) -> StripeResult:
+    """The stripe of one laser on/off pair, as the session pipeline extracts it.
+
+    Difference image (paper Eq. 23; divided by the laser-off frame with ``normalize``, which
+    removes the pull of the board's edges on the stripe) and :func:`extract_stripe` with
+    ``stripe_options``; for a normalised image without a given threshold, a noise-aware one.
+    """
+    on_g = _as_gray(on, "the laser-on image", channel)
+    off_g = _as_gray(off, "the laser-off image", channel)
+    d = difference_image(on_g, off_g, normalize=normalize)
+    opts = dict(stripe_options)
+    if normalize and opts.get("threshold") is None:
+        opts["threshold"] = _normalized_threshold(on_g, off_g, d)
+    return extract_stripe(d, **opts)
+
+
+def _record_pose(rec: dict[str, Any], robot: Any, unit: str) -> tuple[np.ndarray | None,
+                                                                     np.ndarray]:
+    """(joints in rad or None, base_from_hand pose) of a record; raises _Reject."""
+    if "pose" in rec:
+        pose = np.asarray(rec["pose"], dtype=float)
+        if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
+            raise _Reject("'pose' must be a finite 4x4 base_from_hand matrix")
+        return None, pose
+    if "joints" not in rec:
+        raise _Reject("the record lacks 'joints' (or 'pose')")
+    joints = np.asarray(rec["joints"], dtype=float).reshape(-1)
+    if joints.shape != (robot.dof,) or not np.all(np.isfinite(joints)):
+        raise _Reject(f"joint readings must be {robot.dof} finite numbers, got "
+                      f"{np.asarray(rec['joints']).tolist()}")
+    if unit == "deg":
+        joints = np.radians(joints)
+    return joints, robot.poses(joints[None])[0]
+
+
+@dataclass(frozen=True)
+class StripeList:
+    """Stripe pixels given as a list (a manifest's ``stripe`` CSV) instead of an image."""
+
+    pixels: np.ndarray
+    intensity: np.ndarray
+
+
+def _counts_text(counts: dict[str, int]) -> str:
+    return ", ".join(f"{k.lower()} {v}" for k, v in counts.items() if v)
+

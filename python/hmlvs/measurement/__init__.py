@@ -1,0 +1,1 @@
+"""Measuring with a calibrated sensor: stripes + poses -> point clouds."""

@@ -1,0 +1,3 @@
+"""The paper's studies: sensor design analysis (``design``, Figs. 4-6), the simulation study
+(``study``, Table 1 and Fig. 8) and the measurement scenarios (``scenarios``, Fig. 13 and
+Table 3)."""
