@@ -11,10 +11,10 @@
 #include <thread>
 #include <vector>
 
-#include "hmlvs/fitness.h"
-#include "hmlvs/lm.h"
-#include "hmlvs/model.h"
-#include "hmlvs/search.h"
+#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/solvers/lm.h"
+#include "hmlvs/model/model.h"
+#include "hmlvs/solvers/search.h"
 
 namespace {
 

@@ -10,7 +10,7 @@
 #include <string>
 
 #include "bindings.h"
-#include "hmlvs/image.h"
+#include "hmlvs/image/image.h"
 
 namespace py = pybind11;
 

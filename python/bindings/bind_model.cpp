@@ -3,8 +3,8 @@
 #include <pybind11/stl.h>
 
 #include "bindings.h"
-#include "hmlvs/cost.h"
-#include "hmlvs/model.h"
+#include "hmlvs/model/cost.h"
+#include "hmlvs/model/model.h"
 
 namespace py = pybind11;
 

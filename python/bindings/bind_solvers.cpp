@@ -12,10 +12,10 @@
 #include <vector>
 
 #include "bindings.h"
-#include "hmlvs/fitness.h"
-#include "hmlvs/lm.h"
-#include "hmlvs/parallel.h"
-#include "hmlvs/search.h"
+#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/solvers/lm.h"
+#include "hmlvs/solvers/parallel.h"
+#include "hmlvs/solvers/search.h"
 
 namespace py = pybind11;
 

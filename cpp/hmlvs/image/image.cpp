@@ -1,4 +1,4 @@
-#include "hmlvs/image.h"
+#include "hmlvs/image/image.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "hmlvs/kinematics.h"
+#include "hmlvs/model/kinematics.h"
 
 #include <cmath>
 #include <sstream>

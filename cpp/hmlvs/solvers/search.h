@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "hmlvs/fitness.h"
+#include "hmlvs/solvers/fitness.h"
 
 namespace hmlvs {
 

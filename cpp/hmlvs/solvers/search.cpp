@@ -1,4 +1,4 @@
-#include "hmlvs/search.h"
+#include "hmlvs/solvers/search.h"
 
 #include <algorithm>
 #include <atomic>
@@ -8,8 +8,8 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "hmlvs/parallel.h"
-#include "hmlvs/random.h"
+#include "hmlvs/solvers/parallel.h"
+#include "hmlvs/solvers/random.h"
 
 namespace hmlvs {
 

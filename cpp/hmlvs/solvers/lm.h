@@ -10,7 +10,7 @@
 #include <array>
 #include <string>
 
-#include "hmlvs/fitness.h"
+#include "hmlvs/solvers/fitness.h"
 
 namespace hmlvs {
 

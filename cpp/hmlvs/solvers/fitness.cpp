@@ -1,4 +1,4 @@
-#include "hmlvs/fitness.h"
+#include "hmlvs/solvers/fitness.h"
 
 #include <cmath>
 #include <limits>

@@ -3,7 +3,7 @@
 
 #include <Eigen/Core>
 
-#include "hmlvs/model.h"
+#include "hmlvs/model/model.h"
 
 namespace hmlvs {
 

@@ -1,4 +1,4 @@
-#include "hmlvs/model.h"
+#include "hmlvs/model/model.h"
 
 #include <Eigen/Geometry>
 #include <cmath>

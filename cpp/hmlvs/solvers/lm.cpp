@@ -1,4 +1,4 @@
-#include "hmlvs/lm.h"
+#include "hmlvs/solvers/lm.h"
 
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>

@@ -4,7 +4,7 @@
 #include <Eigen/Core>
 #include <vector>
 
-#include "hmlvs/model.h"
+#include "hmlvs/model/model.h"
 
 namespace hmlvs {
 

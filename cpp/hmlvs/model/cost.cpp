@@ -1,4 +1,4 @@
-#include "hmlvs/cost.h"
+#include "hmlvs/model/cost.h"
 
 #include <ceres/autodiff_cost_function.h>
 
