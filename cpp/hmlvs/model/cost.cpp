@@ -7,9 +7,10 @@
 
 namespace hmlvs {
 
-void ResidualJacobian(const Vector14d& q, PixelsRef pixels, PosesRef poses, Points3Ref references,
-                      Eigen::VectorXd* residuals,
-                      Eigen::Matrix<double, Eigen::Dynamic, kNumParams, Eigen::RowMajor>* jacobian) {
+void ResidualJacobian(
+    const Vector14d& q, PixelsRef pixels, PosesRef poses, Points3Ref references,
+    Eigen::VectorXd* residuals,
+    Eigen::Matrix<double, Eigen::Dynamic, kNumParams, Eigen::RowMajor>* jacobian) {
   // Shape, finiteness and the laser-plane check, with the model's error messages.
   const RowMatX3 e = Residuals(q, pixels, poses, references);
   const Eigen::Index m = pixels.rows();

@@ -106,8 +106,9 @@ void ValidatePoses(PosesRef poses) {
     const double err = (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
     if (err > 1e-6 || r.determinant() < 0.0) {
       std::ostringstream msg;
-      msg << "pose " << i << " has a rotation part that is not a proper rotation (|R^T R - I| = "
-          << err << ", det = " << r.determinant() << "); poses must be base_from_hand transforms";
+      msg << "pose " << i
+          << " has a rotation part that is not a proper rotation (|R^T R - I| = " << err
+          << ", det = " << r.determinant() << "); poses must be base_from_hand transforms";
       throw std::invalid_argument(msg.str());
     }
   }
@@ -148,8 +149,7 @@ PointsResult BasePointsFromPixels(const Vector14d& q, PixelsRef pixels, PosesRef
     if (!out.valid[i]) continue;
     const Eigen::Vector4d cam(out.points(i, 0), out.points(i, 1), out.points(i, 2), 1.0);
     const Eigen::Vector4d hand = hand_from_camera * cam;
-    const Eigen::Vector3d base =
-        PoseRotation(poses, i) * hand.head<3>() + PosePosition(poses, i);
+    const Eigen::Vector3d base = PoseRotation(poses, i) * hand.head<3>() + PosePosition(poses, i);
     out.points.row(i) = base.transpose();
   }
   return out;
@@ -240,8 +240,8 @@ RowMatX3 CameraFromBase(const Vector14d& q, Points3Ref base_points, PosesRef pos
   const Eigen::Vector3d tc = hfc.topRightCorner<3, 1>();
   RowMatX3 cam(base_points.rows(), 3);
   for (Eigen::Index i = 0; i < base_points.rows(); ++i) {
-    const Eigen::Vector3d hand =
-        PoseRotation(poses, i).transpose() * (base_points.row(i).transpose() - PosePosition(poses, i));
+    const Eigen::Vector3d hand = PoseRotation(poses, i).transpose() *
+                                 (base_points.row(i).transpose() - PosePosition(poses, i));
     cam.row(i) = (rc.transpose() * (hand - tc)).transpose();
   }
   return cam;

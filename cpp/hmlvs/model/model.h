@@ -6,13 +6,12 @@
 // evaluation (double) and Ceres automatic differentiation (ceres::Jet).
 #pragma once
 
-#include <cstdint>
-#include <vector>
-
 #include <Eigen/Core>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <string>
+#include <vector>
 
 namespace hmlvs {
 
@@ -90,8 +89,8 @@ T PixelToCamera(const T* q, const T& tan_theta, const T& u, const T& v, T* camer
 ///   bP = R_N (R_C cP + t) + P_N.
 /// Returns false, leaving `base_point` untouched, when the ray misses the laser plane.
 template <typename T>
-bool PixelToBase(const T* q, const Eigen::Matrix<T, 3, 3>& hand_from_camera_rot,
-                 const T& tan_theta, double u, double v, const Eigen::Matrix3d& base_from_hand_rot,
+bool PixelToBase(const T* q, const Eigen::Matrix<T, 3, 3>& hand_from_camera_rot, const T& tan_theta,
+                 double u, double v, const Eigen::Matrix3d& base_from_hand_rot,
                  const Eigen::Vector3d& base_from_hand_pos, T* base_point) {
   T cp[3];
   if (!(PixelToCamera(q, tan_theta, T(u), T(v), cp) > T(0.0))) return false;
@@ -110,7 +109,8 @@ bool PixelToBase(const T* q, const Eigen::Matrix<T, 3, 3>& hand_from_camera_rot,
 /// Returns false when the pixel's ray misses the laser plane.
 template <typename T>
 bool PointResidual(const T* q, const Eigen::Matrix<T, 3, 3>& hand_from_camera_rot,
-                   const T& tan_theta, double u, double v, const Eigen::Matrix3d& base_from_hand_rot,
+                   const T& tan_theta, double u, double v,
+                   const Eigen::Matrix3d& base_from_hand_rot,
                    const Eigen::Vector3d& base_from_hand_pos, const Eigen::Vector3d& reference,
                    T* residual) {
   T bp[3];

@@ -5,8 +5,8 @@
 
 #include <Eigen/Geometry>
 #include <chrono>
-#include <memory>
 #include <cmath>
+#include <memory>
 #include <sstream>
 #include <stdexcept>
 #include <vector>
@@ -24,8 +24,8 @@ double WrapNear(double angle, double reference) {
 // E = h - (R cP + t) in the hand frame, for intrinsics q[0..7], a rotation (quaternion or
 // matrix) and a translation. False when the pixel's ray misses the laser plane.
 template <typename T, typename Rotation>
-bool HandResidual(const T* q, const Rotation& rot, const T& tx, const T& ty, const T& tz,
-                  double u, double v, const Eigen::Vector3d& h, T* residual) {
+bool HandResidual(const T* q, const Rotation& rot, const T& tx, const T& ty, const T& tz, double u,
+                  double v, const Eigen::Vector3d& h, T* residual) {
   using std::tan;
   T cp[3];
   if (!(PixelToCamera(q, tan(q[kTheta]), T(u), T(v), cp) > T(0.0))) return false;
@@ -43,8 +43,8 @@ struct ModernResidual {
 
   template <typename T>
   bool operator()(const T* f, const T* su, const T* sv, const T* cu, const T* cv, const T* k,
-                  const T* hh, const T* theta, const T* quat, const T* tx, const T* ty,
-                  const T* tz, T* residual) const {
+                  const T* hh, const T* theta, const T* quat, const T* tx, const T* ty, const T* tz,
+                  T* residual) const {
     T q[kNumParams];  // only the intrinsics f..theta are read
     q[kF] = *f;
     q[kSu] = *su;
@@ -68,8 +68,8 @@ struct EulerResidual {
   bool operator()(const T* const* p, T* residual) const {
     T q[kNumParams];
     for (int i = 0; i < kNumParams; ++i) q[i] = p[i][0];
-    return HandResidual(q, RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), q[kTx], q[kTy], q[kTz],
-                        u, v, h, residual);
+    return HandResidual(q, RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), q[kTx], q[kTy], q[kTz], u,
+                        v, h, residual);
   }
 };
 
@@ -80,8 +80,8 @@ struct PaperResidual {
 
   bool operator()(const double* q, double* residual) const {
     double e[3];
-    if (!HandResidual(q, RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), q[kTx], q[kTy], q[kTz], u,
-                      v, h, e)) {
+    if (!HandResidual(q, RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), q[kTx], q[kTy], q[kTz], u, v,
+                      h, e)) {
       return false;
     }
     residual[0] = std::sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
@@ -151,8 +151,8 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
   if (free == 0) throw std::invalid_argument("all parameters are fixed: nothing to estimate");
   if (residuals < free) {
     std::ostringstream msg;
-    msg << "too few points: " << data.size() << " points give " << residuals
-        << " residuals for " << free << " free parameters";
+    msg << "too few points: " << data.size() << " points give " << residuals << " residuals for "
+        << free << " free parameters";
     throw std::invalid_argument(msg.str());
   }
   if (!paper && o.use_bounds) {
@@ -177,8 +177,7 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
   popt.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(popt);
   std::array<double, 4> quat{};  // Eigen order x, y, z, w
-  const bool use_quaternion =
-      !paper && !o.fixed[kOmega] && !o.fixed[kPhi] && !o.fixed[kVarphi];
+  const bool use_quaternion = !paper && !o.fixed[kOmega] && !o.fixed[kPhi] && !o.fixed[kVarphi];
 
   if (paper) {
     for (Eigen::Index i = 0; i < data.size(); ++i) {
@@ -196,12 +195,11 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
     const Eigen::Quaterniond rq(RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]));
     quat = {rq.x(), rq.y(), rq.z(), rq.w()};
     for (Eigen::Index i = 0; i < data.size(); ++i) {
-      auto* cost = new ceres::AutoDiffCostFunction<ModernResidual, 3, 1, 1, 1, 1, 1, 1, 1, 1, 4, 1,
-                                                   1, 1>(
-          new ModernResidual{data.u(i), data.v(i), data.ReferenceInHand(i)});
-      problem.AddResidualBlock(cost, loss.get(), &q[kF], &q[kSu], &q[kSv], &q[kCu],
-                               &q[kCv], &q[kK], &q[kH], &q[kTheta], quat.data(), &q[kTx],
-                               &q[kTy], &q[kTz]);
+      auto* cost =
+          new ceres::AutoDiffCostFunction<ModernResidual, 3, 1, 1, 1, 1, 1, 1, 1, 1, 4, 1, 1, 1>(
+              new ModernResidual{data.u(i), data.v(i), data.ReferenceInHand(i)});
+      problem.AddResidualBlock(cost, loss.get(), &q[kF], &q[kSu], &q[kSv], &q[kCu], &q[kCv], &q[kK],
+                               &q[kH], &q[kTheta], quat.data(), &q[kTx], &q[kTy], &q[kTz]);
     }
     problem.SetManifold(quat.data(), new ceres::EigenQuaternionManifold());
   } else {
@@ -246,9 +244,9 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
 
   if (use_quaternion) {
     const Eigen::Quaterniond rq(quat[3], quat[0], quat[1], quat[2]);
-    const Eigen::Vector3d euler = EulerZYZFromRotation(
-        rq.normalized().toRotationMatrix(),
-        Eigen::Vector3d(initial[kOmega], initial[kPhi], initial[kVarphi]));
+    const Eigen::Vector3d euler =
+        EulerZYZFromRotation(rq.normalized().toRotationMatrix(),
+                             Eigen::Vector3d(initial[kOmega], initial[kPhi], initial[kVarphi]));
     q[kOmega] = euler[0];
     q[kPhi] = euler[1];
     q[kVarphi] = euler[2];
@@ -261,8 +259,7 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
   result.termination = ceres::TerminationTypeToString(summary.termination_type);
   result.message = summary.message;
   result.usable = summary.IsSolutionUsable();
-  result.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
 }
 

@@ -19,7 +19,7 @@ enum class LossKind { kNone, kHuber, kCauchy };
 
 struct LmOptions {
   LmMode mode = LmMode::kModern;
-  int max_iterations = 0;  ///< <= 0: 300 x (number of free parameters)
+  int max_iterations = 0;                ///< <= 0: 300 x (number of free parameters)
   std::array<bool, kNumParams> fixed{};  ///< held at the initial value
   bool use_bounds = true;                ///< modern mode: keep parameters in [lower, upper]
   Vector14d lower = Vector14d::Constant(-1e300);
