@@ -1,5 +1,6 @@
 #include "hmlvs/solvers/fitness.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -44,40 +45,45 @@ FitnessData::FitnessData(PixelsRef pixels, PosesRef poses, Points3Ref references
 
 namespace {
 
-struct KernelParams {
-  double f, su, sv, cu, cv, k, h, ftan;
-  double r[9];
-  double tx, ty, tz;
-};
+// Points per block of the hot loop: the blocks' per-point values live on the stack (8 KiB).
+constexpr Eigen::Index kBlock = 512;
 
-// The hot loop, with one division per point: with s = 1 + k r^2 and D = Yd + f tan(theta) s,
-// the camera point rho [Xu, Yu, f] equals (H / D) [Xd, Yd, f s], and the ray meets the plane
-// iff D s > 0 (the model's Yu + f tan(theta) = D / s). On x86-64 an AVX2 clone is chosen at
-// load time when the CPU has it; each machine always runs the same clone, so results do not
-// depend on the thread count.
+// The hot loop: the model's HandResidual (one division per point, see PixelToCamera) on the
+// reference points stored in their hand frames, in blocks of two passes:
+//  1. per point, the squared error and the laser-plane test. The compiler vectorises this loop
+//     across points once HandResidual is inlined. (Not `omp simd`: that pragma is lowered before
+//     inlining and turns the model's small local arrays into per-lane arrays, which blocks
+//     vectorisation.)
+//  2. their sum and minimum, with `#pragma omp simd` reductions (-fopenmp-simd, no OpenMP
+//     runtime), which allows the reordered, vectorised sum.
+// On x86-64 an AVX2 clone is chosen at load time when the CPU has it; each machine always runs
+// the same clone, so results do not depend on the thread count.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__AVX2__)
 __attribute__((target_clones("avx2", "default")))
 #endif
-double Kernel(const KernelParams& p, const double* u, const double* v, const double* hx,
-              const double* hy, const double* hz, Eigen::Index m, double* min_sign) {
+double Kernel(const double* q, const Eigen::Matrix3d& hand_from_camera_rot, double tan_theta,
+              const double* u, const double* v, const double* hx, const double* hy,
+              const double* hz, Eigen::Index m, double* min_plane) {
   double sum = 0.0;
-  double min_ds = std::numeric_limits<double>::infinity();
-#pragma omp simd reduction(+ : sum) reduction(min : min_ds)
-  for (Eigen::Index i = 0; i < m; ++i) {
-    const double xd = p.su * (u[i] - p.cu);
-    const double yd = p.sv * (v[i] - p.cv);
-    const double s = 1.0 + p.k * (xd * xd + yd * yd);
-    const double d = yd + p.ftan * s;
-    const double ds = d * s;
-    min_ds = ds < min_ds ? ds : min_ds;
-    const double g = p.h / d;
-    const double cx = g * xd, cy = g * yd, cz = g * p.f * s;
-    const double ex = hx[i] - (p.r[0] * cx + p.r[1] * cy + p.r[2] * cz + p.tx);
-    const double ey = hy[i] - (p.r[3] * cx + p.r[4] * cy + p.r[5] * cz + p.ty);
-    const double ez = hz[i] - (p.r[6] * cx + p.r[7] * cy + p.r[8] * cz + p.tz);
-    sum += ex * ex + ey * ey + ez * ez;
+  double min_test = std::numeric_limits<double>::infinity();
+  double err2[kBlock];
+  double plane[kBlock];
+  for (Eigen::Index start = 0; start < m; start += kBlock) {
+    const Eigen::Index n = std::min(kBlock, m - start);
+    for (Eigen::Index j = 0; j < n; ++j) {
+      const Eigen::Index i = start + j;
+      const double h[3] = {hx[i], hy[i], hz[i]};
+      double e[3];
+      plane[j] = HandResidual(q, hand_from_camera_rot, tan_theta, u[i], v[i], h, e);
+      err2[j] = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+    }
+#pragma omp simd reduction(+ : sum) reduction(min : min_test)
+    for (Eigen::Index j = 0; j < n; ++j) {
+      sum += err2[j];
+      min_test = plane[j] < min_test ? plane[j] : min_test;
+    }
   }
-  *min_sign = min_ds;
+  *min_plane = min_test;
   return sum;
 }
 
@@ -85,36 +91,21 @@ double Kernel(const KernelParams& p, const double* u, const double* v, const dou
 
 double FitnessData::Evaluate(const double* q) const {
   const Eigen::Matrix3d rc = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
-  KernelParams p;
-  p.f = q[kF];
-  p.su = q[kSu];
-  p.sv = q[kSv];
-  p.cu = q[kCu];
-  p.cv = q[kCv];
-  p.k = q[kK];
-  p.h = q[kH];
-  p.ftan = q[kF] * std::tan(q[kTheta]);
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) p.r[3 * r + c] = rc(r, c);
-  p.tx = q[kTx];
-  p.ty = q[kTy];
-  p.tz = q[kTz];
-  double min_ds = 0.0;
-  const double sum =
-      Kernel(p, u_.data(), v_.data(), hx_.data(), hy_.data(), hz_.data(), size(), &min_ds);
-  if (!(min_ds > 0.0)) return std::numeric_limits<double>::infinity();
+  double min_plane = 0.0;
+  const double sum = Kernel(q, rc, std::tan(q[kTheta]), u_.data(), v_.data(), hx_.data(),
+                            hy_.data(), hz_.data(), size(), &min_plane);
+  if (!(min_plane > 0.0)) return std::numeric_limits<double>::infinity();
   return 0.5 * sum;
 }
 
 Eigen::VectorXd FitnessData::PointErrors(const double* q) const {
   const Eigen::Matrix3d rc = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
   const double tan_theta = std::tan(q[kTheta]);
-  const Eigen::Vector3d t(q[kTx], q[kTy], q[kTz]);
   Eigen::VectorXd out(size());
   for (Eigen::Index i = 0; i < size(); ++i) {
-    double cp[3];
-    if (PixelToCamera(q, tan_theta, u_[i], v_[i], cp) > 0.0) {
-      out[i] = (ReferenceInHand(i) - (rc * Eigen::Vector3d(cp[0], cp[1], cp[2]) + t)).norm();
+    double e[3];
+    if (HandResidual(q, rc, tan_theta, u_[i], v_[i], ReferenceInHand(i).data(), e) > 0.0) {
+      out[i] = Eigen::Vector3d(e[0], e[1], e[2]).norm();
     } else {
       out[i] = std::numeric_limits<double>::quiet_NaN();
     }

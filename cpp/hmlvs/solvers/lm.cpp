@@ -21,22 +21,11 @@ double WrapNear(double angle, double reference) {
   return angle + 2.0 * kPi * std::round((reference - angle) / (2.0 * kPi));
 }
 
-// E = h - (R cP + t) in the hand frame, for intrinsics q[0..7], a rotation (quaternion or
-// matrix) and a translation. False when the pixel's ray misses the laser plane.
-template <typename T, typename Rotation>
-bool HandResidual(const T* q, const Rotation& rot, const T& tx, const T& ty, const T& tz, double u,
-                  double v, const Eigen::Vector3d& h, T* residual) {
-  using std::tan;
-  T cp[3];
-  if (!(PixelToCamera(q, tan(q[kTheta]), T(u), T(v), cp) > T(0.0))) return false;
-  const Eigen::Matrix<T, 3, 1> hand =
-      rot * Eigen::Matrix<T, 3, 1>(cp[0], cp[1], cp[2]) + Eigen::Matrix<T, 3, 1>(tx, ty, tz);
-  for (int i = 0; i < 3; ++i) residual[i] = T(h[i]) - hand[i];
-  return true;
-}
+// The three residual functors below all evaluate the model's HandResidual (model/model.h):
+// E_h = h - (R_C cP + t) in the hand frame, which has the norm of the base-frame E.
 
 // Intrinsics and translation as 11 scalar blocks (f..theta, tx, ty, tz) and the rotation as an
-// Eigen quaternion [x, y, z, w]: E = h - (R cP + t) in the hand frame (same norm as in base).
+// Eigen quaternion [x, y, z, w].
 struct ModernResidual {
   double u, v;
   Eigen::Vector3d h;
@@ -45,7 +34,8 @@ struct ModernResidual {
   bool operator()(const T* f, const T* su, const T* sv, const T* cu, const T* cv, const T* k,
                   const T* hh, const T* theta, const T* quat, const T* tx, const T* ty, const T* tz,
                   T* residual) const {
-    T q[kNumParams];  // only the intrinsics f..theta are read
+    using std::tan;
+    T q[kNumParams];  // the Euler angles are not read: the rotation is the quaternion
     q[kF] = *f;
     q[kSu] = *su;
     q[kSv] = *sv;
@@ -54,8 +44,12 @@ struct ModernResidual {
     q[kK] = *k;
     q[kH] = *hh;
     q[kTheta] = *theta;
+    q[kOmega] = q[kPhi] = q[kVarphi] = T(0.0);
+    q[kTx] = *tx;
+    q[kTy] = *ty;
+    q[kTz] = *tz;
     const Eigen::Quaternion<T> rot(quat[3], quat[0], quat[1], quat[2]);
-    return HandResidual(q, rot, *tx, *ty, *tz, u, v, h, residual);
+    return HandResidual(q, rot, tan(q[kTheta]), u, v, h.data(), residual) > T(0.0);
   }
 };
 
@@ -66,10 +60,11 @@ struct EulerResidual {
 
   template <typename T>
   bool operator()(const T* const* p, T* residual) const {
+    using std::tan;
     T q[kNumParams];
     for (int i = 0; i < kNumParams; ++i) q[i] = p[i][0];
-    return HandResidual(q, RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), q[kTx], q[kTy], q[kTz], u,
-                        v, h, residual);
+    return HandResidual(q, RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), tan(q[kTheta]), u, v,
+                        h.data(), residual) > T(0.0);
   }
 };
 
@@ -80,8 +75,8 @@ struct PaperResidual {
 
   bool operator()(const double* q, double* residual) const {
     double e[3];
-    if (!HandResidual(q, RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), q[kTx], q[kTy], q[kTz], u, v,
-                      h, e)) {
+    if (!(HandResidual(q, RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), std::tan(q[kTheta]), u, v,
+                       h.data(), e) > 0.0)) {
       return false;
     }
     residual[0] = std::sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
