@@ -11,6 +11,8 @@
 #include <stdexcept>
 #include <vector>
 
+#include "hmlvs/solvers/lm_costs.h"
+
 namespace hmlvs {
 
 namespace {
@@ -100,6 +102,26 @@ ceres::LossFunction* MakeLoss(const LmOptions& o) {
 
 }  // namespace
 
+ceres::CostFunction* NewPaperCost(double u, double v, const Eigen::Vector3d& reference_in_hand) {
+  return new ceres::NumericDiffCostFunction<PaperResidual, ceres::FORWARD, 1, kNumParams>(
+      new PaperResidual{u, v, reference_in_hand});
+}
+
+ceres::CostFunction* NewModernQuaternionCost(double u, double v,
+                                             const Eigen::Vector3d& reference_in_hand) {
+  return new ceres::AutoDiffCostFunction<ModernResidual, 3, 1, 1, 1, 1, 1, 1, 1, 1, 4, 1, 1, 1>(
+      new ModernResidual{u, v, reference_in_hand});
+}
+
+ceres::CostFunction* NewModernEulerCost(double u, double v,
+                                        const Eigen::Vector3d& reference_in_hand) {
+  auto* cost = new ceres::DynamicAutoDiffCostFunction<EulerResidual, 16>(
+      new EulerResidual{u, v, reference_in_hand});
+  for (int p = 0; p < kNumParams; ++p) cost->AddParameterBlock(1);
+  cost->SetNumResiduals(3);
+  return cost;
+}
+
 Eigen::Vector3d EulerZYZFromRotation(const Eigen::Matrix3d& r, const Eigen::Vector3d& hint) {
   const double sphi = std::hypot(r(0, 2), r(1, 2));
   if (sphi < 1e-12) {
@@ -176,9 +198,8 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
 
   if (paper) {
     for (Eigen::Index i = 0; i < data.size(); ++i) {
-      auto* cost = new ceres::NumericDiffCostFunction<PaperResidual, ceres::FORWARD, 1, kNumParams>(
-          new PaperResidual{data.u(i), data.v(i), data.ReferenceInHand(i)});
-      problem.AddResidualBlock(cost, nullptr, q.data());
+      problem.AddResidualBlock(NewPaperCost(data.u(i), data.v(i), data.ReferenceInHand(i)), nullptr,
+                               q.data());
     }
     std::vector<int> fixed_idx;
     for (int i = 0; i < kNumParams; ++i)
@@ -190,24 +211,18 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
     const Eigen::Quaterniond rq(RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]));
     quat = {rq.x(), rq.y(), rq.z(), rq.w()};
     for (Eigen::Index i = 0; i < data.size(); ++i) {
-      auto* cost =
-          new ceres::AutoDiffCostFunction<ModernResidual, 3, 1, 1, 1, 1, 1, 1, 1, 1, 4, 1, 1, 1>(
-              new ModernResidual{data.u(i), data.v(i), data.ReferenceInHand(i)});
+      ceres::CostFunction* cost =
+          NewModernQuaternionCost(data.u(i), data.v(i), data.ReferenceInHand(i));
       problem.AddResidualBlock(cost, loss.get(), &q[kF], &q[kSu], &q[kSv], &q[kCu], &q[kCv], &q[kK],
                                &q[kH], &q[kTheta], quat.data(), &q[kTx], &q[kTy], &q[kTz]);
     }
     problem.SetManifold(quat.data(), new ceres::EigenQuaternionManifold());
   } else {
     for (Eigen::Index i = 0; i < data.size(); ++i) {
-      auto* cost = new ceres::DynamicAutoDiffCostFunction<EulerResidual, 16>(
-          new EulerResidual{data.u(i), data.v(i), data.ReferenceInHand(i)});
       std::vector<double*> blocks;
-      for (int p = 0; p < kNumParams; ++p) {
-        cost->AddParameterBlock(1);
-        blocks.push_back(&q[p]);
-      }
-      cost->SetNumResiduals(3);
-      problem.AddResidualBlock(cost, loss.get(), blocks);
+      for (int p = 0; p < kNumParams; ++p) blocks.push_back(&q[p]);
+      problem.AddResidualBlock(NewModernEulerCost(data.u(i), data.v(i), data.ReferenceInHand(i)),
+                               loss.get(), blocks);
     }
   }
   if (!paper) {
