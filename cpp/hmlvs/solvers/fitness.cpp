@@ -1,6 +1,5 @@
 #include "hmlvs/solvers/fitness.h"
 
-#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -45,19 +44,29 @@ FitnessData::FitnessData(PixelsRef pixels, PosesRef poses, Points3Ref references
 
 namespace {
 
-// Points per block of the hot loop: the blocks' per-point values live on the stack (8 KiB).
-constexpr Eigen::Index kBlock = 512;
+// One point's share of the fitness: the model's HandResidual (one division, see PixelToCamera),
+// returned by value. The `omp simd` loop below must not take the address of its own locals:
+// that pragma is lowered before inlining and turns such locals into per-lane arrays, which
+// blocks vectorisation. Inside this function they are ordinary and vanish once it is inlined.
+struct PointTerm {
+  double squared_error;
+  double plane;  // the laser-plane test D s: > 0 iff the ray meets the plane
+};
 
-// The hot loop: the model's HandResidual (one division per point, see PixelToCamera) on the
-// reference points stored in their hand frames, in blocks of two passes:
-//  1. per point, the squared error and the laser-plane test. The compiler vectorises this loop
-//     across points once HandResidual is inlined. (Not `omp simd`: that pragma is lowered before
-//     inlining and turns the model's small local arrays into per-lane arrays, which blocks
-//     vectorisation.)
-//  2. their sum and minimum, with `#pragma omp simd` reductions (-fopenmp-simd, no OpenMP
-//     runtime), which allows the reordered, vectorised sum.
-// On x86-64 an AVX2 clone is chosen at load time when the CPU has it; each machine always runs
-// the same clone, so results do not depend on the thread count.
+inline PointTerm Term(const double* q, const Eigen::Matrix3d& hand_from_camera_rot,
+                      double tan_theta, double u, double v, double hx, double hy, double hz) {
+  const double h[3] = {hx, hy, hz};
+  double e[3];
+  PointTerm t;
+  t.plane = HandResidual(q, hand_from_camera_rot, tan_theta, u, v, h, e);
+  t.squared_error = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+  return t;
+}
+
+// The hot loop over the reference points stored in their hand frames, vectorised across points
+// with `#pragma omp simd` (-fopenmp-simd, no OpenMP runtime), which also allows the reordered
+// sum and minimum. On x86-64 an AVX2 clone is chosen at load time when the CPU has it; each
+// machine always runs the same clone, so results do not depend on the thread count.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__AVX2__)
 __attribute__((target_clones("avx2", "default")))
 #endif
@@ -66,22 +75,11 @@ double Kernel(const double* q, const Eigen::Matrix3d& hand_from_camera_rot, doub
               const double* hz, Eigen::Index m, double* min_plane) {
   double sum = 0.0;
   double min_test = std::numeric_limits<double>::infinity();
-  double err2[kBlock];
-  double plane[kBlock];
-  for (Eigen::Index start = 0; start < m; start += kBlock) {
-    const Eigen::Index n = std::min(kBlock, m - start);
-    for (Eigen::Index j = 0; j < n; ++j) {
-      const Eigen::Index i = start + j;
-      const double h[3] = {hx[i], hy[i], hz[i]};
-      double e[3];
-      plane[j] = HandResidual(q, hand_from_camera_rot, tan_theta, u[i], v[i], h, e);
-      err2[j] = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
-    }
 #pragma omp simd reduction(+ : sum) reduction(min : min_test)
-    for (Eigen::Index j = 0; j < n; ++j) {
-      sum += err2[j];
-      min_test = plane[j] < min_test ? plane[j] : min_test;
-    }
+  for (Eigen::Index i = 0; i < m; ++i) {
+    const PointTerm t = Term(q, hand_from_camera_rot, tan_theta, u[i], v[i], hx[i], hy[i], hz[i]);
+    min_test = t.plane < min_test ? t.plane : min_test;
+    sum += t.squared_error;
   }
   *min_plane = min_test;
   return sum;
