@@ -11,10 +11,10 @@
 #include <thread>
 #include <vector>
 
-#include "hmlvs/fitness.h"
-#include "hmlvs/lm.h"
-#include "hmlvs/model.h"
-#include "hmlvs/search.h"
+#include "hmlvs/model/model.h"
+#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/solvers/lm.h"
+#include "hmlvs/solvers/search.h"
 
 namespace {
 
@@ -112,8 +112,8 @@ int main(int argc, char** argv) {
       best = res.runs[0].best_fitness;
     }
     Emit("pso_run_" + std::to_string(threads) + "_threads", Median(times) * 1e3, "ms", reps,
-         ", \"threads\": " + std::to_string(threads) + ", \"last_best_fitness\": " +
-             std::to_string(best));
+         ", \"threads\": " + std::to_string(threads) +
+             ", \"last_best_fitness\": " + std::to_string(best));
   }
   // 3. LM solves from a perturbed start (s = 0.01 around the truth), modern and paper mode.
   for (const auto mode : {hmlvs::LmMode::kModern, hmlvs::LmMode::kPaper}) {

@@ -10,7 +10,7 @@
 #include <string>
 
 #include "bindings.h"
-#include "hmlvs/image.h"
+#include "hmlvs/image/image.h"
 
 namespace py = pybind11;
 
@@ -33,14 +33,14 @@ template <typename T>
 ImageView<T> ViewOf(const py::array& a, const char* name) {
   if (a.ndim() != 2) {
     std::ostringstream msg;
-    msg << name << " must be a 2D (rows x cols) grayscale array, got " << a.ndim()
-        << " dimensions";
+    msg << name << " must be a 2D (rows x cols) grayscale array, got " << a.ndim() << " dimensions";
     throw std::invalid_argument(msg.str());
   }
   const auto item = static_cast<py::ssize_t>(sizeof(T));
   if (a.strides(0) % item != 0 || a.strides(1) % item != 0) {
-    throw std::invalid_argument(std::string(name) + " has strides that are not a multiple of "
-                                                    "its pixel size");
+    throw std::invalid_argument(std::string(name) +
+                                " has strides that are not a multiple of "
+                                "its pixel size");
   }
   ImageView<T> v;
   v.data = static_cast<const T*>(a.data());
@@ -113,8 +113,7 @@ void BindImage(py::module_& m) {
         if (DepthOf(off, "the laser-off image") != d) {
           throw std::invalid_argument(
               "the laser-on and laser-off images have different bit depths (" +
-              std::string(py::str(on.dtype())) + " and " + std::string(py::str(off.dtype())) +
-              ")");
+              std::string(py::str(on.dtype())) + " and " + std::string(py::str(off.dtype())) + ")");
         }
         return d == Depth::kU8 ? Difference<std::uint8_t>(on, off, o)
                                : Difference<std::uint16_t>(on, off, o);

@@ -3,7 +3,7 @@
 #include <pybind11/stl.h>
 
 #include "bindings.h"
-#include "hmlvs/kinematics.h"
+#include "hmlvs/model/kinematics.h"
 
 namespace py = pybind11;
 

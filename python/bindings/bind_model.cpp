@@ -3,8 +3,8 @@
 #include <pybind11/stl.h>
 
 #include "bindings.h"
-#include "hmlvs/cost.h"
-#include "hmlvs/model.h"
+#include "hmlvs/model/cost.h"
+#include "hmlvs/model/model.h"
 
 namespace py = pybind11;
 
@@ -35,8 +35,8 @@ void BindModel(py::module_& m) {
         py::arg("references"), release);
   m.def("_objective", &Objective, py::arg("params"), py::arg("pixels"), py::arg("poses"),
         py::arg("references"), release);
-  m.def("_pixels_from_camera", &PixelsFromCameraPoints, py::arg("params"),
-        py::arg("camera_points"), release);
+  m.def("_pixels_from_camera", &PixelsFromCameraPoints, py::arg("params"), py::arg("camera_points"),
+        release);
   m.def("_pixels_from_base", &PixelsFromBasePoints, py::arg("params"), py::arg("points"),
         py::arg("poses"), py::arg("plane_tolerance"), release);
   m.def("_laser_plane_distance", &LaserPlaneDistance, py::arg("params"), py::arg("points"),

@@ -12,10 +12,10 @@
 #include <vector>
 
 #include "bindings.h"
-#include "hmlvs/fitness.h"
-#include "hmlvs/lm.h"
-#include "hmlvs/parallel.h"
-#include "hmlvs/search.h"
+#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/solvers/lm.h"
+#include "hmlvs/solvers/parallel.h"
+#include "hmlvs/solvers/search.h"
 
 namespace py = pybind11;
 
@@ -88,14 +88,15 @@ void BindSolvers(py::module_& m) {
       .def(py::init<PixelsRef, PosesRef, Points3Ref>(), py::arg("pixels"), py::arg("poses"),
            py::arg("references"))
       .def("__len__", &FitnessData::size)
-      .def("evaluate", [](const FitnessData& d, const Vector14d& q) { return d.Evaluate(q.data()); })
+      .def("evaluate",
+           [](const FitnessData& d, const Vector14d& q) { return d.Evaluate(q.data()); })
       .def("point_errors",
            [](const FitnessData& d, const Vector14d& q) { return d.PointErrors(q.data()); })
       .def(
           "evaluate_many",
           [](const FitnessData& d,
-             const Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, kNumParams,
-                                                  Eigen::RowMajor>>& qs) {
+             const Eigen::Ref<
+                 const Eigen::Matrix<double, Eigen::Dynamic, kNumParams, Eigen::RowMajor>>& qs) {
             Eigen::VectorXd out(qs.rows());
             {
               py::gil_scoped_release release;
@@ -204,8 +205,8 @@ void BindSolvers(py::module_& m) {
   m.def(
       "_run_lm_many",
       [](const FitnessData& data,
-         const Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, kNumParams,
-                                              Eigen::RowMajor>>& initials,
+         const Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, kNumParams, Eigen::RowMajor>>&
+             initials,
          const LmOptions& o, int threads, py::object progress) {
         // Independent LM solves from many starts (the paper's 1000 runs), in parallel. The
         // optional progress callable (done, total, best_cost) is called by member 0 (the

@@ -1,23 +1,16 @@
-// Per-point residual functors shared by the Ceres solves and the Jacobian/identifiability code.
+// The per-point base-frame residual as a Ceres functor, and the residual Jacobian of a data set
+// by automatic differentiation (used by the identifiability and uncertainty analyses). The LM
+// solves (solvers/lm.cpp) use the hand-frame form of the same residual, HandResidual.
 #pragma once
 
 #include <Eigen/Core>
 
-#include "hmlvs/model.h"
+#include "hmlvs/model/model.h"
 
 namespace hmlvs {
 
-/// Hand-frame data of one calibration point, precomputed once per data set:
-/// the pixel and the reference point expressed in the hand frame, h = R_N^T (P - P_N).
-/// Since R_N is a rotation, ||P - bP|| = ||h - (R_C cP + t)||, so the hot loops never touch
-/// the pose again.
-struct HandPoint {
-  double u = 0.0;
-  double v = 0.0;
-  Eigen::Vector3d reference_in_hand = Eigen::Vector3d::Zero();
-};
-
 /// Residual of one point with the 14 parameters, E = P - bP (base frame, 3 components).
+/// Returns false when the pixel's ray misses the laser plane.
 struct PointResidualFunctor {
   double u, v;
   Eigen::Matrix3d base_from_hand_rot;
@@ -30,7 +23,7 @@ struct PointResidualFunctor {
     const Eigen::Matrix<T, 3, 3> rc = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
     const T tan_theta = tan(q[kTheta]);
     return PointResidual(q, rc, tan_theta, u, v, base_from_hand_rot, base_from_hand_pos, reference,
-                         residual);
+                         residual) > T(0.0);
   }
 };
 

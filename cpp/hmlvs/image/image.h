@@ -6,10 +6,9 @@
 // without a copy. Pixel (u = column, v = row) is 0-based with pixel centres at integers.
 #pragma once
 
+#include <Eigen/Core>
 #include <cstddef>
 #include <cstdint>
-
-#include <Eigen/Core>
 
 namespace hmlvs {
 

@@ -1,4 +1,4 @@
-#include "hmlvs/image.h"
+#include "hmlvs/image/image.h"
 
 #include <algorithm>
 #include <cmath>
@@ -13,8 +13,8 @@ namespace hmlvs {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-constexpr int kMaxRuns = 8;   // runs stored per scan line; more count as "multiple"
-constexpr int kBlock = 32;    // scan lines tested together for "nothing above threshold"
+constexpr int kMaxRuns = 8;  // runs stored per scan line; more count as "multiple"
+constexpr int kBlock = 32;   // scan lines tested together for "nothing above threshold"
 constexpr int kMaxStegerSteps = 3;
 
 template <typename T>
@@ -298,8 +298,7 @@ Centre GaussianCentre(const ScanView<T>& v, int s, const Peak& pk, double noise)
 }
 
 template <typename T>
-Centre StegerCentre(const ScanView<T>& v, int s, const Peak& pk, const Kernels& k,
-                    double noise) {
+Centre StegerCentre(const ScanView<T>& v, int s, const Peak& pk, const Kernels& k, double noise) {
   Centre c;
   int m = pk.m;
   for (int step = 0; step < kMaxStegerSteps; ++step) {
@@ -345,8 +344,7 @@ void ValidateOptions(const StripeOptions& o) {
     msg << "method must be centroid, gaussian or steger";
   } else if (!std::isfinite(o.threshold)) {
     msg << "threshold must be a finite number (negative for automatic), got " << o.threshold;
-  } else if (!(o.min_width >= 0.0) || !(o.max_width > o.min_width) ||
-             !std::isfinite(o.max_width)) {
+  } else if (!(o.min_width >= 0.0) || !(o.max_width > o.min_width) || !std::isfinite(o.max_width)) {
     msg << "stripe widths must satisfy 0 <= min_width < max_width < inf, got min_width "
         << o.min_width << " and max_width " << o.max_width;
   } else if (!std::isfinite(o.noise)) {
@@ -374,8 +372,7 @@ void DifferenceImage(const ImageView<T>& on, const ImageView<T>& off, T* out,
         << " pixels but the laser-off image is " << off.cols << " x " << off.rows;
     throw std::invalid_argument(msg.str());
   }
-  if (!std::isfinite(o.scale) || !std::isfinite(o.floor) || o.scale == 0.0 ||
-      o.floor == 0.0) {
+  if (!std::isfinite(o.scale) || !std::isfinite(o.floor) || o.scale == 0.0 || o.floor == 0.0) {
     std::ostringstream msg;
     msg << "normalisation scale and floor must be finite and positive (or negative for "
            "automatic), got scale "
@@ -541,8 +538,8 @@ StripeResult ExtractStripe(const ImageView<T>& image, const StripeOptions& o) {
     res.num_peaks[s] = n_valid + n_wide;
     if (n_valid == 0) {
       const Peak& shown = n_wide > 0 ? best_wide : best_narrow;
-      res.status[s] = static_cast<std::uint8_t>(n_wide > 0 ? StripeStatus::kTooWide
-                                                           : StripeStatus::kTooNarrow);
+      res.status[s] =
+          static_cast<std::uint8_t>(n_wide > 0 ? StripeStatus::kTooWide : StripeStatus::kTooNarrow);
       res.intensity[s] = shown.value;
       res.width[s] = shown.width;
       continue;
@@ -555,8 +552,7 @@ StripeResult ExtractStripe(const ImageView<T>& image, const StripeOptions& o) {
     }
     res.intensity[s] = best_valid.value;
     res.width[s] = best_valid.width;
-    if (res.num_peaks[s] > 1 &&
-        !(o.dominance >= 1.0 && best_valid.value >= o.dominance * second)) {
+    if (res.num_peaks[s] > 1 && !(o.dominance >= 1.0 && best_valid.value >= o.dominance * second)) {
       res.status[s] = static_cast<std::uint8_t>(StripeStatus::kMultiple);
       continue;
     }

@@ -1,4 +1,4 @@
-#include "hmlvs/kinematics.h"
+#include "hmlvs/model/kinematics.h"
 
 #include <cmath>
 #include <sstream>
@@ -18,7 +18,7 @@ Eigen::Matrix4d DHLinkTransform(const DHJoint& joint, double reading, DHConventi
         0, sa, ca, d,                          //
         0, 0, 0, 1;
   } else {
-    t << ct, -st, 0, joint.a,           //
+    t << ct, -st, 0, joint.a,            //
         st * ca, ct * ca, -sa, -sa * d,  //
         st * sa, ct * sa, ca, ca * d,    //
         0, 0, 0, 1;

@@ -1,4 +1,4 @@
-#include "hmlvs/parallel.h"
+#include "hmlvs/solvers/parallel.h"
 
 #include <exception>
 #include <mutex>

@@ -1,6 +1,7 @@
 // Levenberg-Marquardt identification with Ceres, in two modes:
 //  - kPaper: the paper's NLSO: one scalar residual ||E_i|| per point, forward-difference
-//    Jacobian, the 14 parameters with ZYZ Euler angles, no bounds, at most 300 x 14 iterations.
+//    Jacobian, the 14 parameters with ZYZ Euler angles, no bounds, at most 300 x (free parameters)
+//    iterations.
 //  - kModern: the three components of E_i, Jacobian by automatic differentiation, the hand-eye
 //    rotation on SO(3) (unit quaternion manifold; converted back to ZYZ Euler angles), bounds
 //    on the other parameters, any subset held fixed, optional robust loss.
@@ -10,7 +11,7 @@
 #include <array>
 #include <string>
 
-#include "hmlvs/fitness.h"
+#include "hmlvs/solvers/fitness.h"
 
 namespace hmlvs {
 
@@ -19,7 +20,7 @@ enum class LossKind { kNone, kHuber, kCauchy };
 
 struct LmOptions {
   LmMode mode = LmMode::kModern;
-  int max_iterations = 0;  ///< <= 0: 300 x (number of free parameters)
+  int max_iterations = 0;                ///< <= 0: 300 x (number of free parameters)
   std::array<bool, kNumParams> fixed{};  ///< held at the initial value
   bool use_bounds = true;                ///< modern mode: keep parameters in [lower, upper]
   Vector14d lower = Vector14d::Constant(-1e300);

@@ -1,4 +1,4 @@
-#include "hmlvs/model.h"
+#include "hmlvs/model/model.h"
 
 #include <Eigen/Geometry>
 #include <cmath>
@@ -44,10 +44,15 @@ inline Eigen::Vector3d PosePosition(PosesRef poses, Eigen::Index i) {
   return Eigen::Vector3d(p[3], p[7], p[11]);
 }
 
-[[noreturn]] void ThrowMissedPlane(Eigen::Index i, double u, double v, double denom) {
+// A pixel whose ray misses the laser plane; `plane` is PixelToCamera's test value D s.
+[[noreturn]] void ThrowMissedPlane(const Vector14d& q, Eigen::Index i, double u, double v,
+                                   double plane) {
+  // Yu + f tan(theta) = D / s = (D s) / s^2, the number MODEL.md step 3 names.
+  double xd, yd;
+  const double s = DistortedSensorPoint(q.data(), u, v, &xd, &yd);
   std::ostringstream msg;
   msg << "pixel " << i << " (u=" << u << ", v=" << v
-      << ") has a ray that misses the laser plane: Yu + f tan(theta) = " << denom
+      << ") has a ray that misses the laser plane: Yu + f tan(theta) = " << plane / (s * s)
       << " mm <= 0, so it has no measurement";
   throw std::invalid_argument(msg.str());
 }
@@ -106,8 +111,9 @@ void ValidatePoses(PosesRef poses) {
     const double err = (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
     if (err > 1e-6 || r.determinant() < 0.0) {
       std::ostringstream msg;
-      msg << "pose " << i << " has a rotation part that is not a proper rotation (|R^T R - I| = "
-          << err << ", det = " << r.determinant() << "); poses must be base_from_hand transforms";
+      msg << "pose " << i
+          << " has a rotation part that is not a proper rotation (|R^T R - I| = " << err
+          << ", det = " << r.determinant() << "); poses must be base_from_hand transforms";
       throw std::invalid_argument(msg.str());
     }
   }
@@ -124,12 +130,12 @@ PointsResult CameraPointsFromPixels(const Vector14d& q, PixelsRef pixels, bool t
   for (Eigen::Index i = 0; i < m; ++i) {
     double cp[3];
     const double u = pixels(i, 0), v = pixels(i, 1);
-    const double denom = PixelToCamera(q.data(), tan_theta, u, v, cp);
-    if (denom > 0.0) {
+    const double plane = PixelToCamera(q.data(), tan_theta, u, v, cp);
+    if (plane > 0.0) {
       out.points.row(i) << cp[0], cp[1], cp[2];
       out.valid[i] = 1;
     } else {
-      if (throw_on_invalid) ThrowMissedPlane(i, u, v, denom);
+      if (throw_on_invalid) ThrowMissedPlane(q, i, u, v, plane);
       out.points.row(i).setConstant(kNaN);
       out.valid[i] = 0;
       ++out.num_invalid;
@@ -142,15 +148,28 @@ PointsResult BasePointsFromPixels(const Vector14d& q, PixelsRef pixels, PosesRef
                                   bool throw_on_invalid) {
   RequireSameRows(pixels.rows(), "pixels", poses.rows(), "poses");
   ValidatePoses(poses);
-  PointsResult out = CameraPointsFromPixels(q, pixels, throw_on_invalid);
-  const Eigen::Matrix4d hand_from_camera = HandFromCamera(q);
-  for (Eigen::Index i = 0; i < pixels.rows(); ++i) {
-    if (!out.valid[i]) continue;
-    const Eigen::Vector4d cam(out.points(i, 0), out.points(i, 1), out.points(i, 2), 1.0);
-    const Eigen::Vector4d hand = hand_from_camera * cam;
-    const Eigen::Vector3d base =
-        PoseRotation(poses, i) * hand.head<3>() + PosePosition(poses, i);
-    out.points.row(i) = base.transpose();
+  ValidateParams(q);
+  RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
+  const Eigen::Index m = pixels.rows();
+  PointsResult out;
+  out.points.resize(m, 3);
+  out.valid.resize(m);
+  const Eigen::Matrix3d hand_from_camera_rot = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
+  const double tan_theta = std::tan(q[kTheta]);
+  for (Eigen::Index i = 0; i < m; ++i) {
+    double bp[3];
+    const double u = pixels(i, 0), v = pixels(i, 1);
+    const double plane = PixelToBase(q.data(), hand_from_camera_rot, tan_theta, u, v,
+                                     PoseRotation(poses, i), PosePosition(poses, i), bp);
+    if (plane > 0.0) {
+      out.points.row(i) << bp[0], bp[1], bp[2];
+      out.valid[i] = 1;
+    } else {
+      if (throw_on_invalid) ThrowMissedPlane(q, i, u, v, plane);
+      out.points.row(i).setConstant(kNaN);
+      out.valid[i] = 0;
+      ++out.num_invalid;
+    }
   }
   return out;
 }
@@ -174,10 +193,9 @@ RowMatX3 CameraRaysFromPixels(const Vector14d& q, PixelsRef pixels) {
   RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
   RowMatX3 rays(pixels.rows(), 3);
   for (Eigen::Index i = 0; i < pixels.rows(); ++i) {
-    const double xd = q[kSu] * (pixels(i, 0) - q[kCu]);
-    const double yd = q[kSv] * (pixels(i, 1) - q[kCv]);
-    const double inv = 1.0 / (1.0 + q[kK] * (xd * xd + yd * yd));
-    rays.row(i) << xd * inv, yd * inv, q[kF];
+    double xd, yd;
+    const double s = DistortedSensorPoint(q.data(), pixels(i, 0), pixels(i, 1), &xd, &yd);
+    rays.row(i) << xd / s, yd / s, q[kF];  // (Xu, Yu, f)
   }
   return rays;
 }
@@ -240,18 +258,15 @@ RowMatX3 CameraFromBase(const Vector14d& q, Points3Ref base_points, PosesRef pos
   const Eigen::Vector3d tc = hfc.topRightCorner<3, 1>();
   RowMatX3 cam(base_points.rows(), 3);
   for (Eigen::Index i = 0; i < base_points.rows(); ++i) {
-    const Eigen::Vector3d hand =
-        PoseRotation(poses, i).transpose() * (base_points.row(i).transpose() - PosePosition(poses, i));
+    const Eigen::Vector3d hand = PoseRotation(poses, i).transpose() *
+                                 (base_points.row(i).transpose() - PosePosition(poses, i));
     cam.row(i) = (rc.transpose() * (hand - tc)).transpose();
   }
   return cam;
 }
 
-}  // namespace
-
-Eigen::VectorXd LaserPlaneDistance(const Vector14d& q, Points3Ref base_points, PosesRef poses) {
-  ValidateParams(q);
-  const RowMatX3 cam = CameraFromBase(q, base_points, poses);
+// Signed distances (mm) of camera-frame points from the laser plane y + z tan(theta) = H.
+Eigen::VectorXd PlaneDistances(const Vector14d& q, const RowMatX3& cam) {
   const double t = std::tan(q[kTheta]);
   const double norm = std::sqrt(1.0 + t * t);
   Eigen::VectorXd d(cam.rows());
@@ -259,6 +274,13 @@ Eigen::VectorXd LaserPlaneDistance(const Vector14d& q, Points3Ref base_points, P
     d[i] = (cam(i, 1) + cam(i, 2) * t - q[kH]) / norm;
   }
   return d;
+}
+
+}  // namespace
+
+Eigen::VectorXd LaserPlaneDistance(const Vector14d& q, Points3Ref base_points, PosesRef poses) {
+  ValidateParams(q);
+  return PlaneDistances(q, CameraFromBase(q, base_points, poses));
 }
 
 PixelsResult PixelsFromBasePoints(const Vector14d& q, Points3Ref base_points, PosesRef poses,
@@ -270,11 +292,9 @@ PixelsResult PixelsFromBasePoints(const Vector14d& q, Points3Ref base_points, Po
   const RowMatX3 cam = CameraFromBase(q, base_points, poses);
   PixelsResult out = PixelsFromCameraPoints(q, cam);
   if (std::isfinite(plane_tolerance)) {
-    const double t = std::tan(q[kTheta]);
-    const double norm = std::sqrt(1.0 + t * t);
+    const Eigen::VectorXd d = PlaneDistances(q, cam);
     for (Eigen::Index i = 0; i < cam.rows(); ++i) {
-      const double d = (cam(i, 1) + cam(i, 2) * t - q[kH]) / norm;
-      if (out.valid[i] && std::abs(d) > plane_tolerance) {
+      if (out.valid[i] && std::abs(d[i]) > plane_tolerance) {
         out.valid[i] = 0;
         out.pixels.row(i).setConstant(kNaN);
         ++out.num_invalid;

@@ -1,15 +1,17 @@
-#include "hmlvs/lm.h"
+#include "hmlvs/solvers/lm.h"
 
 #include <ceres/ceres.h>
 #include <ceres/rotation.h>
 
 #include <Eigen/Geometry>
 #include <chrono>
-#include <memory>
 #include <cmath>
+#include <memory>
 #include <sstream>
 #include <stdexcept>
 #include <vector>
+
+#include "hmlvs/solvers/lm_costs.h"
 
 namespace hmlvs {
 
@@ -21,31 +23,21 @@ double WrapNear(double angle, double reference) {
   return angle + 2.0 * kPi * std::round((reference - angle) / (2.0 * kPi));
 }
 
-// E = h - (R cP + t) in the hand frame, for intrinsics q[0..7], a rotation (quaternion or
-// matrix) and a translation. False when the pixel's ray misses the laser plane.
-template <typename T, typename Rotation>
-bool HandResidual(const T* q, const Rotation& rot, const T& tx, const T& ty, const T& tz,
-                  double u, double v, const Eigen::Vector3d& h, T* residual) {
-  using std::tan;
-  T cp[3];
-  if (!(PixelToCamera(q, tan(q[kTheta]), T(u), T(v), cp) > T(0.0))) return false;
-  const Eigen::Matrix<T, 3, 1> hand =
-      rot * Eigen::Matrix<T, 3, 1>(cp[0], cp[1], cp[2]) + Eigen::Matrix<T, 3, 1>(tx, ty, tz);
-  for (int i = 0; i < 3; ++i) residual[i] = T(h[i]) - hand[i];
-  return true;
-}
+// The three residual functors below all evaluate the model's HandResidual (model/model.h):
+// E_h = h - (R_C cP + t) in the hand frame, which has the norm of the base-frame E.
 
 // Intrinsics and translation as 11 scalar blocks (f..theta, tx, ty, tz) and the rotation as an
-// Eigen quaternion [x, y, z, w]: E = h - (R cP + t) in the hand frame (same norm as in base).
+// Eigen quaternion [x, y, z, w].
 struct ModernResidual {
   double u, v;
   Eigen::Vector3d h;
 
   template <typename T>
   bool operator()(const T* f, const T* su, const T* sv, const T* cu, const T* cv, const T* k,
-                  const T* hh, const T* theta, const T* quat, const T* tx, const T* ty,
-                  const T* tz, T* residual) const {
-    T q[kNumParams];  // only the intrinsics f..theta are read
+                  const T* hh, const T* theta, const T* quat, const T* tx, const T* ty, const T* tz,
+                  T* residual) const {
+    using std::tan;
+    T q[kNumParams];  // the Euler angles are not read: the rotation is the quaternion
     q[kF] = *f;
     q[kSu] = *su;
     q[kSv] = *sv;
@@ -54,8 +46,12 @@ struct ModernResidual {
     q[kK] = *k;
     q[kH] = *hh;
     q[kTheta] = *theta;
+    q[kOmega] = q[kPhi] = q[kVarphi] = T(0.0);
+    q[kTx] = *tx;
+    q[kTy] = *ty;
+    q[kTz] = *tz;
     const Eigen::Quaternion<T> rot(quat[3], quat[0], quat[1], quat[2]);
-    return HandResidual(q, rot, *tx, *ty, *tz, u, v, h, residual);
+    return HandResidual(q, rot, tan(q[kTheta]), u, v, h.data(), residual) > T(0.0);
   }
 };
 
@@ -66,10 +62,11 @@ struct EulerResidual {
 
   template <typename T>
   bool operator()(const T* const* p, T* residual) const {
+    using std::tan;
     T q[kNumParams];
     for (int i = 0; i < kNumParams; ++i) q[i] = p[i][0];
-    return HandResidual(q, RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), q[kTx], q[kTy], q[kTz],
-                        u, v, h, residual);
+    return HandResidual(q, RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), tan(q[kTheta]), u, v,
+                        h.data(), residual) > T(0.0);
   }
 };
 
@@ -80,8 +77,8 @@ struct PaperResidual {
 
   bool operator()(const double* q, double* residual) const {
     double e[3];
-    if (!HandResidual(q, RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), q[kTx], q[kTy], q[kTz], u,
-                      v, h, e)) {
+    if (!(HandResidual(q, RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), std::tan(q[kTheta]), u, v,
+                       h.data(), e) > 0.0)) {
       return false;
     }
     residual[0] = std::sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
@@ -104,6 +101,26 @@ ceres::LossFunction* MakeLoss(const LmOptions& o) {
 }
 
 }  // namespace
+
+ceres::CostFunction* NewPaperCost(double u, double v, const Eigen::Vector3d& reference_in_hand) {
+  return new ceres::NumericDiffCostFunction<PaperResidual, ceres::FORWARD, 1, kNumParams>(
+      new PaperResidual{u, v, reference_in_hand});
+}
+
+ceres::CostFunction* NewModernQuaternionCost(double u, double v,
+                                             const Eigen::Vector3d& reference_in_hand) {
+  return new ceres::AutoDiffCostFunction<ModernResidual, 3, 1, 1, 1, 1, 1, 1, 1, 1, 4, 1, 1, 1>(
+      new ModernResidual{u, v, reference_in_hand});
+}
+
+ceres::CostFunction* NewModernEulerCost(double u, double v,
+                                        const Eigen::Vector3d& reference_in_hand) {
+  auto* cost = new ceres::DynamicAutoDiffCostFunction<EulerResidual, 16>(
+      new EulerResidual{u, v, reference_in_hand});
+  for (int p = 0; p < kNumParams; ++p) cost->AddParameterBlock(1);
+  cost->SetNumResiduals(3);
+  return cost;
+}
 
 Eigen::Vector3d EulerZYZFromRotation(const Eigen::Matrix3d& r, const Eigen::Vector3d& hint) {
   const double sphi = std::hypot(r(0, 2), r(1, 2));
@@ -151,8 +168,8 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
   if (free == 0) throw std::invalid_argument("all parameters are fixed: nothing to estimate");
   if (residuals < free) {
     std::ostringstream msg;
-    msg << "too few points: " << data.size() << " points give " << residuals
-        << " residuals for " << free << " free parameters";
+    msg << "too few points: " << data.size() << " points give " << residuals << " residuals for "
+        << free << " free parameters";
     throw std::invalid_argument(msg.str());
   }
   if (!paper && o.use_bounds) {
@@ -177,14 +194,12 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
   popt.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(popt);
   std::array<double, 4> quat{};  // Eigen order x, y, z, w
-  const bool use_quaternion =
-      !paper && !o.fixed[kOmega] && !o.fixed[kPhi] && !o.fixed[kVarphi];
+  const bool use_quaternion = !paper && !o.fixed[kOmega] && !o.fixed[kPhi] && !o.fixed[kVarphi];
 
   if (paper) {
     for (Eigen::Index i = 0; i < data.size(); ++i) {
-      auto* cost = new ceres::NumericDiffCostFunction<PaperResidual, ceres::FORWARD, 1, kNumParams>(
-          new PaperResidual{data.u(i), data.v(i), data.ReferenceInHand(i)});
-      problem.AddResidualBlock(cost, nullptr, q.data());
+      problem.AddResidualBlock(NewPaperCost(data.u(i), data.v(i), data.ReferenceInHand(i)), nullptr,
+                               q.data());
     }
     std::vector<int> fixed_idx;
     for (int i = 0; i < kNumParams; ++i)
@@ -196,25 +211,18 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
     const Eigen::Quaterniond rq(RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]));
     quat = {rq.x(), rq.y(), rq.z(), rq.w()};
     for (Eigen::Index i = 0; i < data.size(); ++i) {
-      auto* cost = new ceres::AutoDiffCostFunction<ModernResidual, 3, 1, 1, 1, 1, 1, 1, 1, 1, 4, 1,
-                                                   1, 1>(
-          new ModernResidual{data.u(i), data.v(i), data.ReferenceInHand(i)});
-      problem.AddResidualBlock(cost, loss.get(), &q[kF], &q[kSu], &q[kSv], &q[kCu],
-                               &q[kCv], &q[kK], &q[kH], &q[kTheta], quat.data(), &q[kTx],
-                               &q[kTy], &q[kTz]);
+      ceres::CostFunction* cost =
+          NewModernQuaternionCost(data.u(i), data.v(i), data.ReferenceInHand(i));
+      problem.AddResidualBlock(cost, loss.get(), &q[kF], &q[kSu], &q[kSv], &q[kCu], &q[kCv], &q[kK],
+                               &q[kH], &q[kTheta], quat.data(), &q[kTx], &q[kTy], &q[kTz]);
     }
     problem.SetManifold(quat.data(), new ceres::EigenQuaternionManifold());
   } else {
     for (Eigen::Index i = 0; i < data.size(); ++i) {
-      auto* cost = new ceres::DynamicAutoDiffCostFunction<EulerResidual, 16>(
-          new EulerResidual{data.u(i), data.v(i), data.ReferenceInHand(i)});
       std::vector<double*> blocks;
-      for (int p = 0; p < kNumParams; ++p) {
-        cost->AddParameterBlock(1);
-        blocks.push_back(&q[p]);
-      }
-      cost->SetNumResiduals(3);
-      problem.AddResidualBlock(cost, loss.get(), blocks);
+      for (int p = 0; p < kNumParams; ++p) blocks.push_back(&q[p]);
+      problem.AddResidualBlock(NewModernEulerCost(data.u(i), data.v(i), data.ReferenceInHand(i)),
+                               loss.get(), blocks);
     }
   }
   if (!paper) {
@@ -246,9 +254,9 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
 
   if (use_quaternion) {
     const Eigen::Quaterniond rq(quat[3], quat[0], quat[1], quat[2]);
-    const Eigen::Vector3d euler = EulerZYZFromRotation(
-        rq.normalized().toRotationMatrix(),
-        Eigen::Vector3d(initial[kOmega], initial[kPhi], initial[kVarphi]));
+    const Eigen::Vector3d euler =
+        EulerZYZFromRotation(rq.normalized().toRotationMatrix(),
+                             Eigen::Vector3d(initial[kOmega], initial[kPhi], initial[kVarphi]));
     q[kOmega] = euler[0];
     q[kPhi] = euler[1];
     q[kVarphi] = euler[2];
@@ -261,8 +269,7 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
   result.termination = ceres::TerminationTypeToString(summary.termination_type);
   result.message = summary.message;
   result.usable = summary.IsSolutionUsable();
-  result.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
 }
 

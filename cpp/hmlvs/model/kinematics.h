@@ -4,7 +4,7 @@
 #include <Eigen/Core>
 #include <vector>
 
-#include "hmlvs/model.h"
+#include "hmlvs/model/model.h"
 
 namespace hmlvs {
 
@@ -37,9 +37,9 @@ Eigen::Matrix4d DHLinkTransform(const DHJoint& joint, double reading, DHConventi
 /// Joint readings (m x n, rad for revolute and mm for prismatic joints) -> base_from_hand
 /// poses (m x 16, row-major 4x4 each). Throws std::invalid_argument on a shape mismatch or a
 /// non-finite reading.
-RowMatX16 ForwardKinematics(const DHRobot& robot,
-                            const Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic,
-                                                                 Eigen::Dynamic, Eigen::RowMajor>>&
-                                joints);
+RowMatX16 ForwardKinematics(
+    const DHRobot& robot,
+    const Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>&
+        joints);
 
 }  // namespace hmlvs

@@ -5,7 +5,7 @@
 #include <Eigen/Core>
 #include <vector>
 
-#include "hmlvs/model.h"
+#include "hmlvs/model/model.h"
 
 namespace hmlvs {
 

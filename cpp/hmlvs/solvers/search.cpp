@@ -1,4 +1,4 @@
-#include "hmlvs/search.h"
+#include "hmlvs/solvers/search.h"
 
 #include <algorithm>
 #include <atomic>
@@ -8,8 +8,8 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "hmlvs/parallel.h"
-#include "hmlvs/random.h"
+#include "hmlvs/solvers/parallel.h"
+#include "hmlvs/solvers/random.h"
 
 namespace hmlvs {
 
@@ -65,8 +65,8 @@ class PsoRunner {
 
   void Init(Swarm& s, int run, int first, int last) const {
     for (int i = first; i < last; ++i) {
-      s.rng[i] = Rng(StreamKey(o_.seed, static_cast<std::uint64_t>(run),
-                               static_cast<std::uint64_t>(i)));
+      s.rng[i] =
+          Rng(StreamKey(o_.seed, static_cast<std::uint64_t>(run), static_cast<std::uint64_t>(i)));
       Rng& r = s.rng[i];
       for (int d = 0; d < kNumParams; ++d) {
         s.x[i][d] = init_lo_[d] + r.Uniform() * (init_hi_[d] - init_lo_[d]);
@@ -245,8 +245,8 @@ RandomSearchResult RunRandomSearch(const FitnessData& data, const RandomSearchOp
   if (o.evaluations < 1) throw std::invalid_argument("evaluations must be >= 1");
   CheckBounds(o.lower, o.upper, "search bounds");
   const auto start = std::chrono::steady_clock::now();
-  const int threads = static_cast<int>(
-      std::min<long long>(ResolveThreads(o.threads), o.evaluations));
+  const int threads =
+      static_cast<int>(std::min<long long>(ResolveThreads(o.threads), o.evaluations));
   constexpr long long kBlock = 4096;  // evaluations between cancellation checks
   const long long blocks = (o.evaluations + kBlock - 1) / kBlock;
   std::vector<double> best_fit(threads, std::numeric_limits<double>::infinity());

@@ -1,4 +1,4 @@
-#include "hmlvs/cost.h"
+#include "hmlvs/model/cost.h"
 
 #include <ceres/autodiff_cost_function.h>
 
@@ -7,9 +7,10 @@
 
 namespace hmlvs {
 
-void ResidualJacobian(const Vector14d& q, PixelsRef pixels, PosesRef poses, Points3Ref references,
-                      Eigen::VectorXd* residuals,
-                      Eigen::Matrix<double, Eigen::Dynamic, kNumParams, Eigen::RowMajor>* jacobian) {
+void ResidualJacobian(
+    const Vector14d& q, PixelsRef pixels, PosesRef poses, Points3Ref references,
+    Eigen::VectorXd* residuals,
+    Eigen::Matrix<double, Eigen::Dynamic, kNumParams, Eigen::RowMajor>* jacobian) {
   // Shape, finiteness and the laser-plane check, with the model's error messages.
   const RowMatX3 e = Residuals(q, pixels, poses, references);
   const Eigen::Index m = pixels.rows();

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "hmlvs/fitness.h"
+#include "hmlvs/solvers/fitness.h"
 
 namespace hmlvs {
 
@@ -23,15 +23,15 @@ using ProgressCallback = std::function<bool(const Progress&)>;
 
 struct PsoOptions {
   int swarm_size = 50;
-  int iterations = 5000;       ///< T
-  double w_max = 0.9;          ///< inertia at t = 0 (Eq. 20)
-  double w_min = 0.4;          ///< inertia at t = T
-  double c1 = 2.0;             ///< pull towards the particle's best
-  double c2 = 2.0;             ///< pull towards the swarm's best
-  double vmax = 0.1;           ///< velocity limit, fraction of each parameter's range
-  double target_fitness = 0.0; ///< stop when the best fitness F(q) is <= this
-  int runs = 1;                ///< independent runs (different random streams)
-  int threads = 0;             ///< <= 0: all hardware threads
+  int iterations = 5000;        ///< T
+  double w_max = 0.9;           ///< inertia at t = 0 (Eq. 20)
+  double w_min = 0.4;           ///< inertia at t = T
+  double c1 = 2.0;              ///< pull towards the particle's best
+  double c2 = 2.0;              ///< pull towards the swarm's best
+  double vmax = 0.1;            ///< velocity limit, fraction of each parameter's range
+  double target_fitness = 0.0;  ///< stop when the best fitness F(q) is <= this
+  int runs = 1;                 ///< independent runs (different random streams)
+  int threads = 0;              ///< <= 0: all hardware threads
   std::uint64_t seed = 0;
   Vector14d lower = Vector14d::Zero();  ///< search bounds (lower == upper holds it fixed)
   Vector14d upper = Vector14d::Zero();
@@ -39,7 +39,7 @@ struct PsoOptions {
   /// intersected with the search bounds. Unset (lower > upper): the search bounds.
   Vector14d init_lower = Vector14d::Constant(1.0);
   Vector14d init_upper = Vector14d::Constant(-1.0);
-  int progress_every = 100;    ///< iterations between progress callbacks
+  int progress_every = 100;  ///< iterations between progress callbacks
 };
 
 struct PsoRun {

@@ -1,0 +1,114 @@
+#include "hmlvs/solvers/fitness.h"
+
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+namespace hmlvs {
+
+FitnessData::FitnessData(PixelsRef pixels, PosesRef poses, Points3Ref references) {
+  const Eigen::Index m = pixels.rows();
+  if (poses.rows() != m || references.rows() != m) {
+    std::ostringstream msg;
+    msg << "pixels has " << m << " rows, poses " << poses.rows() << " and reference points "
+        << references.rows() << "; they must match";
+    throw std::invalid_argument(msg.str());
+  }
+  ValidatePoses(poses);
+  for (Eigen::Index i = 0; i < m; ++i) {
+    if (!pixels.row(i).allFinite() || !references.row(i).allFinite()) {
+      std::ostringstream msg;
+      msg << "calibration point " << i << " has a non-finite pixel or reference point";
+      throw std::invalid_argument(msg.str());
+    }
+  }
+  u_.resize(m);
+  v_.resize(m);
+  hx_.resize(m);
+  hy_.resize(m);
+  hz_.resize(m);
+  for (Eigen::Index i = 0; i < m; ++i) {
+    const double* p = poses.row(i).data();
+    Eigen::Matrix3d r;
+    r << p[0], p[1], p[2], p[4], p[5], p[6], p[8], p[9], p[10];
+    const Eigen::Vector3d h =
+        r.transpose() * (references.row(i).transpose() - Eigen::Vector3d(p[3], p[7], p[11]));
+    u_[i] = pixels(i, 0);
+    v_[i] = pixels(i, 1);
+    hx_[i] = h[0];
+    hy_[i] = h[1];
+    hz_[i] = h[2];
+  }
+}
+
+namespace {
+
+// One point's share of the fitness: the model's HandResidual (one division, see PixelToCamera),
+// returned by value. The `omp simd` loop below must not take the address of its own locals:
+// that pragma is lowered before inlining and turns such locals into per-lane arrays, which
+// blocks vectorisation. Inside this function they are ordinary and vanish once it is inlined.
+struct PointTerm {
+  double squared_error;
+  double plane;  // the laser-plane test D s: > 0 iff the ray meets the plane
+};
+
+inline PointTerm Term(const double* q, const Eigen::Matrix3d& hand_from_camera_rot,
+                      double tan_theta, double u, double v, double hx, double hy, double hz) {
+  const double h[3] = {hx, hy, hz};
+  double e[3];
+  PointTerm t;
+  t.plane = HandResidual(q, hand_from_camera_rot, tan_theta, u, v, h, e);
+  t.squared_error = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+  return t;
+}
+
+// The hot loop over the reference points stored in their hand frames, vectorised across points
+// with `#pragma omp simd` (-fopenmp-simd, no OpenMP runtime), which also allows the reordered
+// sum and minimum. On x86-64 an AVX2 clone is chosen at load time when the CPU has it; each
+// machine always runs the same clone, so results do not depend on the thread count.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__AVX2__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+double Kernel(const double* q, const Eigen::Matrix3d& hand_from_camera_rot, double tan_theta,
+              const double* u, const double* v, const double* hx, const double* hy,
+              const double* hz, Eigen::Index m, double* min_plane) {
+  double sum = 0.0;
+  double min_test = std::numeric_limits<double>::infinity();
+#pragma omp simd reduction(+ : sum) reduction(min : min_test)
+  for (Eigen::Index i = 0; i < m; ++i) {
+    const PointTerm t = Term(q, hand_from_camera_rot, tan_theta, u[i], v[i], hx[i], hy[i], hz[i]);
+    min_test = t.plane < min_test ? t.plane : min_test;
+    sum += t.squared_error;
+  }
+  *min_plane = min_test;
+  return sum;
+}
+
+}  // namespace
+
+double FitnessData::Evaluate(const double* q) const {
+  const Eigen::Matrix3d rc = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
+  double min_plane = 0.0;
+  const double sum = Kernel(q, rc, std::tan(q[kTheta]), u_.data(), v_.data(), hx_.data(),
+                            hy_.data(), hz_.data(), size(), &min_plane);
+  if (!(min_plane > 0.0)) return std::numeric_limits<double>::infinity();
+  return 0.5 * sum;
+}
+
+Eigen::VectorXd FitnessData::PointErrors(const double* q) const {
+  const Eigen::Matrix3d rc = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
+  const double tan_theta = std::tan(q[kTheta]);
+  Eigen::VectorXd out(size());
+  for (Eigen::Index i = 0; i < size(); ++i) {
+    double e[3];
+    if (HandResidual(q, rc, tan_theta, u_[i], v_[i], ReferenceInHand(i).data(), e) > 0.0) {
+      out[i] = Eigen::Vector3d(e[0], e[1], e[2]).norm();
+    } else {
+      out[i] = std::numeric_limits<double>::quiet_NaN();
+    }
+  }
+  return out;
+}
+
+}  // namespace hmlvs

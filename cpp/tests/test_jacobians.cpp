@@ -1,0 +1,231 @@
+// Every Jacobian the solvers use, against central differences: the residual Jacobian of the
+// identifiability/uncertainty analyses (autodiff) and the three LM residual blocks (autodiff on
+// the quaternion manifold, autodiff over Euler angles, the paper mode's forward differences).
+// Not ceres::GradientChecker (Ceres 2.1): its Ridders differences take the relative initial step
+// (default 1e-2) also as an absolute minimum step, which moves Su = 0.0074 mm/px off the model's
+// domain; with a smaller setting they returned a wrong derivative for one paper-mode entry
+// (-6802 where central differences at steps 1e-4 to 1e-10 agree on -25732); and it judges
+// entries that are analytically 0 (three on the quaternion's tangent space) by relative error
+// alone.
+#include <ceres/manifold.h>
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <vector>
+
+#include "hmlvs/model/cost.h"
+#include "hmlvs/model/model.h"
+#include "hmlvs/solvers/lm_costs.h"
+#include "test_util.h"
+
+namespace hmlvs {
+namespace {
+
+using test::Generic;
+using test::MakeScene;
+
+// A scene whose reference points are off the model's by ~1 mm, so that no residual (and no
+// ||E||, whose gradient is undefined at 0) vanishes.
+struct OffsetScene {
+  test::Scene scene;
+  RowMatX3 references;
+};
+
+OffsetScene MakeOffsetScene(const Vector14d& q, int m) {
+  OffsetScene s{MakeScene(q, m, 21), RowMatX3()};
+  s.references = s.scene.points;
+  for (Eigen::Index i = 0; i < m; ++i) {
+    s.references.row(i) += Eigen::RowVector3d(std::sin(i), std::cos(2.0 * i), 0.7);
+  }
+  return s;
+}
+
+Eigen::Vector3d ReferenceInHand(const OffsetScene& s, Eigen::Index i) {
+  return test::PoseRotation(s.scene.poses, i).transpose() *
+         (s.references.row(i).transpose() - test::PosePosition(s.scene.poses, i));
+}
+
+TEST(Jacobians, ResidualJacobianMatchesCentralDifferences) {
+  const Vector14d q = Generic();
+  const OffsetScene s = MakeOffsetScene(q, 25);
+  Eigen::VectorXd r;
+  Eigen::Matrix<double, Eigen::Dynamic, kNumParams, Eigen::RowMajor> jac;
+  ResidualJacobian(q, s.scene.pixels, s.scene.poses, s.references, &r, &jac);
+  ASSERT_EQ(r.size(), 75);
+  ASSERT_EQ(jac.rows(), 75);
+
+  // The residuals are those of the batch function, flattened row by row.
+  const RowMatX3 e = Residuals(q, s.scene.pixels, s.scene.poses, s.references);
+  for (Eigen::Index i = 0; i < 25; ++i)
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(r[3 * i + c], e(i, c), 1e-10);
+
+  // Central differences of Residuals with a step of 1e-5 of each parameter's scale. Truncation
+  // error is ~(step / scale)^2 = 1e-10 of the derivative, rounding ~1e-16 |E| / step with
+  // |E| < 2000 mm; measured at most 2.1e-9 relative to the column's largest entry, 1e-6 allowed.
+  // A wrong derivative (e.g. a missed chain-rule factor) is off by O(1) of that scale.
+  Vector14d scale = q.cwiseAbs();
+  for (int j : {kK, kOmega, kPhi, kVarphi, kTy}) scale[j] = std::max(scale[j], 0.1);
+  for (int j = 0; j < kNumParams; ++j) {
+    const double h = 1e-5 * scale[j];
+    Vector14d qp = q, qm = q;
+    qp[j] += h;
+    qm[j] -= h;
+    const RowMatX3 ep = Residuals(qp, s.scene.pixels, s.scene.poses, s.references);
+    const RowMatX3 em = Residuals(qm, s.scene.pixels, s.scene.poses, s.references);
+    const Eigen::Map<const Eigen::VectorXd> fp(ep.data(), 75), fm(em.data(), 75);
+    const Eigen::VectorXd numeric = (fp - fm) / (2.0 * h);
+    const double column_max = jac.col(j).cwiseAbs().maxCoeff();
+    EXPECT_GT(column_max, 0.0) << ParamNames()[j];
+    EXPECT_LT((numeric - jac.col(j)).cwiseAbs().maxCoeff(), 1e-6 * column_max) << ParamNames()[j];
+  }
+}
+
+// Jacobians of one LM residual block per calibration point, stacked (rows: points x residuals;
+// columns: the tangent-space coordinates of all parameter blocks).
+struct StackedJacobians {
+  Eigen::MatrixXd analytic;  // from CostFunction::Evaluate (times PlusJacobian on a manifold)
+  Eigen::MatrixXd numeric;   // central differences along the manifold's Plus
+};
+
+// Central differences (f(x [+] h e_j) - f(x [+] -h e_j)) / 2h in each block's tangent space,
+// with h = 1e-5 max(|x_j|, 1e-3) for a scalar block and 1e-5 rad on the quaternion manifold.
+// Truncation error ~(h / scale)^2 = 1e-10 of the derivative; rounding ~1e-16 |f| / h < 1e-7
+// with |f| of a few mm.
+StackedJacobians Differentiate(const std::vector<ceres::CostFunction*>& costs,
+                               const std::vector<std::vector<double>>& blocks,
+                               const std::vector<const ceres::Manifold*>& manifolds) {
+  const int n_blocks = static_cast<int>(blocks.size());
+  int n_tangent = 0;
+  for (int k = 0; k < n_blocks; ++k) {
+    n_tangent += manifolds[k] ? manifolds[k]->TangentSize() : static_cast<int>(blocks[k].size());
+  }
+  const int n_res = costs.front()->num_residuals();
+  StackedJacobians out{Eigen::MatrixXd(n_res * costs.size(), n_tangent),
+                       Eigen::MatrixXd(n_res * costs.size(), n_tangent)};
+  using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  for (std::size_t c = 0; c < costs.size(); ++c) {
+    std::unique_ptr<ceres::CostFunction> cost(costs[c]);
+    auto evaluate = [&](const std::vector<std::vector<double>>& x, double* residuals,
+                        std::vector<RowMatrix>* jacobians) {
+      std::vector<const double*> ptrs;
+      for (const auto& b : x) ptrs.push_back(b.data());
+      std::vector<double*> jac_ptrs;
+      if (jacobians) {
+        jacobians->clear();
+        for (const auto& b : x) jacobians->emplace_back(n_res, static_cast<int>(b.size()));
+        for (auto& j : *jacobians) jac_ptrs.push_back(j.data());
+      }
+      EXPECT_TRUE(cost->Evaluate(ptrs.data(), residuals, jacobians ? jac_ptrs.data() : nullptr));
+    };
+    std::vector<double> r0(n_res), rp(n_res), rm(n_res);
+    std::vector<RowMatrix> ambient;
+    evaluate(blocks, r0.data(), &ambient);
+    int col = 0;
+    for (int k = 0; k < n_blocks; ++k) {
+      const int size = static_cast<int>(blocks[k].size());
+      const ceres::Manifold* m = manifolds[k];
+      const int tangent = m ? m->TangentSize() : size;
+      RowMatrix plus_jacobian = RowMatrix::Identity(size, tangent);
+      if (m) m->PlusJacobian(blocks[k].data(), plus_jacobian.data());
+      out.analytic.block(n_res * c, col, n_res, tangent) = ambient[k] * plus_jacobian;
+      for (int j = 0; j < tangent; ++j) {
+        const double h = m ? 1e-5 : 1e-5 * std::max(std::abs(blocks[k][j]), 1e-3);
+        std::vector<std::vector<double>> xp = blocks, xm = blocks;
+        if (m) {
+          std::vector<double> delta(tangent, 0.0);
+          delta[j] = h;
+          m->Plus(blocks[k].data(), delta.data(), xp[k].data());
+          delta[j] = -h;
+          m->Plus(blocks[k].data(), delta.data(), xm[k].data());
+        } else {
+          xp[k][j] += h;
+          xm[k][j] -= h;
+        }
+        evaluate(xp, rp.data(), nullptr);
+        evaluate(xm, rm.data(), nullptr);
+        for (int i = 0; i < n_res; ++i)
+          out.numeric(n_res * c + i, col + j) = (rp[i] - rm[i]) / (2 * h);
+      }
+      col += tangent;
+    }
+  }
+  return out;
+}
+
+// Largest error of each column relative to the column's largest analytic entry (over all
+// points), so that entries that are analytically 0 are judged on the column's scale.
+double WorstColumnError(const StackedJacobians& j) {
+  double worst = 0.0;
+  for (Eigen::Index c = 0; c < j.analytic.cols(); ++c) {
+    const double scale = j.analytic.col(c).cwiseAbs().maxCoeff();
+    EXPECT_GT(scale, 0.0) << "column " << c << " is identically zero";
+    worst = std::max(worst, (j.numeric.col(c) - j.analytic.col(c)).cwiseAbs().maxCoeff() / scale);
+  }
+  return worst;
+}
+
+std::vector<std::vector<double>> ScalarBlocks(const Vector14d& q) {
+  std::vector<std::vector<double>> blocks;
+  for (int j = 0; j < kNumParams; ++j) blocks.push_back({q[j]});
+  return blocks;
+}
+
+TEST(Jacobians, ModernQuaternionCostOnItsManifold) {
+  const Vector14d q = Generic();
+  const OffsetScene s = MakeOffsetScene(q, 12);
+  const Eigen::Quaterniond rot(RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]));
+  std::vector<std::vector<double>> blocks;
+  for (int j = kF; j <= kTheta; ++j) blocks.push_back({q[j]});
+  blocks.push_back({rot.x(), rot.y(), rot.z(), rot.w()});
+  for (int j = kTx; j <= kTz; ++j) blocks.push_back({q[j]});
+  ceres::EigenQuaternionManifold quaternion;
+  std::vector<const ceres::Manifold*> manifolds(12, nullptr);
+  manifolds[8] = &quaternion;
+  std::vector<ceres::CostFunction*> costs;
+  for (Eigen::Index i = 0; i < 12; ++i) {
+    costs.push_back(
+        NewModernQuaternionCost(s.scene.pixels(i, 0), s.scene.pixels(i, 1), ReferenceInHand(s, i)));
+  }
+  const StackedJacobians j = Differentiate(costs, blocks, manifolds);
+  ASSERT_EQ(j.analytic.cols(), 14);  // 8 + 3 (tangent of the quaternion) + 3
+  // Autodiff is exact to rounding and the differences good to ~1e-9 (above); measured 1.4e-9.
+  // A wrong derivative is off by O(1).
+  EXPECT_LT(WorstColumnError(j), 1e-6);
+}
+
+TEST(Jacobians, ModernEulerCost) {
+  const Vector14d q = Generic();
+  const OffsetScene s = MakeOffsetScene(q, 12);
+  std::vector<ceres::CostFunction*> costs;
+  for (Eigen::Index i = 0; i < 12; ++i) {
+    costs.push_back(
+        NewModernEulerCost(s.scene.pixels(i, 0), s.scene.pixels(i, 1), ReferenceInHand(s, i)));
+  }
+  const StackedJacobians j =
+      Differentiate(costs, ScalarBlocks(q), std::vector<const ceres::Manifold*>(14, nullptr));
+  EXPECT_LT(WorstColumnError(j), 1e-6);  // as above
+}
+
+TEST(Jacobians, PaperCostForwardDifferences) {
+  const Vector14d q = Generic();
+  const OffsetScene s = MakeOffsetScene(q, 12);
+  std::vector<ceres::CostFunction*> costs;
+  for (Eigen::Index i = 0; i < 12; ++i) {
+    costs.push_back(
+        NewPaperCost(s.scene.pixels(i, 0), s.scene.pixels(i, 1), ReferenceInHand(s, i)));
+  }
+  const StackedJacobians j =
+      Differentiate(costs, {std::vector<double>(q.data(), q.data() + kNumParams)}, {nullptr});
+  // The paper mode's own Jacobian is a forward difference (Ceres: step 1e-6 |x|, at least
+  // 1.5e-8), whose truncation error h f'' / 2 is largest where ||E|| (~1 mm) bends most:
+  // measured 2.9e-4 of the column scale. 2e-3 bounds it; a wrong derivative is off by O(1).
+  const double worst = WorstColumnError(j);
+  EXPECT_LT(worst, 2e-3);
+  EXPECT_GT(worst, 1e-9);  // it is a finite difference, not an exact derivative
+}
+
+}  // namespace
+}  // namespace hmlvs
