@@ -5,12 +5,17 @@
 
 PYTHON ?= python3
 APT_PACKAGES ?= libeigen3-dev libceres-dev
-TEST_APT_PACKAGES ?= chromium
+TEST_APT_PACKAGES ?= chromium libgtest-dev
 # CI (CI=true) builds with warnings as errors.
 PIP_FLAGS := --quiet $(if $(CI),--config-settings=cmake.define.HMLVS_WERROR=ON,)
+# make test builds the C++ tests in the extension's own CMake tree (the core compiles once).
+TEST_BUILD_DIR := build/test
+TEST_PIP_FLAGS := $(PIP_FLAGS) --config-settings=build-dir=$(TEST_BUILD_DIR) \
+	--config-settings=cmake.define.HMLVS_BUILD_TESTS=ON
+CPP_SOURCES = $(shell find cpp python/bindings bench -name '*.cpp' -o -name '*.h')
 SUDO := $(shell if [ "$$(id -u)" != 0 ] && command -v sudo >/dev/null 2>&1; then echo sudo; fi)
 
-.PHONY: deps test-deps install demo test bench clean
+.PHONY: deps test-deps install test-install style demo test bench clean
 
 # Install the Debian packages that are missing (apt-get update + install, as root or via sudo).
 define apt_install
@@ -35,9 +40,19 @@ install: deps
 demo: install
 	$(PYTHON) -m hmlvs demo
 
-# The suite, then the tests that use simulated sessions or images once more under another
-# BLAS kernel: a result that depends on the CPU's last bits fails here, not on a user's machine.
-test: test-deps install
+test-install: test-deps
+	$(PYTHON) -m pip install $(TEST_PIP_FLAGS) ".[test]"
+
+# ruff (Python) and clang-format (C++), the versions pinned in the test extras.
+style: test-install
+	$(PYTHON) -m ruff check .
+	clang-format --dry-run -Werror $(CPP_SOURCES)
+
+# Style, the C++ tests, the Python suite, then the tests that use simulated sessions or images
+# once more under another BLAS kernel: a result that depends on the CPU's last bits fails
+# here, not on a user's machine.
+test: test-install style
+	ctest --test-dir $(TEST_BUILD_DIR) --output-on-failure
 	$(PYTHON) -m pytest -q
 	OPENBLAS_CORETYPE=Prescott $(PYTHON) -m pytest -q -m scene
 

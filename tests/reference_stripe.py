@@ -1,6 +1,6 @@
 """An independent NumPy/OpenCV version of the stripe extraction, as a parity oracle.
 
-Written from the definitions in ``cpp/hmlvs/image.h`` (not from the C++ code): runs of
+Written from the definitions in ``cpp/hmlvs/image/image.h`` (not from the C++ code): runs of
 pixels above the threshold along each image column, their peak and full width at half
 maximum, the choice of one peak, and the three centre methods. Vectorised over columns,
 so that it is also a fair NumPy baseline for ``bench/bench_stripe.py``. Rows are handled by
