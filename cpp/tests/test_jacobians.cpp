@@ -48,6 +48,16 @@ Eigen::Vector3d ReferenceInHand(const OffsetScene& s, Eigen::Index i) {
          (s.references.row(i).transpose() - test::PosePosition(s.scene.poses, i));
 }
 
+// One residual block per point of the scene, made by `make(u, v, reference_in_hand)`.
+template <typename Make>
+std::vector<ceres::CostFunction*> CostsOf(const OffsetScene& s, Eigen::Index n, Make make) {
+  std::vector<ceres::CostFunction*> costs;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    costs.push_back(make(s.scene.pixels(i, 0), s.scene.pixels(i, 1), ReferenceInHand(s, i)));
+  }
+  return costs;
+}
+
 TEST(Jacobians, ResidualJacobianMatchesCentralDifferences) {
   const Vector14d q = Generic();
   const OffsetScene s = MakeOffsetScene(q, 25);
@@ -184,11 +194,7 @@ TEST(Jacobians, ModernQuaternionCostOnItsManifold) {
   ceres::EigenQuaternionManifold quaternion;
   std::vector<const ceres::Manifold*> manifolds(12, nullptr);
   manifolds[8] = &quaternion;
-  std::vector<ceres::CostFunction*> costs;
-  for (Eigen::Index i = 0; i < 12; ++i) {
-    costs.push_back(
-        NewModernQuaternionCost(s.scene.pixels(i, 0), s.scene.pixels(i, 1), ReferenceInHand(s, i)));
-  }
+  const std::vector<ceres::CostFunction*> costs = CostsOf(s, 12, NewModernQuaternionCost);
   const StackedJacobians j = Differentiate(costs, blocks, manifolds);
   ASSERT_EQ(j.analytic.cols(), 14);  // 8 + 3 (tangent of the quaternion) + 3
   // Autodiff is exact to rounding and the differences good to ~1e-9 (above); measured 1.4e-9.
@@ -199,11 +205,7 @@ TEST(Jacobians, ModernQuaternionCostOnItsManifold) {
 TEST(Jacobians, ModernEulerCost) {
   const Vector14d q = Generic();
   const OffsetScene s = MakeOffsetScene(q, 12);
-  std::vector<ceres::CostFunction*> costs;
-  for (Eigen::Index i = 0; i < 12; ++i) {
-    costs.push_back(
-        NewModernEulerCost(s.scene.pixels(i, 0), s.scene.pixels(i, 1), ReferenceInHand(s, i)));
-  }
+  const std::vector<ceres::CostFunction*> costs = CostsOf(s, 12, NewModernEulerCost);
   const StackedJacobians j =
       Differentiate(costs, ScalarBlocks(q), std::vector<const ceres::Manifold*>(14, nullptr));
   EXPECT_LT(WorstColumnError(j), 1e-6);  // as above
@@ -212,11 +214,7 @@ TEST(Jacobians, ModernEulerCost) {
 TEST(Jacobians, PaperCostForwardDifferences) {
   const Vector14d q = Generic();
   const OffsetScene s = MakeOffsetScene(q, 12);
-  std::vector<ceres::CostFunction*> costs;
-  for (Eigen::Index i = 0; i < 12; ++i) {
-    costs.push_back(
-        NewPaperCost(s.scene.pixels(i, 0), s.scene.pixels(i, 1), ReferenceInHand(s, i)));
-  }
+  const std::vector<ceres::CostFunction*> costs = CostsOf(s, 12, NewPaperCost);
   const StackedJacobians j =
       Differentiate(costs, {std::vector<double>(q.data(), q.data() + kNumParams)}, {nullptr});
   // The paper mode's own Jacobian is a forward difference (Ceres: step 1e-6 |x|, at least

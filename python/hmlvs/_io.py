@@ -1,4 +1,5 @@
-"""Atomic file output: write to a temporary file beside the target, then rename."""
+"""File access shared by every reader and writer: input files that must exist, and atomic
+output (write to a temporary file beside the target, then rename)."""
 
 from __future__ import annotations
 
@@ -34,3 +35,11 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", encoding: str | None 
         except FileNotFoundError:
             pass
         raise
+
+
+def existing_file(path: str | os.PathLike, what: str) -> Path:
+    """``path`` as a Path; ValueError "<path>: no such <what>" unless it is a file."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such {what}")
+    return path

@@ -119,20 +119,23 @@ void ValidatePoses(PosesRef poses) {
   }
 }
 
-PointsResult CameraPointsFromPixels(const Vector14d& q, PixelsRef pixels, bool throw_on_invalid) {
-  ValidateParams(q);
-  RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
+namespace {
+
+// Pixels -> points with a validity mask: `point_of(i, u, v, point)` writes pixel i's point and
+// returns the laser-plane test (> 0 where the ray meets the plane in front of the camera).
+template <typename PointOf>
+PointsResult MapPixels(const Vector14d& q, PixelsRef pixels, bool throw_on_invalid,
+                       PointOf point_of) {
   const Eigen::Index m = pixels.rows();
   PointsResult out;
   out.points.resize(m, 3);
   out.valid.resize(m);
-  const double tan_theta = std::tan(q[kTheta]);
   for (Eigen::Index i = 0; i < m; ++i) {
-    double cp[3];
+    double point[3];
     const double u = pixels(i, 0), v = pixels(i, 1);
-    const double plane = PixelToCamera(q.data(), tan_theta, u, v, cp);
+    const double plane = point_of(i, u, v, point);
     if (plane > 0.0) {
-      out.points.row(i) << cp[0], cp[1], cp[2];
+      out.points.row(i) << point[0], point[1], point[2];
       out.valid[i] = 1;
     } else {
       if (throw_on_invalid) ThrowMissedPlane(q, i, u, v, plane);
@@ -144,34 +147,31 @@ PointsResult CameraPointsFromPixels(const Vector14d& q, PixelsRef pixels, bool t
   return out;
 }
 
+}  // namespace
+
+PointsResult CameraPointsFromPixels(const Vector14d& q, PixelsRef pixels, bool throw_on_invalid) {
+  ValidateParams(q);
+  RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
+  const double tan_theta = std::tan(q[kTheta]);
+  return MapPixels(q, pixels, throw_on_invalid,
+                   [&](Eigen::Index, double u, double v, double* point) {
+                     return PixelToCamera(q.data(), tan_theta, u, v, point);
+                   });
+}
+
 PointsResult BasePointsFromPixels(const Vector14d& q, PixelsRef pixels, PosesRef poses,
                                   bool throw_on_invalid) {
   RequireSameRows(pixels.rows(), "pixels", poses.rows(), "poses");
   ValidatePoses(poses);
   ValidateParams(q);
   RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
-  const Eigen::Index m = pixels.rows();
-  PointsResult out;
-  out.points.resize(m, 3);
-  out.valid.resize(m);
   const Eigen::Matrix3d hand_from_camera_rot = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
   const double tan_theta = std::tan(q[kTheta]);
-  for (Eigen::Index i = 0; i < m; ++i) {
-    double bp[3];
-    const double u = pixels(i, 0), v = pixels(i, 1);
-    const double plane = PixelToBase(q.data(), hand_from_camera_rot, tan_theta, u, v,
-                                     PoseRotation(poses, i), PosePosition(poses, i), bp);
-    if (plane > 0.0) {
-      out.points.row(i) << bp[0], bp[1], bp[2];
-      out.valid[i] = 1;
-    } else {
-      if (throw_on_invalid) ThrowMissedPlane(q, i, u, v, plane);
-      out.points.row(i).setConstant(kNaN);
-      out.valid[i] = 0;
-      ++out.num_invalid;
-    }
-  }
-  return out;
+  return MapPixels(q, pixels, throw_on_invalid,
+                   [&](Eigen::Index i, double u, double v, double* point) {
+                     return PixelToBase(q.data(), hand_from_camera_rot, tan_theta, u, v,
+                                        PoseRotation(poses, i), PosePosition(poses, i), point);
+                   });
 }
 
 RowMatX3 Residuals(const Vector14d& q, PixelsRef pixels, PosesRef poses, Points3Ref references) {

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .._io import atomic_write
+from .._io import atomic_write, existing_file
 from ..geometry.robot import Robot
 from ..models.paper import hand_from_camera
 from ..models.params import NAMES, UNITS, Parameters
@@ -122,9 +122,7 @@ class Calibration:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "Calibration":
-        path = Path(path)
-        if not path.is_file():
-            raise ValueError(f"{path}: no such calibration file")
+        path = existing_file(path, "calibration file")
         try:
             text = path.read_text(encoding="utf-8")
             d = json.loads(text) if path.suffix == ".json" else yaml.safe_load(text)

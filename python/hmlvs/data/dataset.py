@@ -12,7 +12,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .._arrays import as_matrix, same_rows
-from .._io import atomic_write
+from .._io import atomic_write, existing_file
 from ..models.paper import validate_poses
 
 FORMAT = "hmlvs-dataset"
@@ -215,9 +215,7 @@ class Dataset:
     @classmethod
     def load(cls, path: str | os.PathLike) -> "Dataset":
         """Read a data set written by :meth:`save` (``.npz`` or ``.json``)."""
-        path = Path(path)
-        if not path.is_file():
-            raise ValueError(f"{path}: no such data set file")
+        path = existing_file(path, "data set file")
         try:
             if path.suffix == ".npz":
                 with np.load(path, allow_pickle=False) as z:
