@@ -48,6 +48,7 @@ _EXPORTS = {
     "GimbalLockWarning": "diagnostics.identifiability",
     "AtBoundWarning": "diagnostics.identifiability",
     "DiagnosticsFailedWarning": "diagnostics.identifiability",
+    "SetupWarning": "diagnostics.identifiability",
     "warning_category": "diagnostics.identifiability",
     "IdentifiabilityReport": "diagnostics.identifiability",
     "identifiability": "diagnostics.identifiability",

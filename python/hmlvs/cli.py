@@ -713,5 +713,32 @@ def scenario(
                                                     for f in result.files.values()))
 
 
+def _command():
+    """The click command of ``app``, with flags shown without a type placeholder in the help
+    (``--json  Print ...`` rather than ``--json <bool>  Print ...``)."""
+    import click
+
+    cmd = typer.main.get_command(app)
+
+    def strip(c: click.Command) -> None:
+        for p in c.params:
+            if getattr(p, "is_flag", False) or getattr(p, "count", False):
+                p.metavar = ""
+        original = c.get_help_option
+
+        def help_option(ctx: click.Context, _original=original):
+            opt = _original(ctx)
+            if opt is not None:
+                opt.metavar = ""
+            return opt
+
+        c.get_help_option = help_option  # type: ignore[method-assign]
+        for sub in getattr(c, "commands", {}).values():
+            strip(sub)
+
+    strip(cmd)
+    return cmd
+
+
 def main(argv: Optional[list[str]] = None) -> None:
-    app(args=argv)
+    _command().main(args=argv, prog_name="hmlvs")

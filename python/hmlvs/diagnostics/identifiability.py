@@ -121,6 +121,13 @@ class AtBoundWarning(HmlvsDataWarning):
     kind = "at-bound"
 
 
+class SetupWarning(HmlvsDataWarning):
+    """A simulated set-up (board, stand-off, image size) does not suit the sensor: many views
+    would not show enough of the board to be used."""
+
+    kind = "setup"
+
+
 class DiagnosticsFailedWarning(HmlvsDataWarning):
     """The identifiability or uncertainty analysis could not be computed."""
 
@@ -146,6 +153,8 @@ def warning_category(message: str) -> type[HmlvsDataWarning]:
         return AtBoundWarning
     if "not computed" in m:
         return DiagnosticsFailedWarning
+    if "views cannot be used" in m:
+        return SetupWarning
     return HmlvsDataWarning
 
 
