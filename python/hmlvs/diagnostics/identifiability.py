@@ -145,7 +145,7 @@ def warning_category(message: str) -> type[HmlvsDataWarning]:
         return TooFewPointsWarning
     if "nearly the same hand pose" in m or "lie on one image line" in m:
         return PoseVarietyWarning
-    if "gimbal lock" in m and "direction" not in m:
+    if "gimbal lock" in m:
         return GimbalLockWarning
     if "direction among the free parameters" in m or "rank-deficient" in m:
         return FlatDirectionWarning
