@@ -496,7 +496,8 @@ def design(
     width: int = typer.Option(640, help="Image width (px)."),
     height: int = typer.Option(480, help="Image height (px)."),
     baseline: float = typer.Option(100.0, "--H", "--baseline", help="Laser baseline H (mm)."),
-    theta: float = typer.Option(25.0, help="Laser projection angle (deg)."),
+    theta: float = typer.Option(25.0, help="Laser projection angle (deg; like every angle "
+                                "given on the command line; results are in rad)."),
     k: float = typer.Option(0.0, help="Radial distortion k (1/mm^2), division model."),
     true_h: Optional[float] = typer.Option(
         None, "--true-H", help="The real H for the Fig. 6 error (mm); default H - 1."),
@@ -527,7 +528,15 @@ def design(
         ]
         files = []
         if out is not None:
-            files = dsg.plot(report, out, errors=errors)
+            if as_json:
+                files = dsg.plot(report, out, errors=errors)
+            else:
+                from rich.console import Console
+
+                with Console(stderr=True).status(f"writing the design plots to {out} (about "
+                                                 "10-30 s)"):
+                    files = dsg.plot(report, out, errors=errors)
+                typer.echo(f"plots written to {out}", err=True)
             md = out / "design.md"
             with atomic_write(md) as fh:
                 fh.write(report.markdown(errors=errors, files=files))
