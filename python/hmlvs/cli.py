@@ -45,7 +45,7 @@ def _guard(as_json: bool = False) -> Iterator[None]:
 # with the camera mounted a few degrees off the hand's axes, as a real mounting is. At the
 # exact nominal (phi = 0) the ZYZ Euler angles sit on their gimbal lock and omega, varphi
 # separately mean nothing (docs/glossary.md); a generic mounting gives a determined result.
-MOUNTING_DEG = (3.0, 6.0, -2.0)  # omega, phi, varphi (deg)
+MOUNTING_DEG = (1.0, 2.0, -1.0)  # omega, phi, varphi (deg)
 
 
 def _truth(mounting_deg) -> "object":
@@ -176,6 +176,17 @@ def _main(
     Units: mm and pixels; angles on the command line are in degrees (design --theta),
     angles in results are in radians. Terms used in messages: docs/glossary.md.
     """
+
+
+def _is_manifest(path: Path) -> bool:
+    """An image manifest: a folder, ``manifest.json``/``.yaml``, or a JSON/YAML file whose
+    format is ``hmlvs-images``."""
+    if path.is_dir() or path.name in ("manifest.json", "manifest.yaml", "manifest.yml"):
+        return True
+    if path.suffix.lower() in (".json", ".yaml", ".yml") and path.is_file():
+        with open(path, "rb") as fh:
+            return b"hmlvs-images" in fh.read(4096)
+    return False
 
 
 def _solve_progress(quiet: bool):
@@ -349,7 +360,7 @@ def demo(
     """Simulate a SCORBOT ER-VII session, calibrate it (PSO + LM), compare with the truth.
 
     The true sensor is the paper's nominal one (Table 2) with the camera mounted slightly
-    rotated (omega 3, phi 6, varphi -2 deg). Su, Sv, Cu and Cv are held at their
+    rotated (omega 1, phi 2, varphi -1 deg). Su, Sv, Cu and Cv are held at their
     datasheet values, as MODEL.md says the laser data need; the other ten are estimated.
 
     Example: hmlvs demo --seed 1 --poses 60
@@ -435,7 +446,7 @@ def calibrate(
     image_reports = []
     with _guard(as_json), _collect_warnings() as caught:
         fixed_names, why = _resolve_fixed(fixed, free)
-        if data.is_dir() or data.name == "manifest.json":
+        if _is_manifest(data):
             from .image.session import dataset_from_images
 
             ds, image_reports = dataset_from_images(data, mode=mode)
@@ -580,7 +591,7 @@ def report(
     with _guard(as_json):
         cal = Calibration.load(calibration)
         image_reports = None
-        if data.is_dir() or data.name == "manifest.json":
+        if _is_manifest(data):
             from .image.session import dataset_from_images
 
             ds, image_reports = dataset_from_images(data, mode=mode)
