@@ -95,6 +95,9 @@ def _gather(caught: list, *texts: object) -> list[dict]:
 
     messages: list[tuple[str, str]] = []
     for w in caught:
+        if issubclass(w.category, (DeprecationWarning, PendingDeprecationWarning,
+                                   ImportWarning, ResourceWarning)):
+            continue  # for developers, hidden by Python's default filters too
         if issubclass(w.category, HmlvsDataWarning):
             messages.append((str(w.message), ""))
         else:
