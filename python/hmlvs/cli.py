@@ -26,14 +26,170 @@ def _guard(as_json: bool = False) -> Iterator[None]:
     try:
         yield
     except ValueError as e:
-        msg = " ".join(str(e).split())
+        # A message of several lines (e.g. one per rejected image pair) keeps its lines;
+        # whitespace inside a line is collapsed.
+        lines = [" ".join(line.split()) for line in str(e).splitlines()]
+        lines = [line for line in lines if line] or [""]
         if as_json:
-            typer.echo(json.dumps({"error": msg}))
-        typer.echo(f"error: {msg}", err=True)
+            typer.echo(json.dumps({"error": "\n".join(lines)}))
+        typer.echo(f"error: {lines[0]}", err=True)
+        for line in lines[1:]:
+            typer.echo(f"  {line}", err=True)
         raise typer.Exit(2) from None
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
         raise typer.Exit(130) from None
+
+
+# The simulated true sensor of `demo` and `simulate`: the paper's nominal values (Table 2)
+# with the camera mounted a few degrees off the hand's axes, as a real mounting is. At the
+# exact nominal (phi = 0) the ZYZ Euler angles sit on their gimbal lock and omega, varphi
+# separately mean nothing (docs/glossary.md); a generic mounting gives a determined result.
+MOUNTING_DEG = (1.0, 2.0, -1.0)  # omega, phi, varphi (deg)
+
+
+def _truth(mounting_deg) -> "object":
+    import math
+
+    from .models.params import Parameters
+
+    om, ph, va = (math.radians(float(a)) for a in mounting_deg)
+    return Parameters.nominal().replace(omega=om, phi=ph, varphi=va)
+
+
+GLOSSARY_URL = "docs/glossary.md"
+
+# What the command line holds fixed unless told otherwise: the scale gauge (Su) and the
+# three parameters the laser data cannot separate from the camera's position and tilt
+# (Sv, Cu, Cv; MODEL.md, "What the data can and cannot determine"). Give them from the
+# camera's datasheet or a prior camera calibration.
+DEFAULT_FIXED = ("Su", "Sv", "Cu", "Cv")
+_FIXED_WHY = {
+    "Su": "scale gauge: f, Su, Sv, k scale together, so one of them must be given",
+    "Sv": "with k = 0 the camera's shift along its y axis is absorbed by H, Sv and Cv",
+    "Cu": "with Su, Sv and Cv, removes the last flat directions of the paper's data",
+    "Cv": "mixes with the camera's y/z position and tilt about its x axis",
+}
+
+_GLOSSARY_ANCHOR = {
+    "flat-direction": "flat-direction", "too-few-points": "too-few-points",
+    "pose-variety": "pose-variety", "gimbal-lock": "zyz-gimbal-lock",
+    "at-bound": "at-a-bound", "diagnostics": "diagnostics", "data": "data-warning",
+}
+
+
+@contextmanager
+def _collect_warnings() -> Iterator[list]:
+    """Record every warning raised inside (instead of printing it with a source line)."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield caught
+
+
+def _gather(caught: list, *texts: object) -> list[dict]:
+    """Every data warning once: the recorded Python warnings, then the ``warning: ...`` lines
+    and warning lists of results; each as {"kind", "message", "see"}."""
+    from .diagnostics.identifiability import HmlvsDataWarning, warning_category
+
+    messages: list[tuple[str, str]] = []
+    for w in caught:
+        if issubclass(w.category, (DeprecationWarning, PendingDeprecationWarning,
+                                   ImportWarning, ResourceWarning)):
+            continue  # for developers, hidden by Python's default filters too
+        if issubclass(w.category, HmlvsDataWarning):
+            messages.append((str(w.message), ""))
+        else:
+            messages.append((str(w.message), w.category.__name__))
+    for t in texts:
+        if t is None:
+            continue
+        if isinstance(t, str):
+            messages += [(line[len("warning: "):], "") for line in t.splitlines()
+                         if line.startswith("warning: ")]
+        else:
+            messages += [(str(m), "") for m in t]
+    out, seen = [], set()
+    for msg, other in messages:
+        key = " ".join(msg.split())
+        if key in seen:
+            continue
+        seen.add(key)
+        kind = warning_category(msg).kind if not other else other
+        anchor = _GLOSSARY_ANCHOR.get(kind)
+        out.append({"kind": kind, "message": key,
+                    "see": f"{GLOSSARY_URL}#{anchor}" if anchor else None})
+    return out
+
+
+def _without_warning_lines(text: str) -> str:
+    """A result summary without its ``warning:`` lines (they are shown once, separately)."""
+    return "\n".join(line for line in text.splitlines() if not line.startswith("warning: "))
+
+
+def _show_warnings(items: list[dict]) -> None:
+    """Each warning once, on stderr, formatted with rich, without a source-code line."""
+    if not items:
+        return
+    from rich.console import Console
+    from rich.markup import escape
+
+    console = Console(stderr=True, highlight=False, soft_wrap=True)
+    for w in items:
+        see = f" [dim](see {w['see']})[/dim]" if w["see"] else ""
+        console.print(f"[bold yellow]warning[/bold yellow] [yellow]{escape(w['kind'])}[/yellow]: "
+                      f"{escape(w['message'])}{see}")
+
+
+def _resolve_fixed(fixed: list[str], free: list[str]) -> tuple[tuple[str, ...], list[str]]:
+    """The parameters to hold fixed: the default gauge plus --fixed, minus --free;
+    ``--fixed none`` frees everything. Also one line per fixed parameter saying why."""
+    from .models.params import NAMES
+
+    names = [f for f in fixed]
+    if [n.lower() for n in names] == ["none"]:
+        chosen: list[str] = []
+    else:
+        chosen = list(DEFAULT_FIXED) + [n for n in names if n not in DEFAULT_FIXED]
+    for n in chosen + list(free):
+        if n not in NAMES:
+            raise ValueError(f"unknown parameter {n!r} in --fixed/--free; the parameters are "
+                             + ", ".join(NAMES))
+    chosen = [n for n in chosen if n not in free]
+    why = [f"{n}: {_FIXED_WHY.get(n, 'held fixed on request (--fixed)')}" for n in chosen]
+    return tuple(chosen), why
+
+
+def _version_callback(value: bool) -> None:
+    if value:
+        from . import __version__
+
+        typer.echo(f"hmlvs {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: bool = typer.Option(False, "--version", callback=_version_callback,
+                                 is_eager=True, help="Print the version and exit."),
+) -> None:
+    """Calibrate and use a hand-mounted laser-vision sensor.
+
+    Units: mm and pixels; angles on the command line are in degrees (design --theta),
+    angles in results are in radians. Terms used in messages: docs/glossary.md.
+    """
+
+
+def _is_manifest(path: Path) -> bool:
+    """An image manifest: a folder, ``manifest.json``/``.yaml``, or a JSON/YAML file whose
+    format is ``hmlvs-images``."""
+    if path.is_dir() or path.name in ("manifest.json", "manifest.yaml", "manifest.yml"):
+        return True
+    if path.suffix.lower() in (".json", ".yaml", ".yml") and path.is_file():
+        with open(path, "rb") as fh:
+            return b"hmlvs-images" in fh.read(4096)
+    return False
 
 
 def _solve_progress(quiet: bool):
@@ -71,68 +227,180 @@ def _echo_json(obj: object) -> None:
 def simulate(
     out: Path = typer.Argument(..., help="Data set file to write (.npz or .json)."),
     poses: int = typer.Option(30, help="Number of robot poses in the session."),
-    pixel_noise: float = typer.Option(0.0, help="Pixel noise, standard deviation (px)."),
+    pixel_noise: float = typer.Option(
+        0.0, help="Noise added to the stripe pixels of the data set, standard deviation (px). "
+        "It does not apply to rendered images (--images): they carry --image-noise instead, "
+        "and the pixels extracted from them have the extractor's own error."),
     point_noise: float = typer.Option(0.0, help="Reference-point noise, std (mm)."),
     images: Optional[Path] = typer.Option(
         None, help="Also render laser on/off images of every pose into this folder, with a "
         "manifest.json pairing each image pair with its joint readings."),
+    image_noise: float = typer.Option(
+        0.0, help="Sensor noise of the rendered images, standard deviation (grey levels of "
+        "0-255; default 0: noise-free images)."),
+    mounting: tuple[float, float, float] = typer.Option(
+        MOUNTING_DEG, help="The true hand-eye rotation as ZYZ Euler angles omega phi varphi "
+        "(deg); the rest of the true sensor is the paper's nominal (Table 2)."),
     seed: int = typer.Option(0, help="Random seed."),
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar and no warnings "
+                               "on the terminal (--json collects them)."),
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary, warnings included."),
 ) -> None:
     """Simulate a checkerboard calibration session (SCORBOT ER-VII, paper set-up).
 
-    Example: hmlvs simulate session.npz --poses 24 --images session-images
+    Example: hmlvs simulate session.npz --poses 60 --images session
     """
     from . import sim
+    from .sim.render import RenderOptions
 
-    with _guard(as_json):
-        s = sim.session(num_poses=poses, pixel_noise=pixel_noise, point_noise=point_noise,
-                        seed=seed)
+    with _guard(as_json), _collect_warnings() as caught:
+        s = sim.session(_truth(mounting), num_poses=poses, pixel_noise=pixel_noise,
+                        point_noise=point_noise, seed=seed)
         s.dataset.save(out)
         manifest = None
         if images is not None:
-            manifest = sim.render_session(s, images, progress=_bar(
-                f"rendering {poses} image pairs", as_json)).manifest
+            manifest = sim.render_session(
+                s, images, options=RenderOptions(noise=image_noise), seed=seed,
+                progress=_bar(f"rendering {poses} image pairs", as_json or quiet)).manifest
+    warns = _gather(caught)
     if as_json:
         _echo_json({"file": str(out), "points": len(s.dataset), "poses": s.dataset.num_poses,
-                    "manifest": None if manifest is None else str(manifest)})
+                    "manifest": None if manifest is None else str(manifest),
+                    "warnings": warns})
     else:
         typer.echo(s.summary())
+        if not quiet:
+            _show_warnings(warns)
         typer.echo(f"written to {out}" + (f" and {manifest}" if manifest else ""))
+
+
+def _rotation_vector(params) -> "list[float]":
+    """hand_from_camera's rotation as a rotation vector (axis times angle, rad)."""
+    import numpy as np
+
+    from .models.paper import hand_from_camera
+
+    r = hand_from_camera(params)[:3, :3]
+    cos = float(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0))
+    angle = float(np.arccos(cos))
+    if angle < 1e-12:
+        return [0.0, 0.0, 0.0]
+    axis = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    if np.sin(angle) > 1e-6:
+        axis = axis / (2.0 * np.sin(angle))
+    else:  # angle near pi
+        axis = np.sqrt(np.clip((np.diag(r) + 1.0) / 2.0, 0.0, None))
+    axis = axis / np.linalg.norm(axis)
+    return [float(x) for x in axis * angle]
+
+
+def _rotation_text(params, truth=None) -> str:
+    """The hand-eye rotation in words: a rotation vector, the ZYZ Euler angles as the
+    paper's view."""
+    rv = _rotation_vector(params)
+    text = ("hand-eye rotation (hand_from_camera) as a rotation vector (axis x angle, rad): "
+            f"[{rv[0]:+.5f}, {rv[1]:+.5f}, {rv[2]:+.5f}], {sum(x * x for x in rv) ** 0.5:.5f} "
+            "rad about its axis")
+    if truth is not None:
+        tv = _rotation_vector(truth)
+        text += f"; true [{tv[0]:+.5f}, {tv[1]:+.5f}, {tv[2]:+.5f}]"
+    return text + ("\n  (omega, phi, varphi in the table are the same rotation as the paper's "
+                   "ZYZ Euler angles; near phi = 0 they are not unique, see "
+                   f"{GLOSSARY_URL}#zyz-gimbal-lock)")
+
+
+def _determined(result) -> tuple[list[str], list[str]]:
+    """Free parameters the data determine, and those they do not (from the uncertainty)."""
+    unc = result.uncertainty
+    free = list(result.free)
+    if unc is None:
+        return [], free
+    return ([n for n in free if unc.determined.get(n, False)],
+            [n for n in free if not unc.determined.get(n, False)])
+
+
+def _demo_verdict(result, truth, fixed_why: list[str]) -> tuple[str, dict]:
+    """The demo's summary in words, and the same as JSON."""
+    det, undet = _determined(result)
+    unc = result.uncertainty
+    lines = ["", "What the numbers mean:",
+             f"- fit RMS {result.fit_rms:.3g} mm: the 3D distance between the reference points "
+             "and the points the calibrated model computes from their stripe pixels, on the "
+             "points used for fitting;",
+             f"- held-out RMS {result.test_rms:.3g} mm: the same on poses the calibration never "
+             "saw, the accuracy to expect when measuring;"]
+    lines.append("- held fixed (given, not estimated): " + "; ".join(fixed_why))
+    worst = []
+    if unc is not None:
+        for n in det:
+            std = unc.std.get(n, 0.0)
+            diff = abs(getattr(result.params, n) - getattr(truth, n))
+            if std > 0:
+                worst.append((diff / std, n))
+    if undet:
+        lines.append(f"- NOT determined by the data: {', '.join(undet)} (their values are one of "
+                     f"many that fit equally well; see {GLOSSARY_URL}#flat-direction)")
+    else:
+        lines.append(f"- determined by the data: all {len(det)} free parameters "
+                     f"({', '.join(det)}); each lies within "
+                     f"{max(worst)[0]:.1f} standard deviations of the truth" if worst else
+                     f"- determined by the data: all {len(det)} free parameters")
+    return "\n".join(lines), {"determined": det, "not_determined": undet,
+                               "max_error_in_std": max(worst)[0] if worst else None}
 
 
 @app.command()
 def demo(
     seed: int = typer.Option(0, help="Random seed."),
-    poses: int = typer.Option(40, help="Number of robot poses."),
+    poses: int = typer.Option(60, help="Number of robot poses (about 1.8 points each; half "
+                              "fit, half held out)."),
     pixel_noise: float = typer.Option(0.1, help="Pixel noise, standard deviation (px)."),
     out: Path = typer.Option(Path("demo-out"), help="Folder for the calibration file."),
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar and no warnings "
+                               "on the terminal (use --json to get them)."),
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary, warnings included."),
 ) -> None:
     """Simulate a SCORBOT ER-VII session, calibrate it (PSO + LM), compare with the truth.
 
-    Example: hmlvs demo --seed 1 --poses 40
+    The true sensor is the paper's nominal one (Table 2) with the camera mounted slightly
+    rotated (omega 1, phi 2, varphi -1 deg). Su, Sv, Cu and Cv are held at their
+    datasheet values, as MODEL.md says the laser data need; the other ten are estimated.
+
+    Example: hmlvs demo --seed 1 --poses 60
     """
     from . import sim
     from .calibration.solvers import calibrate as run_calibration
     from .data.calibration_file import Calibration
-
-    with _guard(as_json):
-        session = sim.session(num_poses=poses, pixel_noise=pixel_noise, seed=seed)
+    truth = _truth(MOUNTING_DEG)
+    fixed, why = _resolve_fixed([], [])
+    with _guard(as_json), _collect_warnings() as caught:
+        session = sim.session(truth, num_poses=poses, pixel_noise=pixel_noise, seed=seed)
         fit, test = session.dataset.split(0.5, seed=seed, by_pose=True)
         if not as_json:
             typer.echo(session.summary())
             typer.echo(f"fit: {len(fit)} points from {fit.num_poses} poses; held out: "
                        f"{len(test)} points from {test.num_poses} poses\n")
-        result = run_calibration(fit, test=test, seed=seed, progress=_solve_progress(as_json))
+        result = run_calibration(fit, test=test, seed=seed, fixed=fixed,
+                                 progress=_solve_progress(as_json or quiet))
         path = Calibration.from_result(result, fit, robot=session.robot).save(
             out / "calibration.yaml")
+    summary = result.summary(session.truth)
+    warns = _gather(caught, result.warnings, summary)
+    verdict, verdict_json = _demo_verdict(result, session.truth, why)
     if as_json:
         _echo_json({"points": len(session.dataset), "poses": session.dataset.num_poses,
                     "fit_rms_mm": result.fit_rms, "test_rms_mm": result.test_rms,
-                    "seconds": result.seconds, "calibration": str(path)})
+                    "seconds": result.seconds, "calibration": str(path),
+                    "fixed": list(result.fixed), **verdict_json,
+                    "rotation_vector_rad": _rotation_vector(result.params),
+                    "true_rotation_vector_rad": _rotation_vector(session.truth),
+                    "warnings": warns})
         return
-    typer.echo(result.summary(session.truth))
+    typer.echo(_without_warning_lines(summary))
+    typer.echo(_rotation_text(result.params, session.truth))
+    typer.echo(verdict)
+    if not quiet:
+        _show_warnings(warns)
     typer.echo(f"\ncalibration written to {path}")
 
 
@@ -146,8 +414,12 @@ def calibrate(
     test: Optional[Path] = typer.Option(None, help="Held-out data set for the test RMS."),
     holdout: float = typer.Option(0.0, help="Fraction of poses held out for testing when "
                                   "no --test is given (0 = none)."),
-    fixed: list[str] = typer.Option(["Su"], "--fixed", help="Parameter held at its initial "
-                                    "value (repeat the option); --fixed none frees all."),
+    fixed: list[str] = typer.Option(
+        [], "--fixed", help="Parameter held at its initial value, in addition to the default "
+        "gauge Su, Sv, Cu, Cv (repeat the option); --fixed none frees all."),
+    free: list[str] = typer.Option(
+        [], "--free", help="Parameter of the default gauge to estimate instead (repeat the "
+        "option), e.g. --free Cu."),
     runs: int = typer.Option(1, help="Independent PSO runs (the best is kept)."),
     iterations: int = typer.Option(5000, help="PSO iterations."),
     loss: Optional[str] = typer.Option(None, help="Robust loss for LM: huber or cauchy."),
@@ -159,9 +431,14 @@ def calibrate(
                              "paper's) or homography (every stripe point on the board)."),
     save_data: Optional[Path] = typer.Option(None, help="Save the data set extracted from "
                                              "images here (.npz or .json)."),
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, no per-image "
+                               "lines and no warnings on the terminal (--json collects them)."),
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary, warnings included."),
 ) -> None:
     """Identify the sensor parameters from a calibration data set or laser on/off images.
+
+    Su, Sv, Cu and Cv are held at their initial (datasheet) values by default: laser points
+    alone cannot determine them (MODEL.md; docs/glossary.md, "scale gauge", "flat direction").
 
     Example: hmlvs calibrate session.npz --holdout 0.3 --out calibration.yaml --report report.html
     """
@@ -170,12 +447,13 @@ def calibrate(
     from .data.dataset import Dataset
 
     image_reports = []
-    with _guard(as_json):
-        if data.is_dir() or data.name == "manifest.json":
+    with _guard(as_json), _collect_warnings() as caught:
+        fixed_names, why = _resolve_fixed(fixed, free)
+        if _is_manifest(data):
             from .image.session import dataset_from_images
 
             ds, image_reports = dataset_from_images(data, mode=mode)
-            if not as_json:
+            if not (as_json or quiet):
                 for r in image_reports:
                     typer.echo(str(r))
             if save_data is not None:
@@ -185,28 +463,41 @@ def calibrate(
         test_ds = Dataset.load(test) if test is not None else None
         if test_ds is None and holdout > 0:
             ds, test_ds = ds.split(1.0 - holdout, seed=seed, by_pose=True)
-        fixed_names = () if [f.lower() for f in fixed] == ["none"] else tuple(fixed)
         result = run_calibration(ds, method=method, test=test_ds, fixed=fixed_names, runs=runs,
                                  iterations=iterations, loss=loss, loss_scale=loss_scale,
                                  seed=seed, threads=threads,
-                                 progress=_solve_progress(as_json))
+                                 progress=_solve_progress(as_json or quiet))
         path = Calibration.from_result(result, ds).save(out)
         report_path = None
         if report is not None:
             from .report.html import write_report
 
-            report_path = write_report(result, ds, report, test=test_ds)
+            report_path = write_report(result, ds, report, test=test_ds,
+                                       image_reports=image_reports)
+    summary = result.summary()
+    warns = _gather(caught, result.warnings, summary)
+    det, undet = _determined(result)
     if as_json:
         _echo_json({"calibration": str(path), "report": None if report_path is None
                     else str(report_path), "fit_rms_mm": result.fit_rms,
                     "test_rms_mm": result.test_rms, "method": method,
                     "parameters": result.params.to_dict(), "fixed": list(result.fixed),
+                    "determined": det, "not_determined": undet,
+                    "rotation_vector_rad": _rotation_vector(result.params),
                     "termination": result.termination, "seconds": result.seconds,
-                    "warnings": result.warnings,
+                    "warnings": warns,
                     "images": [{"id": r.id, "ok": r.ok, "reason": r.reason,
-                                "points": r.points} for r in image_reports]})
+                                "points": r.points, "rejected": dict(r.rejected)}
+                               for r in image_reports]})
         return
-    typer.echo(result.summary())
+    typer.echo(_without_warning_lines(summary))
+    typer.echo(_rotation_text(result.params))
+    typer.echo("held fixed: " + ("; ".join(why) if why else "nothing (--fixed none)"))
+    typer.echo("determined by the data: " + (", ".join(det) or "none")
+               + ("; NOT determined: " + ", ".join(undet)
+                  + f" (see {GLOSSARY_URL}#flat-direction)" if undet else ""))
+    if not quiet:
+        _show_warnings(warns)
     typer.echo(f"calibration written to {path}")
     if report_path is not None:
         typer.echo(f"report written to {report_path}")
@@ -219,7 +510,8 @@ def design(
     width: int = typer.Option(640, help="Image width (px)."),
     height: int = typer.Option(480, help="Image height (px)."),
     baseline: float = typer.Option(100.0, "--H", "--baseline", help="Laser baseline H (mm)."),
-    theta: float = typer.Option(25.0, help="Laser projection angle (deg)."),
+    theta: float = typer.Option(25.0, help="Laser projection angle (deg; like every angle "
+                                "given on the command line; results are in rad)."),
     k: float = typer.Option(0.0, help="Radial distortion k (1/mm^2), division model."),
     true_h: Optional[float] = typer.Option(
         None, "--true-H", help="The real H for the Fig. 6 error (mm); default H - 1."),
@@ -250,7 +542,15 @@ def design(
         ]
         files = []
         if out is not None:
-            files = dsg.plot(report, out, errors=errors)
+            if as_json:
+                files = dsg.plot(report, out, errors=errors)
+            else:
+                from rich.console import Console
+
+                with Console(stderr=True).status(f"writing the design plots to {out} (about "
+                                                 "10-30 s)"):
+                    files = dsg.plot(report, out, errors=errors)
+                typer.echo(f"plots written to {out}", err=True)
             md = out / "design.md"
             with atomic_write(md) as fh:
                 fh.write(report.markdown(errors=errors, files=files))
@@ -274,12 +574,15 @@ def design(
 @app.command()
 def report(
     calibration: Path = typer.Argument(..., help="Calibration file (.yaml or .json)."),
-    data: Path = typer.Argument(..., help="Data set to evaluate on (.npz or .json)."),
+    data: Path = typer.Argument(..., help="Data set to evaluate on (.npz or .json), or an "
+                                "image manifest (a folder with manifest.json, or the file)."),
     test: Optional[Path] = typer.Option(None, help="Held-out data set."),
     out: Path = typer.Option(Path("report.html"), "--out", "-o", help="HTML file to write."),
+    mode: str = typer.Option("corners", help="Calibration points from images: corners or "
+                             "homography (as for calibrate)."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
-    """Write a self-contained HTML report for a calibration file on a data set.
+    """Write a self-contained HTML report for a calibration file on a data set or images.
 
     Example: hmlvs report calibration.yaml session.npz --out report.html
     """
@@ -290,11 +593,18 @@ def report(
 
     with _guard(as_json):
         cal = Calibration.load(calibration)
-        ds = Dataset.load(data)
+        image_reports = None
+        if _is_manifest(data):
+            from .image.session import dataset_from_images
+
+            ds, image_reports = dataset_from_images(data, mode=mode)
+        else:
+            ds = Dataset.load(data)
         test_ds = Dataset.load(test) if test is not None else None
         result = evaluate(cal.params, ds, test_ds, method=cal.method or "loaded",
                           fixed=cal.fixed)
-        path = write_report(result, ds, out, test=test_ds, std=cal.std)
+        path = write_report(result, ds, out, test=test_ds, std=cal.std,
+                            image_reports=image_reports)
     if as_json:
         _echo_json({"report": str(path), "fit_rms_mm": result.fit_rms,
                     "test_rms_mm": result.test_rms})
@@ -450,5 +760,32 @@ def scenario(
                                                     for f in result.files.values()))
 
 
+def _command():
+    """The click command of ``app``, with flags shown without a type placeholder in the help
+    (``--json  Print ...`` rather than ``--json <bool>  Print ...``)."""
+    import click
+
+    cmd = typer.main.get_command(app)
+
+    def strip(c: click.Command) -> None:
+        for p in c.params:
+            if getattr(p, "is_flag", False) or getattr(p, "count", False):
+                p.metavar = ""
+        original = c.get_help_option
+
+        def help_option(ctx: click.Context, _original=original):
+            opt = _original(ctx)
+            if opt is not None:
+                opt.metavar = ""
+            return opt
+
+        c.get_help_option = help_option  # type: ignore[method-assign]
+        for sub in getattr(c, "commands", {}).values():
+            strip(sub)
+
+    strip(cmd)
+    return cmd
+
+
 def main(argv: Optional[list[str]] = None) -> None:
-    app(args=argv)
+    _command().main(args=argv, prog_name="hmlvs")

@@ -362,8 +362,12 @@ def _compute(an: _Analysis, pixel_noise: float | None = None,
         at = [NAMES[i] for i in free_idx
               if q[i] <= bounds.lower[i] or q[i] >= bounds.upper[i]]
         if at:
+            euler = [n for n in at if n in ("omega", "phi", "varphi")]
             notes.append("at a bound: " + ", ".join(at) + "; the covariance treats them as "
-                         "unconstrained")
+                         "unconstrained" + (
+                             "; Euler angles at a bound near phi = 0 usually mean the ZYZ "
+                             "gimbal lock, not a bad fit: read the rotation vector "
+                             "(docs/glossary.md#at-a-bound)" if euler else ""))
     return Uncertainty(
         free=names, covariance=cov, std={n: float(v) for n, v in zip(names, std_arr)},
         correlation=corr, determined=det, combinations=tuple(combos), rotation_std=rot_std,

@@ -47,7 +47,10 @@ class ImageReport:
     def __str__(self) -> str:
         if not self.ok:
             return f"{self.id}: rejected: {self.reason}"
-        extra = f"; not used: {len(self.rejected)}" if self.rejected else ""
+        n = len(self.rejected)
+        extra = (f"; {n} candidate point{'s' if n > 1 else ''} not used ("
+                 + "; ".join(f"{k}: {v}" for k, v in self.rejected.items()) + ")"
+                 if self.rejected else "")
         return (f"{self.id}: {self.points} points, {self.corners} corners, stripe in "
                 f"{self.stripe.get('FOUND', 0)} scan lines{extra}")
 

@@ -281,6 +281,46 @@ def _snap(robot: Robot, q: np.ndarray, joints: np.ndarray, targets: np.ndarray,
     return out
 
 
+# A view can be used from images when the corner finder sees at least a 3 x 3 block of
+# corners with squares it can resolve.
+MIN_VIEW_CORNERS = 9
+MIN_SQUARE_PX = 8.0
+
+
+def _check_views(q: np.ndarray, robot: Robot, board: Checkerboard, joints: np.ndarray,
+                 image_size: tuple[int, int], standoff: tuple[float, float]) -> int:
+    """Warn (``SetupWarning``) when many views would be unusable as images: fewer than
+    MIN_VIEW_CORNERS board corners in the image, or squares smaller than MIN_SQUARE_PX.
+    Returns the number of such views."""
+    import warnings
+
+    from ..diagnostics.identifiability import SetupWarning
+
+    corners = board.corners()
+    w, h = image_size
+    bad, small = 0, 0
+    for j in joints:
+        rep = np.repeat(robot.poses(j[None]), len(corners), axis=0)
+        pix, vis = project(q, corners, rep)
+        inside = vis & (pix[:, 0] >= 0) & (pix[:, 0] <= w - 1) & (pix[:, 1] >= 0) & \
+            (pix[:, 1] <= h - 1)
+        grid = pix.reshape(board.rows, board.cols, 2)
+        step = np.linalg.norm(np.diff(grid, axis=1), axis=2)
+        square = float(np.nanmedian(step)) if step.size else 0.0
+        if inside.sum() < MIN_VIEW_CORNERS or square < MIN_SQUARE_PX:
+            bad += 1
+            small += square < MIN_SQUARE_PX
+    n = len(joints)
+    if n and bad > n // 2:
+        why = (f"the board's squares are below {MIN_SQUARE_PX:g} px in {small} of them"
+               if small else f"fewer than {MIN_VIEW_CORNERS} board corners are in the image")
+        warnings.warn(f"{bad} of {n} views cannot be used from images: {why} (stand-off "
+                      f"{standoff[0]:g}-{standoff[1]:g} mm, board {board.rows}x{board.cols} "
+                      f"corners of {board.square:g} mm, image {w}x{h}); choose a stand-off and "
+                      "board that suit the sensor's field of view", SetupWarning, stacklevel=3)
+    return bad
+
+
 def session(params: Any = None, *, robot: Robot | None = None,
             board: Checkerboard | None = None, num_poses: int = 30,
             image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE, standoff: tuple[float, float] = (
@@ -377,6 +417,7 @@ def session(params: Any = None, *, robot: Robot | None = None,
             pidx.append(p)
 
     joints_arr = np.array(all_joints)
+    _check_views(q, robot, board, joints_arr, image_size, standoff)
     pidx_arr = np.array(pidx, dtype=np.int64)
     pixels = np.array(px_list)
     points = np.array(pt_list)
