@@ -16,6 +16,8 @@ from hmlvs.models.params import Parameters
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.scene  # simulated sessions or rendered images
+
 
 def _run(argv, capsys):
     with pytest.raises(SystemExit) as e:
