@@ -736,19 +736,19 @@ class ErrorReport:
                 f"{100 * self.valid.mean():.1f}% of the image")
 
 
-def error_from_wrong(f: float = 8.0, pixel_pitch: float | Sequence[float] = 0.0074,
-                     image_size: Sequence[int] = (640, 480), H: float = 100.0,
-                     theta: float = math.radians(25.0), k: float = 0.0,
-                     principal_point: Optional[Sequence[float]] = None, *,
-                     H_true: Optional[float] = None, theta_true: Optional[float] = None,
-                     sensor: Optional[Sensor] = None) -> ErrorReport:
+_DESIGN_ARGS = ("f", "pixel_pitch", "image_size", "H", "theta", "k", "principal_point")
+
+
+def error_from_wrong(*, H_true: Optional[float] = None, theta_true: Optional[float] = None,
+                     sensor: Optional[Sensor] = None, **design: Any) -> ErrorReport:
     """The 3D error over the image when the computation uses H and theta but the sensor's
     real values are ``H_true`` and ``theta_true`` (paper Fig. 6).
 
     Parameters
     ----------
     f, pixel_pitch, image_size, H, theta, k, principal_point
-        The design as used in the computation (see :func:`analyze`); or ``sensor``.
+        The design as used in the computation, by keyword, with :func:`analyze`'s defaults;
+        or ``sensor``.
     H_true : float, optional
         The real baseline (mm); the paper's Fig. 6a uses 99 for H = 100.
     theta_true : float, optional
@@ -772,8 +772,11 @@ def error_from_wrong(f: float = 8.0, pixel_pitch: float | Sequence[float] = 0.00
     >>> round(e.max, 2)   # = |P| / 100 at the far image corners
     4.35
     """
-    used = sensor if sensor is not None else Sensor.make(f, pixel_pitch, image_size, H, theta,
-                                                         k, principal_point)
+    unknown = sorted(set(design) - set(_DESIGN_ARGS))
+    if unknown:
+        raise ValueError(f"unknown design argument(s) {', '.join(unknown)}; valid: "
+                         f"{', '.join(_DESIGN_ARGS)}")
+    used = sensor if sensor is not None else Sensor.make(**design)
     if H_true is None and theta_true is None:
         raise ValueError("give H_true and/or theta_true: the sensor's real value(s)")
     changes: dict[str, float] = {}
