@@ -41,6 +41,10 @@ _EXPORTS = {
     # identification and diagnostics
     "CalibrationResult": "calibration.solvers", "calibrate": "calibration.solvers",
     "initial_candidates": "calibration.solvers",
+    "PsoOptions": "calibration.options", "LmOptions": "calibration.options",
+    "RandomSearchOptions": "calibration.options",
+    "Termination": "calibration.result", "PsoStage": "calibration.result",
+    "LmStage": "calibration.result", "RandomSearchStage": "calibration.result",
     "Direction": "diagnostics.identifiability", "HmlvsDataWarning": "diagnostics.identifiability",
     "IdentifiabilityReport": "diagnostics.identifiability",
     "identifiability": "diagnostics.identifiability",
@@ -56,6 +60,7 @@ _EXPORTS = {
     "ImageReport": "image.session", "dataset_from_images": "image.session",
     # measurement
     "PointCloud": "measurement.measure", "measure": "measurement.measure",
+    "MeasureResult": "measurement.measure",
     # simulation and the paper's studies
     "simulate": "sim", "study": "paper.study",
 }
