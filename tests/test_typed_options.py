@@ -161,3 +161,34 @@ def test_cancelled_termination(sim):
                         analyze=False)
     assert r.termination is Termination.CANCELLED and r.pso.iterations < 1000
     assert r.termination_message.startswith("cancelled (stopped by the progress callback)")
+
+
+@pytest.mark.parametrize("bad", ["2", math.nan, math.inf, None])
+@pytest.mark.parametrize("name", ["min_width", "max_width", "steger_sigma", "dominance"])
+def test_stripe_options_name_the_option(name, bad):
+    img = np.zeros((10, 10), np.uint8)
+    with pytest.raises(ValueError, match=rf"^stripe\.{name} must be a (finite )?number"):
+        hmlvs.extract_stripe(img, **{name: bad})
+    with pytest.raises(ValueError, match=rf"^stripe\.{name} must be"):
+        hmlvs.StripeOptions(**{name: bad})
+
+
+@pytest.mark.parametrize("bad", ["3", -1, math.nan, math.inf])
+def test_stripe_threshold_and_noise(bad):
+    for name in ("threshold", "noise"):
+        with pytest.raises(ValueError, match=rf"^stripe\.{name} must be "):
+            hmlvs.StripeOptions(**{name: bad})
+    with pytest.raises(ValueError, match=r"^stripe\.channel must be None or an integer"):
+        hmlvs.StripeOptions(channel=1.5)
+
+
+def test_stripe_options_object_gives_the_keyword_result():
+    img = np.zeros((40, 30), np.uint8)
+    img[18:23, :] = np.array([30, 120, 200, 120, 30])[:, None]  # horizontal, centre row 20
+    img = np.ascontiguousarray(img)
+    a = hmlvs.extract_stripe(img, method="gaussian", threshold=10)
+    b = hmlvs.extract_stripe(img, options=hmlvs.StripeOptions(method="gaussian", threshold=10))
+    np.testing.assert_array_equal(a.centre, b.centre)
+    assert (a.status == 0).all()
+    np.testing.assert_allclose(a.centre, 20.0, atol=1e-6)
+    assert b.method == "gaussian" and b.threshold == 10

@@ -54,6 +54,7 @@ _EXPORTS = {
     "repeatability": "diagnostics.repeatability",
     # image pipeline
     "StripeResult": "image.stripe", "StripeStatus": "image.stripe",
+    "StripeOptions": "image.stripe",
     "difference_image": "image.stripe", "extract_stripe": "image.stripe",
     "Corners": "image.corners", "find_corners": "image.corners",
     "CalibrationPoints": "image.points", "calibration_points": "image.points",
