@@ -4,11 +4,10 @@ per-stage results agree with what the solve did."""
 
 import math
 
-import numpy as np
-import pytest
-
 import hmlvs
 from hmlvs import LmOptions, PsoOptions, RandomSearchOptions, Termination
+import numpy as np
+import pytest
 
 BAD_COUNTS = ["50", 50.5, math.nan, math.inf, -1, 2**40, None, True]
 BAD_REALS = ["0.9", math.nan, math.inf, -math.inf, -1, None]

@@ -18,9 +18,18 @@ from ..diagnostics.identifiability import HmlvsDataWarning
 from ..diagnostics.uncertainty import check_noise, diagnose
 from ..models.params import NAMES, NUM_PARAMS, Bounds, Parameters, param_index
 from ..models.params import fixed_mask as params_fixed_mask
-from .options import (LmOptions, PsoOptions, RandomSearchOptions, check_runs, check_seed,
-                      check_threads, lm_struct, option_names, pso_struct,
-                      random_search_struct)
+from .options import (
+    LmOptions,
+    PsoOptions,
+    RandomSearchOptions,
+    check_runs,
+    check_seed,
+    check_threads,
+    lm_struct,
+    option_names,
+    pso_struct,
+    random_search_struct,
+)
 from .result import LmStage, PsoStage, RandomSearchStage, Termination
 
 if TYPE_CHECKING:
