@@ -21,8 +21,10 @@ def rendered(tmp_path_factory):
 
 def test_board_scan_lies_on_the_board_plane(rendered):
     session, out, _ = rendered
-    cloud, info = measure_images(session.truth, out)
-    assert info["used"] == 4 and not info["rejected"]
+    m = measure_images(session.truth, out)
+    cloud = m.cloud
+    assert m.images == 4 and m.used == 4 and m.rejected == ()
+    assert m.ids == ["p000", "p001", "p002", "p003"]
     z = cloud.valid_points()[:, 2]  # the board is the plane z = 0 of the base frame
     assert cloud.num_valid > 4 * 300
     assert np.sqrt(np.mean(z**2)) < 0.05, np.sqrt(np.mean(z**2))
@@ -34,9 +36,12 @@ def test_bad_pair_is_reported_and_the_rest_goes_through(rendered, tmp_path):
     doc = json.loads((out / "manifest.json").read_text())
     doc["poses"][1]["off"] = "missing.png"
     (out / "manifest2.json").write_text(json.dumps(doc))
-    cloud, info = measure_images(session.truth, out / "manifest2.json")
-    assert info["used"] == 3 and list(info["rejected"]) == ["p001"]
-    assert "missing.png does not exist" in info["rejected"]["p001"]
+    m = measure_images(session.truth, out / "manifest2.json")
+    cloud = m.cloud
+    assert m.images == 4 and m.used == 3 and m.ids == ["p000", "p002", "p003"]
+    assert [r.id for r in m.rejected] == ["p001"]
+    assert "missing.png does not exist" in m.rejected[0].reason
+    assert m.summary()["rejected"] == {"p001": m.rejected[0].reason}
     assert set(np.unique(cloud.pose_index)) == {0, 2, 3}  # the manifest's indices, no shift
 
 
@@ -83,7 +88,7 @@ def test_pose_entries_and_stripe_lists(rendered, tmp_path):
     session, out, _ = rendered
     doc = json.loads((out / "manifest.json").read_text())
     poses = session.robot.poses(session.joints)
-    ref, _ = measure_images(session.truth, out)
+    ref = measure_images(session.truth, out).cloud
     # entry 0 by pose instead of joints: the same points
     e0 = doc["poses"][0]
     e0["pose"] = poses[0].tolist()
@@ -94,15 +99,17 @@ def test_pose_entries_and_stripe_lists(rendered, tmp_path):
     np.savetxt(out / "p001.csv", np.c_[px, np.ones(len(px))], delimiter=",",
                header="u,v,intensity", comments="")
     doc["poses"][1] = {"id": "p001", "stripe": "p001.csv", "joints": session.joints[1].tolist()}
-    cloud, info = measure_images(session.truth, _write(out / "manifest3.json", doc))
-    assert info["used"] == 4
+    m = measure_images(session.truth, _write(out / "manifest3.json", doc))
+    cloud = m.cloud
+    assert m.used == 4
     np.testing.assert_allclose(cloud.points[cloud.pose_index == 0],
                                ref.points[ref.pose_index == 0], atol=1e-9)
     np.testing.assert_allclose(cloud.points[cloud.pose_index == 1], pts, atol=1e-6)
     # a stripe list that is not numbers only rejects its own entry
     (out / "p001.csv").write_text("u,v\n1,abc\n")
-    cloud, info = measure_images(session.truth, out / "manifest3.json")
-    assert list(info["rejected"]) == ["p001"] and "p001.csv" in info["rejected"]["p001"]
+    m = measure_images(session.truth, out / "manifest3.json")
+    assert m.rejected_reasons.keys() == {"p001"} and "p001.csv" in m.rejected_reasons["p001"]
+    assert m.used == 3 and len(m.cloud) < len(cloud)
 
 
 def test_measure_accepts_image_pairs(rendered):

@@ -41,6 +41,10 @@ _EXPORTS = {
     # identification and diagnostics
     "CalibrationResult": "calibration.solvers", "calibrate": "calibration.solvers",
     "initial_candidates": "calibration.solvers",
+    "PsoOptions": "calibration.options", "LmOptions": "calibration.options",
+    "RandomSearchOptions": "calibration.options",
+    "Termination": "calibration.result", "PsoStage": "calibration.result",
+    "LmStage": "calibration.result", "RandomSearchStage": "calibration.result",
     "Direction": "diagnostics.identifiability", "HmlvsDataWarning": "diagnostics.identifiability",
     "FlatDirectionWarning": "diagnostics.identifiability",
     "TooFewPointsWarning": "diagnostics.identifiability",
@@ -58,12 +62,14 @@ _EXPORTS = {
     "repeatability": "diagnostics.repeatability",
     # image pipeline
     "StripeResult": "image.stripe", "StripeStatus": "image.stripe",
+    "StripeOptions": "image.stripe",
     "difference_image": "image.stripe", "extract_stripe": "image.stripe",
     "Corners": "image.corners", "find_corners": "image.corners",
     "CalibrationPoints": "image.points", "calibration_points": "image.points",
     "ImageReport": "image.session", "dataset_from_images": "image.session",
     # measurement
     "PointCloud": "measurement.measure", "measure": "measurement.measure",
+    "MeasureResult": "measurement.measure",
     # simulation and the paper's studies
     "simulate": "sim", "study": "paper.study",
 }

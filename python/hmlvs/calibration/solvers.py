@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 import math
 import os
@@ -17,6 +18,19 @@ from ..diagnostics.identifiability import HmlvsDataWarning
 from ..diagnostics.uncertainty import check_noise, diagnose
 from ..models.params import NAMES, NUM_PARAMS, Bounds, Parameters, param_index
 from ..models.params import fixed_mask as params_fixed_mask
+from .options import (
+    LmOptions,
+    PsoOptions,
+    RandomSearchOptions,
+    check_runs,
+    check_seed,
+    check_threads,
+    lm_struct,
+    option_names,
+    pso_struct,
+    random_search_struct,
+)
+from .result import LmStage, PsoStage, RandomSearchStage, Termination
 
 if TYPE_CHECKING:
     from ..diagnostics.identifiability import IdentifiabilityReport
@@ -24,11 +38,8 @@ if TYPE_CHECKING:
 
 METHODS = ("pso+lm", "pso", "lm", "lm-paper", "random")
 LOSSES = (None, "huber", "cauchy")
-_PSO_OPTIONS = {"swarm_size": 50, "iterations": 5000, "w_max": 0.9, "w_min": 0.4, "c1": 2.0,
-                "c2": 2.0, "vmax": 0.1, "target_fitness": 0.0, "progress_every": 100}
-_LM_OPTIONS = {"max_iterations": 0, "loss_scale": 1.0, "use_bounds": True}
-_OTHER_OPTIONS = {"evaluations": 1_000_000, "spread": None, "test": None,
-                  "pixel_noise": None, "point_noise": None, "analyze": True}
+_OTHER_OPTIONS = {"spread": None, "test": None, "pixel_noise": None, "point_noise": None,
+                  "analyze": True}
 _GAUGE_NOTE = ("Su held fixed at {value:g} mm/px: f, Su, Sv and k form an exact scale gauge "
                "(only f/Su, f/Sv and k Su^2 are determined by laser points), so one of them "
                "must be given, e.g. from the camera's datasheet")
@@ -51,8 +62,13 @@ class CalibrationResult:
     cost : F(q) = 1/2 sum ||E_i||^2 on the fitting points (mm^2)
     history : best fitness F after each PSO iteration of the best run (empty for LM/RS)
     run_fitness : each PSO run's best fitness (several runs), or each LM start's final cost
-    iterations : PSO iterations of the best run, plus LM iterations after it
-    termination : why the solve stopped (e.g. "max_iterations", "CONVERGENCE")
+    run_params : (runs, 14) each run's final parameters, in the order of ``run_fitness``
+        (NaN rows for LM starts that failed)
+    iterations : PSO iterations of the best run, plus LM iterations after it (random search:
+        candidates evaluated)
+    termination : why the solve stopped (:class:`Termination`; the last stage's reason)
+    termination_message : the same as a sentence, e.g. "converged: Function tolerance
+        reached ... after 37 LM iterations (PSO: 5000 generations, max_iterations)"
     seconds : wall-clock time of the solve
     notes : what the solver assumed (e.g. the gauge held fixed)
     warnings : problems found with the data or the solution
@@ -60,10 +76,9 @@ class CalibrationResult:
         directions; :func:`hmlvs.identifiability`)
     uncertainty : covariance, standard deviations, correlations and identifiable
         combinations of the free parameters (:func:`hmlvs.uncertainty`)
-    extra : per-run details of several runs: ``run_params`` ((runs, 14), each run's final
-        parameters, in the order of ``run_fitness``; NaN rows for LM starts that failed),
-        ``starts`` ((runs, 14), the LM starts), ``run_iterations`` and ``run_termination``
-        (LM), ``pso_seconds`` and ``pso_histories`` (PSO)
+    pso, lm, random : what each stage did (:class:`PsoStage`, :class:`LmStage`,
+        :class:`RandomSearchStage`), None for stages that did not run
+    extra : deprecated, read-only: the old untyped dict, built from the stages
     """
 
     params: Parameters
@@ -77,14 +92,18 @@ class CalibrationResult:
     history: np.ndarray
     run_fitness: np.ndarray
     iterations: int
-    termination: str
+    termination: Termination
     seconds: float
     seed: int
     threads: int
     bounds: Bounds
+    termination_message: str = ""
+    run_params: np.ndarray = field(default_factory=lambda: np.empty((0, NUM_PARAMS)))
+    pso: PsoStage | None = None
+    lm: LmStage | None = None
+    random: RandomSearchStage | None = None
     notes: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
-    extra: dict[str, Any] = field(default_factory=dict)
     identifiability: IdentifiabilityReport | None = None
     uncertainty: Uncertainty | None = None
 
@@ -98,12 +117,29 @@ class CalibrationResult:
                 for n in NAMES}
 
     @property
+    def extra(self) -> dict[str, Any]:
+        """Deprecated: the per-run details as the old untyped dict; use :attr:`run_params`,
+        :attr:`pso` and :attr:`lm`."""
+        d: dict[str, Any] = {}
+        if self.pso is not None:
+            d["pso_seconds"] = self.pso.seconds
+            d["pso_histories"] = self.pso.histories
+        if self.lm is not None and self.pso is None:
+            d.update(lm_message=self.lm.message, lm_errors=self.lm.errors,
+                     starts=self.lm.starts, run_iterations=self.lm.run_iterations,
+                     run_termination=self.lm.run_termination)
+        if self.pso is not None or self.lm is not None:
+            d["run_params"] = self.run_params
+        return d
+
+    @property
     def free(self) -> tuple[str, ...]:
         return tuple(n for n in NAMES if n not in self.fixed)
 
     def summary(self, truth: Parameters | None = None) -> str:
-        lines = [f"method {self.method}: {self.termination} after {self.iterations} iterations "
-                 f"in {self.seconds:.3f} s ({self.threads} threads, seed {self.seed})",
+        lines = [f"method {self.method}: {self.termination_message}",
+                 f"{self.iterations} iterations in {self.seconds:.3f} s ({self.threads} "
+                 f"threads, seed {self.seed})",
                  f"fit RMS {self.fit_rms:.4g} mm over {self.fit_errors.size} points"]
         if self.test_rms is not None:
             lines.append(f"held-out RMS {self.test_rms:.4g} mm over {self.test_errors.size} "
@@ -166,15 +202,27 @@ def _resolve_progress(progress: Any) -> tuple[ProgressFn | None, Callable[[], No
                      "tqdm-like bar with update()")
 
 
-def _split_options(options: dict[str, Any]) -> tuple[dict, dict, dict]:
-    unknown = set(options) - set(_PSO_OPTIONS) - set(_LM_OPTIONS) - set(_OTHER_OPTIONS)
+def _split_options(options: dict[str, Any], pso: PsoOptions | None, lm: LmOptions | None,
+                   random: RandomSearchOptions | None,
+                   ) -> tuple[PsoOptions, LmOptions, RandomSearchOptions, dict]:
+    """Flat keyword options -> the validated option objects (keywords override the fields of
+    a given object) and the remaining non-solver options."""
+    groups = ((PsoOptions, pso, "pso"), (LmOptions, lm, "lm"),
+              (RandomSearchOptions, random, "random"))
+    valid = [n for cls, _, _ in groups for n in option_names(cls)] + list(_OTHER_OPTIONS)
+    unknown = [k for k in options if k not in valid]
     if unknown:
-        raise ValueError(f"unknown option(s) {sorted(unknown)}; valid options: "
-                         f"{', '.join(sorted({**_PSO_OPTIONS, **_LM_OPTIONS, **_OTHER_OPTIONS}))}")
-    pso = {k: options.get(k, v) for k, v in _PSO_OPTIONS.items()}
-    lm = {k: options.get(k, v) for k, v in _LM_OPTIONS.items()}
+        raise ValueError(f"unknown option {unknown[0]!r}; valid: {', '.join(sorted(valid))}")
+    built = []
+    for cls, given, arg in groups:
+        if given is None:
+            given = cls()
+        elif not isinstance(given, cls):
+            raise ValueError(f"{arg} must be a {cls.__name__}, got {given!r}")
+        mine = {k: v for k, v in options.items() if k in option_names(cls)}
+        built.append(dataclasses.replace(given, **mine) if mine else given)
     other = {k: options.get(k, v) for k, v in _OTHER_OPTIONS.items()}
-    return pso, lm, other
+    return built[0], built[1], built[2], other
 
 
 def _as_vector(params: Any, name: str) -> np.ndarray:
@@ -188,20 +236,53 @@ def _as_vector(params: Any, name: str) -> np.ndarray:
     return arr
 
 
-def _lm_options(mode: str, fixed_mask: np.ndarray, bounds: Bounds, loss: str | None,
-                lm: dict[str, Any]) -> Any:
-    o = _core._LmOptions()
-    o.mode = getattr(_core._LmMode, mode)
-    o.fixed = [bool(x) for x in fixed_mask]
-    o.lower, o.upper = bounds.lower, bounds.upper
-    o.use_bounds = bool(lm["use_bounds"])
-    o.max_iterations = int(lm["max_iterations"])
-    o.loss = getattr(_core._LossKind, "none" if loss is None else loss)
-    o.loss_scale = float(lm["loss_scale"])
-    if mode == "paper":  # MINPACK lmdif's default tolerances, as the paper used MINPACK
-        o.function_tolerance = o.parameter_tolerance = 1.49012e-8
-        o.gradient_tolerance = 0.0
-    return o
+def _lm_stage(lms: Any, errs: Sequence[str], starts: np.ndarray, costs: np.ndarray, k: int,
+              improved: bool) -> LmStage:
+    best = lms[k]
+    return LmStage(
+        termination=Termination.from_ceres(str(best.termination)),
+        ceres_termination=str(best.termination), message=str(best.message),
+        iterations=int(best.iterations), initial_cost=float(best.initial_cost),
+        final_cost=float(best.final_cost), seconds=float(best.seconds), best_start=k,
+        starts=np.asarray(starts), run_costs=costs,
+        run_params=np.array([r.params if not e else np.full(NUM_PARAMS, np.nan)
+                             for r, e in zip(lms, errs)]),
+        run_iterations=np.array([r.iterations if not e else 0 for r, e in zip(lms, errs)]),
+        run_termination=[r.termination if not e else ("cancelled" if e == "cancelled"
+                                                        else "error")
+                         for r, e in zip(lms, errs)],
+        errors=[e for e in errs if e], improved=improved)
+
+
+_REASONS = {
+    Termination.CONVERGED: "", Termination.MAX_ITERATIONS: "iteration limit reached",
+    Termination.TARGET_FITNESS: "target fitness reached",
+    Termination.MAX_EVALUATIONS: "all candidates evaluated",
+    Termination.CANCELLED: "stopped by the progress callback", Termination.FAILED: "",
+    Termination.NOT_SOLVED: ""}
+
+
+def _termination_message(termination: Termination, pso: PsoStage | None, lm: LmStage | None,
+                         rs: RandomSearchStage | None) -> str:
+    """A sentence: why the solve stopped, after how many iterations of which stage."""
+    reason = _REASONS[termination]
+    head = f"{termination.value} ({reason})" if reason else termination.value
+    pso_part = (f"PSO: {pso.iterations} generations, best fitness {pso.best_fitness:.6g}, "
+                f"{pso.termination.value}") if pso is not None else ""
+    if lm is not None and lm.improved:
+        msg = f"{head}: {lm.message.strip().rstrip('.')}, after {lm.iterations} LM iterations"
+        if termination == Termination.CANCELLED:
+            msg += " (some starts were cancelled)"
+        return msg + (f" ({pso_part})" if pso_part else "")
+    if pso is not None:
+        msg = f"{head}: {pso_part}"
+        if lm is not None:
+            msg += (f"; LM polishing ({lm.ceres_termination}, {lm.iterations} iterations) did "
+                    "not improve the swarm's best")
+        return msg
+    if rs is not None:
+        return f"{head}: random search, {rs.evaluations} candidates evaluated"
+    return head
 
 
 def evaluate(params: Any, dataset: Dataset, test: Dataset | None = None,
@@ -216,7 +297,8 @@ def evaluate(params: Any, dataset: Dataset, test: Dataset | None = None,
         fit_rms=_rms(fit_errors), test_rms=None if test_errors is None else _rms(test_errors),
         fit_errors=fit_errors, test_errors=test_errors,
         cost=float(0.5 * np.nansum(fit_errors**2)), history=np.empty(0),
-        run_fitness=np.empty(0), iterations=0, termination="none (evaluation only)",
+        run_fitness=np.empty(0), iterations=0, termination=Termination.NOT_SOLVED,
+        termination_message="not solved: parameters evaluated as given",
         seconds=0.0, seed=0, threads=0, bounds=Bounds.table2())
 
 
@@ -239,6 +321,8 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
               initial: Parameters | Sequence[float] | None = None,
               fixed: Iterable[str] = ("Su",), runs: int = 1, seed: int = 0,
               threads: int | None = None, loss: str | None = None, progress: Any = None,
+              pso: PsoOptions | None = None, lm: LmOptions | None = None,
+              random: RandomSearchOptions | None = None,
               **options: Any) -> CalibrationResult:
     """Identify the 14 sensor parameters from calibration points.
 
@@ -261,6 +345,8 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
     progress : None, True (a progress bar), a callable ``(done, total, best_fitness)`` that may
         return False to stop, or a tqdm-like bar. Counts PSO iterations (summed over runs),
         random-search evaluations or LM starts solved
+    pso, lm, random : option objects (:class:`PsoOptions`, :class:`LmOptions`,
+        :class:`RandomSearchOptions`); the keyword options below override their fields
     **options : swarm_size, iterations, w_max, w_min, c1, c2, vmax, target_fitness,
         progress_every (PSO); max_iterations, loss_scale, use_bounds (LM); evaluations
         (random search); spread (Eq. 22 spread s); test (a held-out :class:`Dataset`);
@@ -277,7 +363,7 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     if loss not in LOSSES:
         raise ValueError(f"loss must be None, 'huber' or 'cauchy', got {loss!r}")
-    pso_o, lm_o, other = _split_options(options)
+    pso_o, lm_o, rs_o, other = _split_options(options, pso, lm, random)
     test = other["test"]
     check_noise(other["pixel_noise"], other["point_noise"])  # issue 4: fail before the solve
     dataset, test = fit_and_test(dataset, test)
@@ -291,11 +377,9 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
     if len(dataset) < n_free:
         raise ValueError(f"too few points: {len(dataset)} calibration points for {n_free} free "
                          f"parameters (need at least {n_free}; many more are better)")
-    if runs < 1:
-        raise ValueError(f"runs must be >= 1, got {runs}")
-    threads_n = (os.cpu_count() or 1) if threads is None else int(threads)
-    if threads_n < 1:
-        raise ValueError(f"threads must be >= 1, got {threads}")
+    runs = check_runs(runs)
+    seed = check_seed(seed)
+    threads_n = min(os.cpu_count() or 1, 1024) if threads is None else check_threads(threads)
     if initial is None:
         q0 = Parameters.nominal().to_array()
         if not bounds.contains(q0):
@@ -327,37 +411,41 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
     cb, close = _resolve_progress(progress)
     history = np.empty(0)
     run_fitness = np.empty(0)
-    extra: dict[str, Any] = {}
+    run_params = np.empty((0, NUM_PARAMS))
+    pso_stage = lm_stage = rs_stage = None
     try:
         if method in ("pso", "pso+lm"):
-            o = _core._PsoOptions()
-            for k, v in pso_o.items():
-                setattr(o, k, v)
-            o.runs, o.threads, o.seed = int(runs), threads_n, int(seed)
-            o.lower, o.upper = search.lower, search.upper
-            if init_box is not None:
-                o.init_lower, o.init_upper = init_box.lower, init_box.upper
+            o = pso_struct(pso_o, runs=runs, threads=threads_n, seed=seed, lower=search.lower,
+                           upper=search.upper,
+                           init_lower=None if init_box is None else init_box.lower,
+                           init_upper=None if init_box is None else init_box.upper)
             res = _core._run_pso(data, o, cb)
             best = res.runs[res.best_run]
             q = np.array(best.best)
             history = np.array(best.history)
             run_fitness = np.array([r.best_fitness for r in res.runs])
             run_params = np.array([r.best for r in res.runs])
-            iterations, termination = int(best.iterations), str(best.termination)
-            extra["pso_seconds"] = res.seconds
-            extra["pso_histories"] = [np.array(r.history) for r in res.runs]
-            if res.cancelled:
-                termination = "cancelled"
+            pso_stage = PsoStage(
+                termination=(Termination.CANCELLED if res.cancelled
+                             else Termination.from_pso(str(best.termination))),
+                iterations=int(best.iterations), best_fitness=float(best.best_fitness),
+                best_run=int(res.best_run), run_fitness=run_fitness.copy(),
+                run_params=run_params.copy(),
+                histories=[np.array(r.history) for r in res.runs], seconds=float(res.seconds))
+            iterations, termination = pso_stage.iterations, pso_stage.termination
             if method == "pso+lm" and not res.cancelled:
-                lo = _lm_options("modern", fixed_mask, search, loss, lm_o)
+                lo = lm_struct(lm_o, mode="modern", fixed=fixed_mask, lower=search.lower,
+                               upper=search.upper, loss=loss)
                 starts = np.array([r.best for r in res.runs])
                 lms, errs = _core._run_lm_many(data, starts, lo, threads_n)
                 costs = np.array([r.final_cost if not e else np.inf for r, e in zip(lms, errs)])
                 k = int(np.argmin(costs))
-                if np.isfinite(costs[k]) and costs[k] <= best.best_fitness:
+                improved = bool(np.isfinite(costs[k]) and costs[k] <= best.best_fitness)
+                lm_stage = _lm_stage(lms, errs, starts, costs, k, improved)
+                if improved:
                     q = np.array(lms[k].params)
-                    iterations += int(lms[k].iterations)
-                    termination = f"{termination}; LM: {lms[k].termination}"
+                    iterations += lm_stage.iterations
+                    termination = lm_stage.termination
                     # each run keeps the better of its swarm's best and the polished one
                     better = costs <= run_fitness
                     run_params = np.where(better[:, None],
@@ -365,16 +453,16 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
                     run_fitness = np.where(better, costs, run_fitness)
                 else:
                     notes.append("LM polishing did not improve the swarm's best")
-            extra["run_params"] = run_params
         elif method in ("lm", "lm-paper"):
             mode = "modern" if method == "lm" else "paper"
-            lo = _lm_options(mode, fixed_mask, search, loss, lm_o)
+            lo = lm_struct(lm_o, mode=mode, fixed=fixed_mask, lower=search.lower,
+                           upper=search.upper, loss=loss)
             if runs > 1 or spread is not None:
                 if spread is None:
                     raise ValueError("several LM runs need spread=s to draw starts by Eq. 22")
                 starts = np.random.default_rng(seed).uniform(init_box.lower, init_box.upper,
                                                              size=(runs, NUM_PARAMS))
-                if mode == "modern" and lm_o["use_bounds"]:  # inside the bounds LM keeps
+                if mode == "modern" and lm_o.use_bounds:  # inside the bounds LM keeps
                     starts = np.clip(starts, search.lower, search.upper)
             else:
                 starts = q0[None, :]
@@ -388,30 +476,23 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
                 raise ValueError(f"LM could not start: {next(e for e in errs if e)}")
             k = int(np.argmin(costs))
             q = np.array(lms[k].params)
-            iterations, termination = int(lms[k].iterations), str(lms[k].termination)
+            lm_stage = _lm_stage(lms, errs, starts, costs, k, True)
+            iterations, termination = lm_stage.iterations, lm_stage.termination
             if cancelled:
-                termination = "cancelled"
+                termination = Termination.CANCELLED
             run_fitness = costs
-            extra["lm_message"] = lms[k].message
-            extra["lm_errors"] = [e for e in errs if e]
-            extra["starts"] = starts
-            extra["run_params"] = np.array([r.params if not e else np.full(NUM_PARAMS, np.nan)
-                                            for r, e in zip(lms, errs)])
-            extra["run_iterations"] = np.array([r.iterations if not e else 0
-                                                for r, e in zip(lms, errs)])
-            extra["run_termination"] = [r.termination if not e else
-                                        ("cancelled" if e == "cancelled" else "error")
-                                        for r, e in zip(lms, errs)]
+            run_params = lm_stage.run_params
         else:  # random search
-            o = _core._RandomSearchOptions()
-            o.evaluations = int(other["evaluations"])
-            o.threads, o.seed = threads_n, int(seed)
             box = init_box if init_box is not None else search
-            o.lower, o.upper = box.lower, box.upper
+            o = random_search_struct(rs_o, threads=threads_n, seed=seed, lower=box.lower,
+                                     upper=box.upper)
             res = _core._run_random_search(data, o, cb)
             q = np.array(res.best)
             iterations = int(res.evaluations)
-            termination = "cancelled" if res.cancelled else "max_evaluations"
+            termination = Termination.CANCELLED if res.cancelled else Termination.MAX_EVALUATIONS
+            rs_stage = RandomSearchStage(termination=termination, evaluations=iterations,
+                                         best_fitness=float(res.best_fitness),
+                                         seconds=float(res.seconds))
     finally:
         close()
 
@@ -428,7 +509,9 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
         fit_errors=fit_errors, test_errors=test_errors, cost=float(data.evaluate(q)),
         history=history, run_fitness=run_fitness, iterations=iterations,
         termination=termination, seconds=time.perf_counter() - start, seed=int(seed),
-        threads=threads_n, bounds=bounds, notes=notes, extra=extra)
+        threads=threads_n, bounds=bounds, notes=notes, run_params=run_params,
+        termination_message=_termination_message(termination, pso_stage, lm_stage, rs_stage),
+        pso=pso_stage, lm=lm_stage, random=rs_stage)
     # --- identifiability and uncertainty at the solution (issue 4) ---------------------------
     if not other["analyze"]:
         return result

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import enum
+from numbers import Integral, Real
 from typing import Any, Literal
 
 import numpy as np
@@ -159,11 +160,57 @@ _METHODS = {"centroid": _core._StripeMethod.centroid, "gaussian": _core._StripeM
             "steger": _core._StripeMethod.steger}
 
 
+@dataclass(frozen=True)
+class StripeOptions:
+    """Options of :func:`extract_stripe` (see there), checked on construction: a wrong type
+    or a non-finite value gives a ``ValueError`` naming the option. Range checks that
+    relate options (``min_width < max_width``, ``steger_sigma``, ``dominance``) are the
+    C++ core's, with its sentences."""
+
+    direction: Direction = "columns"
+    method: Method = "centroid"
+    threshold: float | None = None
+    min_width: float = 2.0
+    max_width: float = 20.0
+    noise: float | None = None
+    steger_sigma: float = 1.5
+    dominance: float = 0.0
+    channel: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.direction not in _DIRECTIONS:
+            raise ValueError(f"direction must be 'columns' or 'rows', got {self.direction!r}")
+        if self.method not in _METHODS:
+            raise ValueError("method must be 'centroid', 'gaussian' or 'steger', got "
+                             f"{self.method!r}")
+        for name in ("threshold", "noise"):
+            v = getattr(self, name)
+            if v is not None:
+                object.__setattr__(self, name, _nonneg(v, name))
+        for name in ("min_width", "max_width", "steger_sigma", "dominance"):
+            object.__setattr__(self, name, _finite(getattr(self, name), name))
+        c = self.channel
+        if c is not None and (isinstance(c, bool) or not isinstance(c, Integral) or c < 0):
+            raise ValueError(f"stripe.channel must be None or an integer >= 0, got {c!r}")
+
+    def to_core(self) -> Any:
+        """The C++ option struct (the one place it is built)."""
+        o = _core._StripeOptions()
+        o.direction = _DIRECTIONS[self.direction]
+        o.method = _METHODS[self.method]
+        o.threshold = -1.0 if self.threshold is None else self.threshold
+        o.noise = -1.0 if self.noise is None else self.noise
+        o.min_width, o.max_width = self.min_width, self.max_width
+        o.steger_sigma, o.dominance = self.steger_sigma, self.dominance
+        return o
+
+
 def extract_stripe(image: np.ndarray, direction: Direction = "columns",
                    method: Method = "centroid", threshold: float | None = None,
                    min_width: float = 2.0, max_width: float = 20.0,
                    noise: float | None = None, steger_sigma: float = 1.5,
-                   dominance: float = 0.0, channel: int | None = None) -> StripeResult:
+                   dominance: float = 0.0, channel: int | None = None,
+                   options: StripeOptions | None = None) -> StripeResult:
     """Sub-pixel laser stripe centres, one per image column (or row), computed in C++.
 
     Parameters
@@ -185,32 +232,42 @@ def extract_stripe(image: np.ndarray, direction: Direction = "columns",
     dominance : 0 (default) reports a scan line with two plausible peaks as MULTIPLE. A
         ratio d >= 1 instead accepts the strongest peak if it is d times brighter than any
         other.
+    options : a :class:`StripeOptions` holding all of the above instead (then the keyword
+        options are ignored)
 
     Returns
     -------
     StripeResult
     """
-    if direction not in _DIRECTIONS:
-        raise ValueError(f"direction must be 'columns' or 'rows', got {direction!r}")
-    if method not in _METHODS:
-        raise ValueError(f"method must be 'centroid', 'gaussian' or 'steger', got {method!r}")
-    img = _as_gray(image, "the image", channel)
-    o = _core._StripeOptions()
-    o.direction = _DIRECTIONS[direction]
-    o.method = _METHODS[method]
-    o.threshold = -1.0 if threshold is None else _nonneg(threshold, "threshold")
-    o.noise = -1.0 if noise is None else _nonneg(noise, "noise")
-    o.min_width = float(min_width)
-    o.max_width = float(max_width)
-    o.steger_sigma = float(steger_sigma)
-    o.dominance = float(dominance)
-    r = _core._extract_stripe(img, o)
+    if options is None:
+        options = StripeOptions(direction=direction, method=method, threshold=threshold,
+                                min_width=min_width, max_width=max_width, noise=noise,
+                                steger_sigma=steger_sigma, dominance=dominance,
+                                channel=channel)
+    elif not isinstance(options, StripeOptions):
+        raise ValueError(f"options must be a StripeOptions, got {options!r}")
+    direction, method = options.direction, options.method
+    img = _as_gray(image, "the image", options.channel)
+    r = _core._extract_stripe(img, options.to_core())
     n = r.centre.shape[0]
     return StripeResult(
         position=np.arange(n), centre=np.asarray(r.centre), intensity=np.asarray(r.intensity),
         width=np.asarray(r.width), sigma=np.asarray(r.sigma),
         status=np.asarray(r.status, dtype=np.uint8), num_peaks=np.asarray(r.num_peaks),
         direction=direction, method=method, threshold=float(r.threshold), noise=float(r.noise))
+
+
+def _real(x: Any, name: str) -> float:
+    if isinstance(x, bool) or not isinstance(x, Real):
+        raise ValueError(f"stripe.{name} must be a number, got {x!r}")
+    return float(x)
+
+
+def _finite(x: Any, name: str) -> float:
+    v = _real(x, name)
+    if not np.isfinite(v):
+        raise ValueError(f"stripe.{name} must be a finite number, got {x!r}")
+    return v
 
 
 def _positive(x: Any, name: str) -> float:
@@ -221,10 +278,10 @@ def _positive(x: Any, name: str) -> float:
 
 
 def _nonneg(x: Any, name: str) -> float:
-    x = float(x)
-    if not (np.isfinite(x) and x >= 0):
-        raise ValueError(f"{name} must be a finite number >= 0, got {x}")
-    return x
+    v = _real(x, name)
+    if not (np.isfinite(v) and v >= 0):
+        raise ValueError(f"stripe.{name} must be a finite number >= 0, got {x!r}")
+    return v
 
 
 def _normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray) -> float:

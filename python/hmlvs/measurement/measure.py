@@ -197,7 +197,8 @@ def measure_source(calibration: Any, source: str | os.PathLike) -> tuple[PointCl
     """Measure every stripe of a data set file (.npz/.json) or an image manifest.
 
     Returns the cloud and a summary; for a data set with reference points the summary holds
-    the RMS distance between measured and reference points (``rms_mm``).
+    the RMS distance between measured and reference points (``rms_mm``); for images, the
+    :meth:`MeasureResult.summary` dict (this shape is kept for the command line).
     """
     from ..data.dataset import Dataset
 
@@ -207,28 +208,66 @@ def measure_source(calibration: Any, source: str | os.PathLike) -> tuple[PointCl
         cloud = measure(calibration, [ds.pixels[i:i + 1] for i in range(len(ds))], ds.poses)
         err = np.linalg.norm(cloud.points - ds.points, axis=1)[cloud.valid]
         return cloud, {"rms_mm": float(np.sqrt(np.mean(err**2))) if err.size else None}
-    return measure_images(calibration, path)
+    result = measure_images(calibration, path)
+    return result.cloud, result.summary()
+
+
+@dataclass(frozen=True)
+class RejectedPair:
+    """An image pair that gave no stripe: its id in the manifest and why."""
+
+    id: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class MeasureResult:
+    """The outcome of :func:`measure_images`.
+
+    cloud : the measured points; images : pairs in the source; used : pairs that gave a
+    stripe; ids : the used pairs' ids; rejected : the pairs skipped, with the reason
+    """
+
+    cloud: PointCloud
+    images: int
+    used: int
+    ids: list[str]
+    rejected: tuple[RejectedPair, ...] = ()
+
+    @property
+    def rejected_reasons(self) -> dict[str, str]:
+        """id -> reason of each rejected pair."""
+        return {r.id: r.reason for r in self.rejected}
+
+    def summary(self) -> dict[str, Any]:
+        """The old summary dict: images, used, rejected (id -> reason) and ids."""
+        return {"images": self.images, "used": self.used, "rejected": self.rejected_reasons,
+                "ids": list(self.ids)}
 
 
 def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
-                   **options: Any) -> tuple[PointCloud, dict]:
+                   **options: Any) -> MeasureResult:
     """Laser on/off image pairs + joint readings (an image manifest, see docs/file-formats.md,
     or a list of records) -> a point cloud, one stripe profile per pair.
 
     Pairs that fail (no stripe, bad image, mismatched pair) are skipped and named in the
-    summary's ``rejected``; ``options`` go to :func:`hmlvs.image.session.stripes_from_images`.
+    result's ``rejected``; ``options`` go to :func:`hmlvs.image.session.stripes_from_images`.
+
+    Returns
+    -------
+    MeasureResult
     """
     from ..image.session import stripes_from_images
 
     robot = robot or getattr(calibration, "robot", None)
     ids, stripes, poses, reports = stripes_from_images(source, robot=robot, **options)
-    rejected = {r.id: r.reason for r in reports if not r.ok}
+    rejected = tuple(RejectedPair(str(r.id), str(r.reason)) for r in reports if not r.ok)
     if not stripes:
         raise ValueError("no image pair gave a stripe: " +
-                         "; ".join(f"{k}: {v}" for k, v in rejected.items()))
+                         "; ".join(f"{r.id}: {r.reason}" for r in rejected))
     cloud = measure(calibration, stripes, poses)
     # pose_index: the pair's index in the manifest, whatever pairs were skipped before it
     used = np.array([r.index for r in reports if r.ok], dtype=np.int32)
     cloud = dataclasses.replace(cloud, pose_index=used[cloud.pose_index])
-    return cloud, {"images": len(reports), "used": len(stripes), "rejected": rejected,
-                   "ids": ids}
+    return MeasureResult(cloud=cloud, images=len(reports), used=len(stripes), ids=list(ids),
+                         rejected=rejected)

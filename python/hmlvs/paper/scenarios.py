@@ -416,7 +416,8 @@ def cylinder_scan(calibration: Any = None, truth: Any = None, *, seed: int = 0,
         files["manifest"] = source
     else:
         source = _rendered_records(frames, readings, ids)
-    cloud, info = measure_images(params, source, robot=robot)
+    measured = measure_images(params, source, robot=robot)
+    cloud = measured.cloud
     _, stripes, _, _ = stripes_from_images(source, robot=robot)
     sigma_v = np.concatenate([s_.sigma[s_.found] for s_ in stripes])
     if sigma_v.shape[0] != len(cloud):  # pragma: no cover - the same extraction twice
@@ -460,7 +461,7 @@ def cylinder_scan(calibration: Any = None, truth: Any = None, *, seed: int = 0,
         rms_cylinder_mm=rms(dist[on_c]), rms_table_mm=rms(dist[on_t]),
         on_cylinder=int(on_c.sum()), on_table=int(on_t.sum()), outliers=int(np.sum(dist > 1.0)),
         expected_rms_mm=expected, expected_parts=parts, holes=_hole_checks(cyl, pts),
-        rejected=dict(info["rejected"]), files=files, seconds=time.perf_counter() - start)
+        rejected=measured.rejected_reasons, files=files, seconds=time.perf_counter() - start)
 
 
 def plot_cloud(points: np.ndarray, path: Any, title: str = "", elev: float = 40.0,

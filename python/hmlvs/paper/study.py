@@ -497,11 +497,11 @@ def study(s_values: Sequence[float] = PAPER_S, runs_lm: Optional[int] = None,
                     # Jacobian and the rotation's parametrisation.
                     r = calibrate(sim.fit, method=method, runs=n_lm, use_bounds=False,
                                   seed=_seed(seed, s, 1), **common)
-                    params = r.extra["run_params"]
+                    params = r.run_params
                 else:  # pso, pso+lm: the same seed -> PSO+LM polishes the very PSO runs
                     r = calibrate(sim.fit, method=method, runs=n_pso, bounds=box,
                                   seed=_seed(seed, s, 2), **common)
-                    params = r.extra["run_params"]
+                    params = r.run_params
                 if r.termination == "cancelled":
                     raise KeyboardInterrupt
                 errs = [errors(q) for q in params]
@@ -509,7 +509,7 @@ def study(s_values: Sequence[float] = PAPER_S, runs_lm: Optional[int] = None,
                     method=method, s=s, fit_rms=np.array([_rms(f) for f, _ in errs]),
                     test_rms=np.array([_rms(t) for _, t in errs]), seconds=r.seconds,
                     threshold=SUCCESS_THRESHOLD, params=np.array(params),
-                    iterations=(np.asarray(r.extra["run_iterations"])
+                    iterations=(np.asarray(r.lm.run_iterations)
                                 if method in ("lm", "lm-paper") else None),
                     iteration_limit=LM_MAX_ITERATIONS if method in ("lm", "lm-paper") else None)
                 if method == "pso":
