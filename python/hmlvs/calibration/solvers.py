@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import _core
 from ..data.dataset import Dataset, fit_and_test
-from ..diagnostics.identifiability import HmlvsDataWarning
+from ..diagnostics.identifiability import warning_category
 from ..diagnostics.uncertainty import check_noise, diagnose
 from ..models.params import NAMES, NUM_PARAMS, Bounds, Parameters, param_index
 from ..models.params import fixed_mask as params_fixed_mask
@@ -521,7 +521,7 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
     except (ValueError, np.linalg.LinAlgError) as e:  # report, do not fail the calibration
         data_warnings = [f"identifiability and uncertainty not computed: {e}"]
     for w in data_warnings:
-        warnings.warn(w, HmlvsDataWarning, stacklevel=2)
+        warnings.warn(w, warning_category(w), stacklevel=2)  # the kind's subclass
     result.warnings.extend(data_warnings)
     # --- end of issue 4 ------------------------------------------------------------------------
     return result
