@@ -25,54 +25,34 @@ from . import _core
 
 __version__ = _core.__version__
 
-# public name -> module (relative to hmlvs) that defines it
-_EXPORTS = {
-    # sensor model and parameters
-    "NAMES": "models.params", "Bounds": "models.params", "Parameters": "models.params",
-    "hand_from_camera": "models.paper", "laser_plane_distance": "models.paper",
-    "objective": "models.paper", "pixels_from_points": "models.paper",
-    "points_in_base": "models.paper", "points_in_camera": "models.paper",
-    "project": "models.paper", "residuals": "models.paper",
-    # set-up
-    "DHLink": "geometry.robot", "Robot": "geometry.robot", "Checkerboard": "geometry.board",
-    # data and files
-    "Dataset": "data.dataset", "Calibration": "data.calibration_file",
-    "load_calibration": "data.calibration_file",
-    # identification and diagnostics
-    "CalibrationResult": "calibration.solvers", "calibrate": "calibration.solvers",
-    "initial_candidates": "calibration.solvers",
-    "PsoOptions": "calibration.options", "LmOptions": "calibration.options",
-    "RandomSearchOptions": "calibration.options",
-    "Termination": "calibration.result", "PsoStage": "calibration.result",
-    "LmStage": "calibration.result", "RandomSearchStage": "calibration.result",
-    "Direction": "diagnostics.identifiability", "HmlvsDataWarning": "diagnostics.identifiability",
-    "FlatDirectionWarning": "diagnostics.identifiability",
-    "TooFewPointsWarning": "diagnostics.identifiability",
-    "PoseVarietyWarning": "diagnostics.identifiability",
-    "GimbalLockWarning": "diagnostics.identifiability",
-    "AtBoundWarning": "diagnostics.identifiability",
-    "DiagnosticsFailedWarning": "diagnostics.identifiability",
-    "SetupWarning": "diagnostics.identifiability",
-    "warning_category": "diagnostics.identifiability",
-    "IdentifiabilityReport": "diagnostics.identifiability",
-    "identifiability": "diagnostics.identifiability",
-    "Combination": "diagnostics.uncertainty", "Uncertainty": "diagnostics.uncertainty",
-    "uncertainty": "diagnostics.uncertainty",
-    "RepeatabilityReport": "diagnostics.repeatability", "Spread": "diagnostics.repeatability",
-    "repeatability": "diagnostics.repeatability",
-    # image pipeline
-    "StripeResult": "image.stripe", "StripeStatus": "image.stripe",
-    "StripeOptions": "image.stripe",
-    "difference_image": "image.stripe", "extract_stripe": "image.stripe",
-    "Corners": "image.corners", "find_corners": "image.corners",
-    "CalibrationPoints": "image.points", "calibration_points": "image.points",
-    "ImageReport": "image.session", "dataset_from_images": "image.session",
-    # measurement
-    "PointCloud": "measurement.measure", "measure": "measurement.measure",
-    "MeasureResult": "measurement.measure",
-    # simulation and the paper's studies
-    "simulate": "sim", "study": "paper.study",
+# module (relative to hmlvs) -> the public names it defines
+_PUBLIC = {
+    "models.params": ("NAMES", "Bounds", "Parameters"),
+    "models.paper": ("hand_from_camera", "laser_plane_distance", "objective", "pixels_from_points",
+        "points_in_base", "points_in_camera", "project", "residuals"),
+    "geometry.robot": ("DHLink", "Robot"),
+    "geometry.board": ("Checkerboard",),
+    "data.dataset": ("Dataset",),
+    "data.calibration_file": ("Calibration", "load_calibration"),
+    "calibration.solvers": ("CalibrationResult", "calibrate", "initial_candidates"),
+    "calibration.options": ("PsoOptions", "LmOptions", "RandomSearchOptions"),
+    "calibration.result": ("Termination", "PsoStage", "LmStage", "RandomSearchStage"),
+    "diagnostics.identifiability": ("Direction", "HmlvsDataWarning", "FlatDirectionWarning",
+        "TooFewPointsWarning", "PoseVarietyWarning", "GimbalLockWarning", "AtBoundWarning",
+        "DiagnosticsFailedWarning", "SetupWarning", "warning_category", "IdentifiabilityReport",
+        "identifiability"),
+    "diagnostics.uncertainty": ("Combination", "Uncertainty", "uncertainty"),
+    "diagnostics.repeatability": ("RepeatabilityReport", "Spread", "repeatability"),
+    "image.stripe": ("StripeResult", "StripeStatus", "StripeOptions", "difference_image",
+        "extract_stripe"),
+    "image.corners": ("Corners", "find_corners"),
+    "image.points": ("CalibrationPoints", "calibration_points"),
+    "image.session": ("ImageReport", "dataset_from_images"),
+    "measurement.measure": ("PointCloud", "measure", "MeasureResult"),
+    "sim": ("simulate",),
+    "paper.study": ("study",),
 }
+_EXPORTS = {name: module for module, names in _PUBLIC.items() for name in names}
 # modules reached as attributes: hmlvs.design.analyze(...), hmlvs.scenarios.cylinder_scan(...)
 _MODULES = {"design": "paper.design", "scenarios": "paper.scenarios"}
 _SUBPACKAGES = {"calibration", "data", "diagnostics", "geometry", "image", "measurement",
