@@ -190,11 +190,16 @@ def test_ctrl_c_stops_a_long_calibration_promptly(tmp_path, extra):
     proc = subprocess.Popen(
         [sys.executable, "-m", "hmlvs", "calibrate", str(data), "--iterations", "100000000",
          "--out", str(out), *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    time.sleep(4.0)  # imports and the start of the (hours-long) swarm
-    assert proc.poll() is None
-    sent = time.monotonic()
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=30)
+    try:
+        time.sleep(4.0)  # imports and the start of the (hours-long) swarm
+        assert proc.poll() is None
+        sent = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:  # a calibration that ignored the signal must not outlive the test
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
     assert proc.returncode == 130, err.decode()[-500:]
     assert time.monotonic() - sent < 5.0  # promptly: progress is polled every 100 iterations
     assert b"interrupted" in err and not out.exists()  # cleanly: no partial calibration file
