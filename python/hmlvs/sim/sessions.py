@@ -295,15 +295,14 @@ def _check_views(q: np.ndarray, robot: Robot, board: Checkerboard, joints: np.nd
     import warnings
 
     from ..diagnostics.identifiability import SetupWarning
+    from ..image.corners import predicted_corners
 
-    corners = board.corners()
     w, h = image_size
     bad, small = 0, 0
-    for j in joints:
-        rep = np.repeat(robot.poses(j[None]), len(corners), axis=0)
-        pix, vis = project(q, corners, rep)
-        inside = vis & (pix[:, 0] >= 0) & (pix[:, 0] <= w - 1) & (pix[:, 1] >= 0) & \
-            (pix[:, 1] <= h - 1)
+    for pose in robot.poses(joints):
+        pix = predicted_corners(q, pose, board)  # NaN where a corner is behind the camera
+        inside = np.isfinite(pix).all(axis=1) & (pix[:, 0] >= 0) & (pix[:, 0] <= w - 1) & \
+            (pix[:, 1] >= 0) & (pix[:, 1] <= h - 1)
         grid = pix.reshape(board.rows, board.cols, 2)
         step = np.linalg.norm(np.diff(grid, axis=1), axis=2)
         square = float(np.nanmedian(step)) if step.size else 0.0
