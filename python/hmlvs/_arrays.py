@@ -52,3 +52,22 @@ def same_rows(**arrays: np.ndarray) -> int:
         if a.shape[0] != a0.shape[0]:
             raise ValueError(f"{n0} has {a0.shape[0]} rows but {n} has {a.shape[0]}")
     return a0.shape[0]
+
+
+def check_transform(t: Any, name: str, tol: float = 1e-6) -> np.ndarray:
+    """A 4x4 rigid transform (float64 copy): finite, orthonormal rotation with det +1 (to
+    ``tol``), last row [0 0 0 1]; a ValueError naming ``name`` otherwise."""
+    try:
+        m = np.array(t, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a 4x4 matrix of numbers, got {t!r}") from None
+    if m.shape != (4, 4):
+        raise ValueError(f"{name} must be a 4x4 matrix, got shape {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise ValueError(f"{name} is not finite (NaN or inf)")
+    r = m[:3, :3]
+    if (np.abs(r @ r.T - np.eye(3)).max() > tol or np.linalg.det(r) < 0
+            or np.abs(m[3] - [0, 0, 0, 1]).max() > tol):
+        raise ValueError(f"{name} is not a rigid transform (its rotation must be orthonormal with "
+                         "determinant +1 and its last row [0 0 0 1])")
+    return m

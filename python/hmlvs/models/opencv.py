@@ -1,0 +1,143 @@
+"""The general sensor model (``model="opencv"``): OpenCV pinhole intrinsics with Brown-Conrady
+distortion, a laser plane with 3 degrees of freedom, a hand-eye transform with any rotation
+and, optionally, the board's pose in the robot base.
+
+Conventions are OpenCV's (``cv2.projectPoints``): pixel centres at integers, distortion
+coefficients ``(k1, k2, p1, p2, k3)``. Lengths in mm. The laser plane is ``a x + b y + c z + d = 0``
+in the camera frame with ``(a, b, c)`` a unit normal pointing away from the camera's centre
+(``d < 0``: the camera centre is on the negative side).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+from typing import Any
+
+import numpy as np
+
+from .._arrays import check_transform
+
+DISTORTION_NAMES: tuple[str, ...] = ("k1", "k2", "p1", "p2", "k3")
+INTRINSIC_NAMES: tuple[str, ...] = ("fx", "fy", "cx", "cy", *DISTORTION_NAMES)
+
+
+def _array(x: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
+    try:
+        a = np.array(x, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be numbers of shape {shape}, got {x!r}") from None
+    if a.shape != shape:
+        raise ValueError(f"{name} must have shape {shape}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be finite, got {a.tolist()}")
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class OpenCvSensor:
+    """A calibrated general sensor.
+
+    camera_matrix : 3x3 ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` (pixels)
+    dist_coeffs : ``(k1, k2, p1, p2, k3)``
+    image_size : ``(width, height)`` in pixels
+    laser_plane : ``(a, b, c, d)``, camera frame, unit normal, ``d`` in mm (see module doc)
+    hand_from_camera : 4x4 transform (mm)
+    base_from_board : 4x4 transform of the calibration board in the robot base, when known
+    """
+
+    camera_matrix: np.ndarray
+    dist_coeffs: np.ndarray
+    image_size: tuple[int, int]
+    laser_plane: np.ndarray
+    hand_from_camera: np.ndarray
+    base_from_board: np.ndarray | None = field(default=None)
+
+    def __post_init__(self) -> None:
+        k = _array(self.camera_matrix, (3, 3), "camera_matrix")
+        if not (k[0, 0] > 0 and k[1, 1] > 0 and k[1, 0] == 0 and k[2, 0] == 0 and k[2, 1] == 0
+                and k[2, 2] == 1):
+            raise ValueError("camera_matrix must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with "
+                             f"fx, fy > 0, got {k.tolist()}")
+        dist = np.zeros(5)
+        given = np.array(self.dist_coeffs, dtype=float).ravel()
+        if given.size not in (0, 4, 5):
+            raise ValueError("dist_coeffs must hold 4 or 5 numbers (k1, k2, p1, p2[, k3]), got "
+                             f"{given.size}")
+        dist[: given.size] = given
+        dist = _array(dist, (5,), "dist_coeffs")
+        try:
+            w, h = (int(v) for v in self.image_size)
+        except (TypeError, ValueError):
+            raise ValueError(f"image_size must be (width, height), got {self.image_size!r}") \
+                from None
+        if w <= 0 or h <= 0:
+            raise ValueError(f"image_size must be positive, got {(w, h)}")
+        plane = _array(self.laser_plane, (4,), "laser_plane")
+        norm = float(np.linalg.norm(plane[:3]))
+        if not norm > 0:
+            raise ValueError("laser_plane needs a non-zero normal (a, b, c)")
+        plane = plane / norm
+        if plane[3] > 0:
+            plane = -plane
+        hfc = check_transform(self.hand_from_camera, "hand_from_camera")
+        bfb = None if self.base_from_board is None else check_transform(
+            self.base_from_board, "base_from_board")
+        object.__setattr__(self, "camera_matrix", k)
+        object.__setattr__(self, "dist_coeffs", dist)
+        object.__setattr__(self, "image_size", (w, h))
+        object.__setattr__(self, "laser_plane", plane)
+        object.__setattr__(self, "hand_from_camera", hfc)
+        object.__setattr__(self, "base_from_board", bfb)
+
+    @property
+    def fx(self) -> float:
+        return float(self.camera_matrix[0, 0])
+
+    @property
+    def fy(self) -> float:
+        return float(self.camera_matrix[1, 1])
+
+    @property
+    def cx(self) -> float:
+        return float(self.camera_matrix[0, 2])
+
+    @property
+    def cy(self) -> float:
+        return float(self.camera_matrix[1, 2])
+
+    def intrinsics(self) -> dict[str, float]:
+        """fx, fy, cx, cy, k1, k2, p1, p2, k3 by name."""
+        values = (self.fx, self.fy, self.cx, self.cy, *self.dist_coeffs.tolist())
+        return dict(zip(INTRINSIC_NAMES, (float(v) for v in values)))
+
+    def laser_plane_angle_deg(self) -> float:
+        """Angle between the laser plane and the camera's optical axis (degrees)."""
+        return math.degrees(math.asin(min(1.0, abs(float(self.laser_plane[2])))))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "camera_matrix": self.camera_matrix.tolist(),
+            "dist_coeffs": self.dist_coeffs.tolist(),
+            "image_size": list(self.image_size),
+            "laser_plane": self.laser_plane.tolist(),
+            "hand_from_camera": self.hand_from_camera.tolist(),
+            "base_from_board": None if self.base_from_board is None
+            else self.base_from_board.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: Any, source: str = "sensor") -> "OpenCvSensor":
+        if not isinstance(d, dict):
+            raise ValueError(f"{source}: the opencv sensor must be a mapping, got {type(d).__name__}")
+        missing = [k for k in ("camera_matrix", "dist_coeffs", "image_size", "laser_plane",
+                               "hand_from_camera") if k not in d]
+        if missing:
+            raise ValueError(f"{source}: the opencv sensor lacks {', '.join(missing)}")
+        try:
+            return cls(camera_matrix=d["camera_matrix"], dist_coeffs=d["dist_coeffs"],
+                       image_size=d["image_size"], laser_plane=d["laser_plane"],
+                       hand_from_camera=d["hand_from_camera"],
+                       base_from_board=d.get("base_from_board"))
+        except ValueError as e:
+            raise ValueError(f"{source}: {e}") from None
