@@ -129,7 +129,8 @@ class OpenCvSensor:
     @classmethod
     def from_dict(cls, d: Any, source: str = "sensor") -> "OpenCvSensor":
         if not isinstance(d, dict):
-            raise ValueError(f"{source}: the opencv sensor must be a mapping, got {type(d).__name__}")
+            raise ValueError(f"{source}: the opencv sensor must be a mapping, "
+                             f"got {type(d).__name__}")
         missing = [k for k in ("camera_matrix", "dist_coeffs", "image_size", "laser_plane",
                                "hand_from_camera") if k not in d]
         if missing:
