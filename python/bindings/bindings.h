@@ -8,5 +8,6 @@ void BindModel(pybind11::module_& m);
 void BindKinematics(pybind11::module_& m);
 void BindSolvers(pybind11::module_& m);
 void BindImage(pybind11::module_& m);
+void BindGeneral(pybind11::module_& m);
 
 }  // namespace hmlvs::python

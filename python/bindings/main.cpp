@@ -14,4 +14,5 @@ PYBIND11_MODULE(_core, m) {
   hmlvs::python::BindKinematics(m);
   hmlvs::python::BindSolvers(m);
   hmlvs::python::BindImage(m);
+  hmlvs::python::BindGeneral(m);
 }

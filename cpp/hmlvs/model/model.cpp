@@ -6,11 +6,9 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "hmlvs/model/checks.h"
+
 namespace hmlvs {
-
-namespace {
-
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 void RequireSameRows(Eigen::Index a, const char* name_a, Eigen::Index b, const char* name_b) {
   if (a != b) {
@@ -32,17 +30,9 @@ void RequireFinite(const double* data, Eigen::Index rows, int cols, const char* 
   }
 }
 
-inline Eigen::Matrix3d PoseRotation(PosesRef poses, Eigen::Index i) {
-  Eigen::Matrix3d r;
-  const double* p = poses.row(i).data();
-  r << p[0], p[1], p[2], p[4], p[5], p[6], p[8], p[9], p[10];
-  return r;
-}
+namespace {
 
-inline Eigen::Vector3d PosePosition(PosesRef poses, Eigen::Index i) {
-  const double* p = poses.row(i).data();
-  return Eigen::Vector3d(p[3], p[7], p[11]);
-}
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 // A pixel whose ray misses the laser plane; `plane` is PixelToCamera's test value D s.
 [[noreturn]] void ThrowMissedPlane(const Vector14d& q, Eigen::Index i, double u, double v,

@@ -1,0 +1,203 @@
+#include "hmlvs/model/general.h"
+
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+#include "hmlvs/model/checks.h"
+
+namespace hmlvs::general {
+
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// d(xd, yd)/d(x, y) of Distort at (x, y), row-major 2x2.
+void DistortionJacobian(const double* in, double x, double y, double* j) {
+  const double r2 = x * x + y * y;
+  const double radial = 1.0 + r2 * (in[kK1] + r2 * (in[kK2] + r2 * in[kK3]));
+  const double dradial = in[kK1] + r2 * (2.0 * in[kK2] + 3.0 * r2 * in[kK3]);  // d radial / d r2
+  j[0] = radial + 2.0 * x * x * dradial + 2.0 * in[kP1] * y + 6.0 * in[kP2] * x;
+  j[1] = 2.0 * x * y * dradial + 2.0 * in[kP1] * x + 2.0 * in[kP2] * y;
+  j[2] = 2.0 * x * y * dradial + 2.0 * in[kP1] * x + 2.0 * in[kP2] * y;
+  j[3] = radial + 2.0 * y * y * dradial + 6.0 * in[kP1] * y + 2.0 * in[kP2] * x;
+}
+
+}  // namespace
+
+bool UndistortNormalized(const double* in, double u, double v, double* x, double* y,
+                         double* jacobian) {
+  const double mx = (u - in[kCx]) / in[kFx];
+  const double my = (v - in[kCy]) / in[kFy];
+  double px = mx, py = my;
+  double j[4];
+  bool converged = false;
+  for (int iter = 0; iter < 50; ++iter) {
+    double xd, yd;
+    Distort(in, px, py, &xd, &yd);
+    const double ex = xd - mx, ey = yd - my;
+    DistortionJacobian(in, px, py, j);
+    const double det = j[0] * j[3] - j[1] * j[2];
+    if (!(det > 1e-12)) return false;  // folded over: beyond the invertible region
+    const double dx = (j[3] * ex - j[1] * ey) / det;
+    const double dy = (-j[2] * ex + j[0] * ey) / det;
+    px -= dx;
+    py -= dy;
+    if (std::abs(dx) + std::abs(dy) < 1e-14 * (1.0 + std::abs(px) + std::abs(py))) {
+      converged = true;
+      break;
+    }
+  }
+  double xd, yd;
+  Distort(in, px, py, &xd, &yd);
+  converged = converged || (std::abs(xd - mx) + std::abs(yd - my) < 1e-12);
+  if (!converged || !std::isfinite(px) || !std::isfinite(py)) return false;
+  DistortionJacobian(in, px, py, j);
+  if (!(j[0] * j[3] - j[1] * j[2] > 1e-12)) return false;
+  *x = px;
+  *y = py;
+  if (jacobian != nullptr) {
+    for (int k = 0; k < 4; ++k) jacobian[k] = j[k];
+  }
+  return true;
+}
+
+void ValidateIntrinsics(const Vector9d& in) {
+  static const char* names[kNumIntrinsics] = {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"};
+  for (int i = 0; i < kNumIntrinsics; ++i) {
+    if (!std::isfinite(in[i])) {
+      throw std::invalid_argument(std::string("intrinsic ") + names[i] + " is not finite");
+    }
+  }
+  if (!(in[kFx] > 0.0) || !(in[kFy] > 0.0)) {
+    std::ostringstream msg;
+    msg << "the focal lengths must be > 0, got fx = " << in[kFx] << ", fy = " << in[kFy];
+    throw std::invalid_argument(msg.str());
+  }
+}
+
+namespace {
+
+Eigen::Vector4d UnitPlane(const Eigen::Vector4d& plane) {
+  const double n = plane.head<3>().norm();
+  if (!std::isfinite(n) || !(n > 0.0) || !std::isfinite(plane[3])) {
+    throw std::invalid_argument("the laser plane (a, b, c, d) needs a finite, non-zero normal");
+  }
+  return plane / n;
+}
+
+}  // namespace
+
+PixelsResult ProjectCameraPoints(const Vector9d& in, Points3Ref points) {
+  ValidateIntrinsics(in);
+  RequireFinite(points.data(), points.rows(), 3, "camera points");
+  PixelsResult out;
+  out.pixels.resize(points.rows(), 2);
+  out.valid.resize(points.rows());
+  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+    double px[2];
+    const bool ok = ProjectPoint(in.data(), points.row(i).data(), px);
+    out.valid[i] = ok ? 1 : 0;
+    if (ok) {
+      out.pixels.row(i) << px[0], px[1];
+    } else {
+      out.pixels.row(i).setConstant(kNaN);
+      ++out.num_invalid;
+    }
+  }
+  return out;
+}
+
+PixelsResult UndistortPixels(const Vector9d& in, PixelsRef pixels) {
+  ValidateIntrinsics(in);
+  RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
+  PixelsResult out;
+  out.pixels.resize(pixels.rows(), 2);
+  out.valid.resize(pixels.rows());
+  for (Eigen::Index i = 0; i < pixels.rows(); ++i) {
+    double x, y;
+    const bool ok = UndistortNormalized(in.data(), pixels(i, 0), pixels(i, 1), &x, &y);
+    out.valid[i] = ok ? 1 : 0;
+    if (ok) {
+      out.pixels.row(i) << x, y;
+    } else {
+      out.pixels.row(i).setConstant(kNaN);
+      ++out.num_invalid;
+    }
+  }
+  return out;
+}
+
+namespace {
+
+// Pixel i's camera-frame point on the laser plane, or false with the reason in `why`.
+bool LaserPoint(const Vector9d& in, const Eigen::Vector4d& plane, double u, double v, double* point,
+                const char** why) {
+  double x, y;
+  if (!UndistortNormalized(in.data(), u, v, &x, &y)) {
+    *why = "lies beyond the region where the lens distortion can be inverted";
+    return false;
+  }
+  const double normal[3] = {plane[0], plane[1], plane[2]};
+  const double depth = RayPlanePoint(x, y, normal, plane[3], point);
+  if (!(depth > 0.0) || !std::isfinite(depth)) {
+    *why = "has a ray that misses the laser plane (it meets it behind the camera or not at all)";
+    return false;
+  }
+  return true;
+}
+
+template <typename ToOutput>
+PointsResult MapLaserPixels(const Vector9d& in, const Eigen::Vector4d& laser_plane,
+                            PixelsRef pixels, bool throw_on_invalid, ToOutput to_output) {
+  ValidateIntrinsics(in);
+  RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
+  const Eigen::Vector4d plane = UnitPlane(laser_plane);
+  PointsResult out;
+  out.points.resize(pixels.rows(), 3);
+  out.valid.resize(pixels.rows());
+  for (Eigen::Index i = 0; i < pixels.rows(); ++i) {
+    double p[3];
+    const char* why = "";
+    if (LaserPoint(in, plane, pixels(i, 0), pixels(i, 1), p, &why)) {
+      out.points.row(i) = to_output(i, Eigen::Vector3d(p[0], p[1], p[2]));
+      out.valid[i] = 1;
+    } else {
+      if (throw_on_invalid) {
+        std::ostringstream msg;
+        msg << "pixel " << i << " (u=" << pixels(i, 0) << ", v=" << pixels(i, 1) << ") " << why
+            << ", so it has no measurement";
+        throw std::invalid_argument(msg.str());
+      }
+      out.points.row(i).setConstant(kNaN);
+      out.valid[i] = 0;
+      ++out.num_invalid;
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+PointsResult LaserPointsInCamera(const Vector9d& in, const Eigen::Vector4d& laser_plane,
+                                 PixelsRef pixels, bool throw_on_invalid) {
+  return MapLaserPixels(in, laser_plane, pixels, throw_on_invalid,
+                        [](Eigen::Index, const Eigen::Vector3d& p) { return p; });
+}
+
+PointsResult LaserPointsInBase(const Vector9d& in, const Eigen::Vector4d& laser_plane,
+                               const Eigen::Matrix4d& hand_from_camera, PixelsRef pixels,
+                               PosesRef base_from_hand, bool throw_on_invalid) {
+  RequireSameRows(pixels.rows(), "pixels", base_from_hand.rows(), "poses");
+  ValidatePoses(base_from_hand);
+  const Eigen::Matrix3d r_hc = hand_from_camera.topLeftCorner<3, 3>();
+  const Eigen::Vector3d t_hc = hand_from_camera.topRightCorner<3, 1>();
+  return MapLaserPixels(
+      in, laser_plane, pixels, throw_on_invalid, [&](Eigen::Index i, const Eigen::Vector3d& p) {
+        return Eigen::Vector3d(PoseRotation(base_from_hand, i) * (r_hc * p + t_hc) +
+                               PosePosition(base_from_hand, i));
+      });
+}
+
+}  // namespace hmlvs::general

@@ -1,0 +1,153 @@
+// The general sensor model (model "opencv"): OpenCV's pinhole camera with Brown-Conrady
+// distortion, a laser plane with three degrees of freedom and a hand-eye transform with any
+// rotation.
+//
+// Units: mm and pixels; pixel centres at integer coordinates (u = column, v = row), as in
+// cv2.projectPoints. Intrinsics are 9 numbers [fx, fy, cx, cy, k1, k2, p1, p2, k3]. The laser
+// plane is n . X + d = 0 in the camera frame, with n a unit vector.
+//
+// As in model.h, the single-point functions are templates on the scalar, so that one
+// formulation serves plain evaluation, calibration (ceres::Jet) and measurement.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "hmlvs/model/model.h"
+
+namespace hmlvs::general {
+
+constexpr int kNumIntrinsics = 9;
+enum Intrinsic : int { kFx = 0, kFy, kCx, kCy, kK1, kK2, kP1, kP2, kK3 };
+
+using Vector9d = Eigen::Matrix<double, kNumIntrinsics, 1>;
+
+/// The plain value of a scalar: itself for double, the value part for ceres::Jet.
+inline double ValueOf(double x) { return x; }
+template <typename Jet>
+double ValueOf(const Jet& x) {
+  return x.a;
+}
+
+/// Brown-Conrady distortion of a normalised image point (x, y) = (X/Z, Y/Z), as OpenCV:
+///   r2 = x^2 + y^2, radial = 1 + k1 r2 + k2 r2^2 + k3 r2^3,
+///   xd = x radial + 2 p1 x y + p2 (r2 + 2 x^2),  yd = y radial + p1 (r2 + 2 y^2) + 2 p2 x y.
+template <typename T, typename S>
+void Distort(const T* in, const S& x, const S& y, T* xd, T* yd) {
+  const S r2 = x * x + y * y;
+  const T radial = T(1.0) + r2 * (in[kK1] + r2 * (in[kK2] + r2 * in[kK3]));
+  *xd = x * radial + T(2.0) * in[kP1] * x * y + in[kP2] * (r2 + T(2.0) * x * x);
+  *yd = y * radial + in[kP1] * (r2 + T(2.0) * y * y) + T(2.0) * in[kP2] * x * y;
+}
+
+/// A camera-frame point to its pixel (cv2.projectPoints). Returns false for a point that is not
+/// in front of the camera (Z <= 0); the pixel is then meaningless.
+template <typename T>
+bool ProjectPoint(const T* in, const T* camera_point, T* pixel) {
+  const T x = camera_point[0] / camera_point[2];
+  const T y = camera_point[1] / camera_point[2];
+  T xd, yd;
+  Distort(in, x, y, &xd, &yd);
+  pixel[0] = in[kFx] * xd + in[kCx];
+  pixel[1] = in[kFy] * yd + in[kCy];
+  return camera_point[2] > T(0.0);
+}
+
+/// Inverts the distortion of one pixel in plain doubles: the normalised point (x, y) whose
+/// distorted image is the pixel, by Newton's method from the pixel's own normalised position.
+/// Returns false when it does not converge to 1e-12 (the pixel lies beyond the distortion's
+/// invertible region) or the Jacobian is singular. `jacobian` (row-major 2x2, optional)
+/// receives d(xd, yd)/d(x, y) at the solution.
+bool UndistortNormalized(const double* in, double u, double v, double* x, double* y,
+                         double* jacobian = nullptr);
+
+/// The undistorted normalised point (x, y) of pixel (u, v) as a function of the intrinsics,
+/// for any scalar type: one Newton step, in T, from the plain solution (x0, y0) with its
+/// Jacobian. At a converged (x0, y0) the value is unchanged and the derivatives with respect
+/// to the intrinsics are those of the implicit function, exactly.
+template <typename T>
+void UndistortAround(const T* in, double u, double v, double x0, double y0, const double* jacobian,
+                     T* x, T* y) {
+  const T mx = (T(u) - in[kCx]) / in[kFx];
+  const T my = (T(v) - in[kCy]) / in[kFy];
+  T xd, yd;
+  Distort(in, T(x0), T(y0), &xd, &yd);
+  const T ex = xd - mx, ey = yd - my;
+  const double det = jacobian[0] * jacobian[3] - jacobian[1] * jacobian[2];
+  const double i00 = jacobian[3] / det, i01 = -jacobian[1] / det;
+  const double i10 = -jacobian[2] / det, i11 = jacobian[0] / det;
+  *x = T(x0) - (i00 * ex + i01 * ey);
+  *y = T(y0) - (i10 * ex + i11 * ey);
+}
+
+/// The point where the ray through normalised image point (x, y) meets the plane
+/// n . X + d = 0 (camera frame). Returns the depth Z = -d / (n . (x, y, 1)); the ray meets the
+/// plane in front of the camera iff it is > 0.
+template <typename T, typename S>
+T RayPlanePoint(const S& x, const S& y, const T* normal, const T& offset, T* point) {
+  const T depth = -offset / (normal[0] * x + normal[1] * y + normal[2]);
+  point[0] = depth * x;
+  point[1] = depth * y;
+  point[2] = depth;
+  return depth;
+}
+
+/// The camera_from_board transform of one view, from the chain
+///   camera_from_board = inv(hand_from_camera) inv(base_from_hand) base_from_board,
+/// with the two unknown transforms as (unit quaternion [x, y, z, w], translation) and the
+/// robot's base_from_hand given. Writes the rotation (3x3) and the translation.
+template <typename T>
+void CameraFromBoard(const T* hand_from_camera_q, const T* hand_from_camera_t,
+                     const Eigen::Matrix3d& base_from_hand_r,
+                     const Eigen::Vector3d& base_from_hand_t, const T* base_from_board_q,
+                     const T* base_from_board_t, Eigen::Matrix<T, 3, 3>* rotation,
+                     Eigen::Matrix<T, 3, 1>* translation) {
+  using Mat3 = Eigen::Matrix<T, 3, 3>;
+  using Vec3 = Eigen::Matrix<T, 3, 1>;
+  const Mat3 r_hc = Eigen::Quaternion<T>(hand_from_camera_q[3], hand_from_camera_q[0],
+                                         hand_from_camera_q[1], hand_from_camera_q[2])
+                        .normalized()
+                        .toRotationMatrix();
+  const Mat3 r_bb = Eigen::Quaternion<T>(base_from_board_q[3], base_from_board_q[0],
+                                         base_from_board_q[1], base_from_board_q[2])
+                        .normalized()
+                        .toRotationMatrix();
+  const Mat3 r_hand_base = base_from_hand_r.transpose().cast<T>();
+  const Vec3 t_hc(hand_from_camera_t[0], hand_from_camera_t[1], hand_from_camera_t[2]);
+  const Vec3 t_bb(base_from_board_t[0], base_from_board_t[1], base_from_board_t[2]);
+  // hand_from_board = inv(base_from_hand) base_from_board
+  const Mat3 r_hb = r_hand_base * r_bb;
+  const Vec3 t_hb = r_hand_base * (t_bb - base_from_hand_t.cast<T>());
+  *rotation = r_hc.transpose() * r_hb;
+  *translation = r_hc.transpose() * (t_hb - t_hc);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Batch evaluation on plain doubles (intrinsics as a 9-vector; see the top of the file).
+
+/// Throws std::invalid_argument unless the intrinsics are finite with fx, fy > 0.
+void ValidateIntrinsics(const Vector9d& intrinsics);
+
+/// Camera-frame points -> pixels (cv2.projectPoints). Points with Z <= 0 are invalid (NaN).
+PixelsResult ProjectCameraPoints(const Vector9d& intrinsics, Points3Ref camera_points);
+
+/// Pixels -> undistorted normalised image points (x, y) (cv2.undistortPoints without R/P, but
+/// solved to convergence). Pixels where the inversion fails are invalid (NaN).
+PixelsResult UndistortPixels(const Vector9d& intrinsics, PixelsRef pixels);
+
+/// Stripe pixels -> camera-frame points on the laser plane (a, b, c, d). A pixel whose ray
+/// meets the plane behind the camera (or not at all), or whose undistortion fails, is invalid;
+/// with `throw_on_invalid` the first one raises std::invalid_argument naming it.
+PointsResult LaserPointsInCamera(const Vector9d& intrinsics, const Eigen::Vector4d& laser_plane,
+                                 PixelsRef pixels, bool throw_on_invalid);
+
+/// Stripe pixels seen at base_from_hand poses -> base-frame points:
+///   bP = base_from_hand hand_from_camera cP.
+PointsResult LaserPointsInBase(const Vector9d& intrinsics, const Eigen::Vector4d& laser_plane,
+                               const Eigen::Matrix4d& hand_from_camera, PixelsRef pixels,
+                               PosesRef base_from_hand, bool throw_on_invalid);
+
+}  // namespace hmlvs::general

@@ -1,0 +1,539 @@
+#include "hmlvs/solvers/joint.h"
+
+#include <ceres/ceres.h>
+#include <ceres/sphere_manifold.h>
+
+#include <Eigen/Geometry>
+#include <Eigen/SVD>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+
+#include "hmlvs/model/checks.h"
+
+namespace hmlvs::general {
+
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+template <typename T>
+using Mat3 = Eigen::Matrix<T, 3, 3>;
+template <typename T>
+using Vec3 = Eigen::Matrix<T, 3, 1>;
+
+// The corner residuals of one view, (projected - detected) / sigma, for a board pose (r, t).
+template <typename T>
+bool CornerResiduals(const T* in, const Mat3<T>& r, const Vec3<T>& t, const JointView& view,
+                     double inv_sigma, T* residuals) {
+  bool ok = true;
+  for (Eigen::Index i = 0; i < view.corner_points.rows(); ++i) {
+    const Vec3<T> p = r * view.corner_points.row(i).transpose().cast<T>() + t;
+    T px[2];
+    ok = ProjectPoint(in, p.data(), px) && ok;
+    residuals[2 * i] = (px[0] - view.corner_pixels(i, 0)) * inv_sigma;
+    residuals[2 * i + 1] = (px[1] - view.corner_pixels(i, 1)) * inv_sigma;
+  }
+  return ok;
+}
+
+// The laser residuals of one view: the signed distance of the point where pixel i's ray meets
+// the board plane (pose (r, t)) from the laser plane n . X + d = 0, divided by sigma. Returns
+// false when a ray misses the board plane or cannot be undistorted.
+template <typename T>
+bool LaserResiduals(const T* in, const Mat3<T>& r, const Vec3<T>& t, const T* normal,
+                    const T* offset, const JointView& view, double inv_sigma, T* residuals) {
+  using std::sqrt;
+  double in0[kNumIntrinsics];
+  for (int k = 0; k < kNumIntrinsics; ++k) in0[k] = ValueOf(in[k]);
+  const Vec3<T> board_normal = r.col(2);
+  const T board_offset = -board_normal.dot(t);
+  const T n_norm = sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]);
+  bool ok = true;
+  for (Eigen::Index i = 0; i < view.laser_pixels.rows(); ++i) {
+    double x0, y0, jac[4];
+    if (!UndistortNormalized(in0, view.laser_pixels(i, 0), view.laser_pixels(i, 1), &x0, &y0,
+                             jac)) {
+      residuals[i] = T(0.0);
+      ok = false;
+      continue;
+    }
+    T x, y;
+    UndistortAround(in, view.laser_pixels(i, 0), view.laser_pixels(i, 1), x0, y0, jac, &x, &y);
+    T point[3];
+    const T depth = RayPlanePoint(x, y, board_normal.data(), board_offset, point);
+    if (!(depth > T(0.0))) ok = false;
+    residuals[i] =
+        (normal[0] * point[0] + normal[1] * point[1] + normal[2] * point[2]) / n_norm + *offset;
+    residuals[i] *= inv_sigma;
+  }
+  return ok;
+}
+
+template <typename T>
+void QuaternionPose(const T* q, const T* t, Mat3<T>* r, Vec3<T>* v) {
+  *r = Eigen::Quaternion<T>(q[3], q[0], q[1], q[2]).normalized().toRotationMatrix();
+  *v = Vec3<T>(t[0], t[1], t[2]);
+}
+
+struct ChainCorners {
+  const JointView* view;
+  double inv_sigma;
+  template <typename T>
+  bool operator()(const T* in, const T* q_hc, const T* t_hc, const T* q_bb, const T* t_bb,
+                  T* residuals) const {
+    Mat3<T> r;
+    Vec3<T> t;
+    CameraFromBoard(q_hc, t_hc, view->base_from_hand.topLeftCorner<3, 3>().eval(),
+                    view->base_from_hand.topRightCorner<3, 1>().eval(), q_bb, t_bb, &r, &t);
+    return CornerResiduals(in, r, t, *view, inv_sigma, residuals);
+  }
+};
+
+struct ChainLaser {
+  const JointView* view;
+  double inv_sigma;
+  template <typename T>
+  bool operator()(const T* in, const T* q_hc, const T* t_hc, const T* q_bb, const T* t_bb,
+                  const T* normal, const T* offset, T* residuals) const {
+    Mat3<T> r;
+    Vec3<T> t;
+    CameraFromBoard(q_hc, t_hc, view->base_from_hand.topLeftCorner<3, 3>().eval(),
+                    view->base_from_hand.topRightCorner<3, 1>().eval(), q_bb, t_bb, &r, &t);
+    return LaserResiduals(in, r, t, normal, offset, *view, inv_sigma, residuals);
+  }
+};
+
+struct FreeCorners {
+  const JointView* view;
+  double inv_sigma;
+  template <typename T>
+  bool operator()(const T* in, const T* q_cb, const T* t_cb, T* residuals) const {
+    Mat3<T> r;
+    Vec3<T> t;
+    QuaternionPose(q_cb, t_cb, &r, &t);
+    return CornerResiduals(in, r, t, *view, inv_sigma, residuals);
+  }
+};
+
+struct FreeLaser {
+  const JointView* view;
+  double inv_sigma;
+  template <typename T>
+  bool operator()(const T* in, const T* q_cb, const T* t_cb, const T* normal, const T* offset,
+                  T* residuals) const {
+    Mat3<T> r;
+    Vec3<T> t;
+    QuaternionPose(q_cb, t_cb, &r, &t);
+    return LaserResiduals(in, r, t, normal, offset, *view, inv_sigma, residuals);
+  }
+};
+
+// A transform as the parameter blocks of the solve: Eigen quaternion [x, y, z, w] + translation.
+struct PoseBlocks {
+  std::array<double, 4> q{};
+  std::array<double, 3> t{};
+  explicit PoseBlocks(const Eigen::Matrix4d& m) {
+    const Eigen::Quaterniond rq(Eigen::Matrix3d(m.topLeftCorner<3, 3>()));
+    q = {rq.x(), rq.y(), rq.z(), rq.w()};
+    t = {m(0, 3), m(1, 3), m(2, 3)};
+  }
+  Eigen::Matrix4d Matrix() const {
+    Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+    m.topLeftCorner<3, 3>() =
+        Eigen::Quaterniond(q[3], q[0], q[1], q[2]).normalized().toRotationMatrix();
+    m.topRightCorner<3, 1>() << t[0], t[1], t[2];
+    return m;
+  }
+};
+
+void CheckTransform(const Eigen::Matrix4d& m, const std::string& name) {
+  const Eigen::Matrix3d r = m.topLeftCorner<3, 3>();
+  const double err = (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+  if (!m.allFinite() || err > 1e-6 || r.determinant() < 0.0 ||
+      (m.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > 1e-12) {
+    throw std::invalid_argument(name +
+                                " is not a rigid transform (finite, orthonormal rotation "
+                                "with determinant +1, last row [0 0 0 1])");
+  }
+}
+
+void CheckInput(const std::vector<JointView>& views, const JointState& s, const JointOptions& o) {
+  if (views.empty()) throw std::invalid_argument("the joint calibration needs at least one view");
+  ValidateIntrinsics(s.intrinsics);
+  if (!(o.corner_sigma > 0.0) || !(o.laser_sigma > 0.0)) {
+    throw std::invalid_argument("corner_sigma and laser_sigma must be > 0");
+  }
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    const JointView& v = views[i];
+    const std::string name = "view " + std::to_string(i);
+    RequireSameRows(v.corner_pixels.rows(), (name + " corner pixels").c_str(),
+                    v.corner_points.rows(), (name + " corner points").c_str());
+    RequireFinite(v.corner_pixels.data(), v.corner_pixels.rows(), 2,
+                  (name + " corner pixels").c_str());
+    RequireFinite(v.corner_points.data(), v.corner_points.rows(), 3,
+                  (name + " corner points").c_str());
+    RequireFinite(v.laser_pixels.data(), v.laser_pixels.rows(), 2,
+                  (name + " laser pixels").c_str());
+    if (v.corner_pixels.rows() < 4) {
+      throw std::invalid_argument(name + " has " + std::to_string(v.corner_pixels.rows()) +
+                                  " corners; each view needs at least 4");
+    }
+    if (o.chain) CheckTransform(v.base_from_hand, name + " base_from_hand");
+  }
+  if (o.chain) {
+    CheckTransform(s.hand_from_camera, "hand_from_camera");
+    CheckTransform(s.base_from_board, "base_from_board");
+  } else {
+    if (s.camera_from_board.size() != views.size()) {
+      throw std::invalid_argument("camera mode needs one initial camera_from_board per view, got " +
+                                  std::to_string(s.camera_from_board.size()) + " for " +
+                                  std::to_string(views.size()) + " views");
+    }
+    for (std::size_t i = 0; i < views.size(); ++i) {
+      CheckTransform(s.camera_from_board[i], "camera_from_board of view " + std::to_string(i));
+    }
+  }
+  if (o.laser && !(s.laser_plane.head<3>().norm() > 0.0 && s.laser_plane.allFinite())) {
+    throw std::invalid_argument("the initial laser plane needs a finite, non-zero normal");
+  }
+}
+
+ceres::LossFunction* MakeJointLoss(const JointOptions& o) {
+  switch (o.loss) {
+    case LossKind::kHuber:
+      return new ceres::HuberLoss(o.loss_scale);
+    case LossKind::kCauchy:
+      return new ceres::CauchyLoss(o.loss_scale);
+    case LossKind::kNone:
+      break;
+  }
+  return nullptr;
+}
+
+// The problem and its parameter blocks; built the same way for solving and for the Jacobian.
+class JointProblem {
+ public:
+  JointProblem(const std::vector<JointView>& views, const JointState& s, const JointOptions& o)
+      : options_(o), hand_eye_(s.hand_from_camera), board_(s.base_from_board) {
+    CheckInput(views, s, o);
+    intrinsics_ = s.intrinsics;
+    const double n = s.laser_plane.head<3>().norm();
+    normal_ = s.laser_plane.head<3>() / n;
+    offset_ = s.laser_plane[3] / n;
+    if (!o.chain) {
+      for (const auto& m : s.camera_from_board) views_pose_.emplace_back(m);
+    }
+    ceres::Problem::Options popt;
+    popt.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    problem_ = std::make_unique<ceres::Problem>(popt);
+    loss_.reset(MakeJointLoss(o));
+    const double wc = 1.0 / o.corner_sigma, wl = 1.0 / o.laser_sigma;
+    for (std::size_t i = 0; i < views.size(); ++i) {
+      const JointView* v = &views[i];
+      const int nc = 2 * static_cast<int>(v->corner_pixels.rows());
+      const int nl = static_cast<int>(v->laser_pixels.rows());
+      if (o.chain) {
+        AddBlock(new ceres::AutoDiffCostFunction<ChainCorners, ceres::DYNAMIC, 9, 4, 3, 4, 3>(
+                     new ChainCorners{v, wc}, nc),
+                 {intrinsics_.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
+                  board_.t.data()},
+                 nc);
+        if (o.laser && nl > 0) {
+          AddBlock(new ceres::AutoDiffCostFunction<ChainLaser, ceres::DYNAMIC, 9, 4, 3, 4, 3, 3, 1>(
+                       new ChainLaser{v, wl}, nl),
+                   {intrinsics_.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
+                    board_.t.data(), normal_.data(), &offset_},
+                   nl);
+        }
+      } else {
+        PoseBlocks& p = views_pose_[i];
+        AddBlock(new ceres::AutoDiffCostFunction<FreeCorners, ceres::DYNAMIC, 9, 4, 3>(
+                     new FreeCorners{v, wc}, nc),
+                 {intrinsics_.data(), p.q.data(), p.t.data()}, nc);
+        if (o.laser && nl > 0) {
+          AddBlock(new ceres::AutoDiffCostFunction<FreeLaser, ceres::DYNAMIC, 9, 4, 3, 3, 1>(
+                       new FreeLaser{v, wl}, nl),
+                   {intrinsics_.data(), p.q.data(), p.t.data(), normal_.data(), &offset_}, nl);
+        }
+      }
+    }
+    // Manifolds and what is held fixed, in the order of the Jacobian's columns.
+    std::vector<int> fixed;
+    for (int k = 0; k < kNumIntrinsics; ++k) {
+      if (o.fixed[k]) fixed.push_back(k);
+    }
+    static const char* names[kNumIntrinsics] = {"fx", "fy", "cx", "cy", "k1",
+                                                "k2", "p1", "p2", "k3"};
+    if (static_cast<int>(fixed.size()) == kNumIntrinsics) {
+      problem_->SetParameterBlockConstant(intrinsics_.data());
+    } else {
+      if (!fixed.empty()) {
+        problem_->SetManifold(intrinsics_.data(), new ceres::SubsetManifold(kNumIntrinsics, fixed));
+      }
+      free_.push_back(intrinsics_.data());
+      for (int k = 0; k < kNumIntrinsics; ++k) {
+        if (!o.fixed[k]) names_.push_back(names[k]);
+      }
+    }
+    auto add_pose = [&](PoseBlocks& p, bool constant, const std::string& prefix) {
+      problem_->SetManifold(p.q.data(), new ceres::EigenQuaternionManifold());
+      if (constant) {
+        problem_->SetParameterBlockConstant(p.q.data());
+        problem_->SetParameterBlockConstant(p.t.data());
+        return;
+      }
+      free_.push_back(p.q.data());
+      free_.push_back(p.t.data());
+      rotation_columns_.push_back(static_cast<int>(names_.size()));
+      for (const char* c : {"rx", "ry", "rz", "tx", "ty", "tz"}) names_.push_back(prefix + c);
+    };
+    if (o.chain) {
+      add_pose(hand_eye_, o.hand_eye_known, "hand_");
+      add_pose(board_, o.board_pose_known, "board_");
+    } else {
+      for (std::size_t i = 0; i < views_pose_.size(); ++i) {
+        add_pose(views_pose_[i], false, "view" + std::to_string(i) + "_");
+      }
+    }
+    if (o.laser && problem_->HasParameterBlock(normal_.data())) {
+      problem_->SetManifold(normal_.data(), new ceres::SphereManifold<3>());
+      free_.push_back(normal_.data());
+      free_.push_back(&offset_);
+      for (const char* c : {"plane_n1", "plane_n2", "plane_d"}) names_.push_back(c);
+    }
+  }
+
+  ceres::Problem& problem() { return *problem_; }
+  const std::vector<double*>& free_blocks() const { return free_; }
+  const std::vector<std::string>& names() const { return names_; }
+  const std::vector<int>& rotation_columns() const { return rotation_columns_; }
+  int num_residuals() const { return num_residuals_; }
+
+  JointState State() const {
+    JointState s;
+    s.intrinsics = intrinsics_;
+    s.laser_plane << normal_.normalized(), offset_;
+    s.hand_from_camera = hand_eye_.Matrix();
+    s.base_from_board = board_.Matrix();
+    for (const auto& p : views_pose_) s.camera_from_board.push_back(p.Matrix());
+    return s;
+  }
+
+ private:
+  void AddBlock(ceres::CostFunction* cost, const std::vector<double*>& blocks, int residuals) {
+    problem_->AddResidualBlock(cost, loss_.get(), blocks);
+    num_residuals_ += residuals;
+  }
+
+  JointOptions options_;
+  Vector9d intrinsics_;
+  Eigen::Vector3d normal_;
+  double offset_ = 0.0;
+  PoseBlocks hand_eye_, board_;
+  std::vector<PoseBlocks> views_pose_;
+  std::unique_ptr<ceres::LossFunction> loss_;
+  std::unique_ptr<ceres::Problem> problem_;
+  std::vector<double*> free_;
+  std::vector<std::string> names_;
+  std::vector<int> rotation_columns_;
+  int num_residuals_ = 0;
+};
+
+}  // namespace
+
+JointResult SolveJoint(const std::vector<JointView>& views, const JointState& initial,
+                       const JointOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  JointProblem jp(views, initial, options);
+  int free = 0;
+  for (double* b : jp.free_blocks()) free += jp.problem().ParameterBlockTangentSize(b);
+  if (jp.num_residuals() < free) {
+    std::ostringstream msg;
+    msg << "the joint calibration has " << jp.num_residuals() << " residuals for " << free
+        << " unknowns; it needs more views or more corners";
+    throw std::invalid_argument(msg.str());
+  }
+  double cost0 = 0.0;
+  if (!jp.problem().Evaluate(ceres::Problem::EvaluateOptions(), &cost0, nullptr, nullptr,
+                             nullptr) ||
+      !std::isfinite(cost0)) {
+    throw std::invalid_argument(
+        "the initial state cannot be evaluated: a board corner lies behind the camera, or a "
+        "stripe pixel's ray misses its view's board plane or cannot be undistorted");
+  }
+  ceres::Solver::Options sopt;
+  sopt.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  sopt.linear_solver_type = options.chain ? ceres::DENSE_QR : ceres::DENSE_SCHUR;
+  sopt.max_num_iterations = options.max_iterations;
+  sopt.function_tolerance = options.function_tolerance;
+  sopt.parameter_tolerance = options.parameter_tolerance;
+  sopt.gradient_tolerance = options.gradient_tolerance;
+  sopt.num_threads = 1;  // the cost sums of several threads would depend on their schedule
+  sopt.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  ceres::Solve(sopt, &jp.problem(), &summary);
+
+  JointResult r;
+  r.state = jp.State();
+  r.initial_cost = summary.initial_cost;
+  r.final_cost = summary.final_cost;
+  r.iterations = static_cast<int>(summary.iterations.size()) - 1;
+  r.termination = ceres::TerminationTypeToString(summary.termination_type);
+  r.message = summary.message;
+  r.usable = summary.IsSolutionUsable();
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return r;
+}
+
+JointResiduals EvaluateJoint(const std::vector<JointView>& views, const JointState& s,
+                             const JointOptions& o) {
+  CheckInput(views, s, o);
+  JointResiduals out;
+  const Eigen::Vector3d normal = s.laser_plane.head<3>() / s.laser_plane.head<3>().norm();
+  const double offset = s.laser_plane[3] / s.laser_plane.head<3>().norm();
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    const JointView& v = views[i];
+    Eigen::Matrix4d cb;
+    if (o.chain) {
+      cb = s.hand_from_camera.inverse() * v.base_from_hand.inverse() * s.base_from_board;
+    } else {
+      cb = s.camera_from_board[i];
+    }
+    const Eigen::Matrix3d r = cb.topLeftCorner<3, 3>();
+    const Eigen::Vector3d t = cb.topRightCorner<3, 1>();
+    RowMatX2 c(v.corner_pixels.rows(), 2);
+    CornerResiduals(s.intrinsics.data(), r, t, v, 1.0, c.data());
+    out.corners.push_back(c);
+    Eigen::VectorXd l(v.laser_pixels.rows());
+    for (Eigen::Index k = 0; k < v.laser_pixels.rows(); ++k) {
+      JointView one;
+      one.laser_pixels = v.laser_pixels.row(k);
+      double res = 0.0;
+      l[k] = LaserResiduals(s.intrinsics.data(), r, t, normal.data(), &offset, one, 1.0, &res)
+                 ? res
+                 : kNaN;
+    }
+    out.laser.push_back(l);
+  }
+  return out;
+}
+
+Eigen::MatrixXd JointJacobian(const std::vector<JointView>& views, const JointState& state,
+                              const JointOptions& options, std::vector<std::string>* names) {
+  JointProblem jp(views, state, options);
+  ceres::Problem::EvaluateOptions eopt;
+  eopt.parameter_blocks = jp.free_blocks();
+  eopt.apply_loss_function = false;
+  std::vector<ceres::ResidualBlockId> blocks;
+  jp.problem().GetResidualBlocks(&blocks);
+  // Corners of every view first, then the laser pixels (see the header).
+  std::vector<ceres::ResidualBlockId> ordered;
+  const int per_view = options.laser ? 2 : 1;
+  for (int pass = 0; pass < per_view; ++pass) {
+    for (ceres::ResidualBlockId b : blocks) {
+      const bool is_corner =
+          jp.problem().GetCostFunctionForResidualBlock(b)->parameter_block_sizes().size() ==
+          (options.chain ? 5u : 3u);
+      if ((pass == 0) == is_corner) ordered.push_back(b);
+    }
+  }
+  eopt.residual_blocks = ordered;
+  ceres::CRSMatrix crs;
+  double cost = 0.0;
+  if (!jp.problem().Evaluate(eopt, &cost, nullptr, nullptr, &crs)) {
+    throw std::invalid_argument("the Jacobian cannot be evaluated at this state");
+  }
+  Eigen::MatrixXd j = Eigen::MatrixXd::Zero(crs.num_rows, crs.num_cols);
+  for (int r = 0; r < crs.num_rows; ++r) {
+    for (int k = crs.rows[r]; k < crs.rows[r + 1]; ++k) j(r, crs.cols[k]) = crs.values[k];
+  }
+  // Ceres' quaternion tangent delta rotates by 2 |delta|: per radian of rotation, halve.
+  for (int c : jp.rotation_columns()) j.middleCols(c, 3) *= 0.5;
+  if (names != nullptr) *names = jp.names();
+  return j;
+}
+
+Eigen::Matrix4d MeanTransform(const std::vector<Eigen::Matrix4d>& transforms) {
+  if (transforms.empty()) throw std::invalid_argument("no transforms to average");
+  Eigen::Matrix3d sum = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  for (const auto& m : transforms) {
+    sum += m.topLeftCorner<3, 3>();
+    t += m.topRightCorner<3, 1>();
+  }
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(sum, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+  d(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
+  Eigen::Matrix4d out = Eigen::Matrix4d::Identity();
+  out.topLeftCorner<3, 3>() = svd.matrixU() * d * svd.matrixV().transpose();
+  out.topRightCorner<3, 1>() = t / static_cast<double>(transforms.size());
+  return out;
+}
+
+Eigen::Matrix4d HandEyeParkMartin(const std::vector<Eigen::Matrix4d>& base_from_hand,
+                                  const std::vector<Eigen::Matrix4d>& camera_from_board,
+                                  double min_angle) {
+  if (base_from_hand.size() != camera_from_board.size()) {
+    throw std::invalid_argument("hand-eye: " + std::to_string(base_from_hand.size()) +
+                                " robot poses but " + std::to_string(camera_from_board.size()) +
+                                " camera poses");
+  }
+  const std::size_t n = base_from_hand.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    CheckTransform(base_from_hand[i], "robot pose " + std::to_string(i));
+    CheckTransform(camera_from_board[i], "camera pose " + std::to_string(i));
+  }
+  struct Motion {
+    Eigen::Matrix4d a, b;
+  };
+  std::vector<Motion> motions;
+  Eigen::Matrix3d m = Eigen::Matrix3d::Zero();
+  for (std::size_t i = 0; i < n; ++i) {
+    for (std::size_t j = i + 1; j < n; ++j) {
+      // A = hand_i_from_hand_j, B = camera_i_from_camera_j: A X = X B.
+      const Eigen::Matrix4d a = base_from_hand[i].inverse() * base_from_hand[j];
+      const Eigen::Matrix4d b = camera_from_board[i] * camera_from_board[j].inverse();
+      const Eigen::AngleAxisd aa(Eigen::Matrix3d(a.topLeftCorner<3, 3>()));
+      const Eigen::AngleAxisd ab(Eigen::Matrix3d(b.topLeftCorner<3, 3>()));
+      if (aa.angle() < min_angle || ab.angle() < min_angle) continue;
+      m += (ab.axis() * ab.angle()) * (aa.axis() * aa.angle()).transpose();
+      motions.push_back({a, b});
+    }
+  }
+  if (motions.size() < 2) {
+    throw std::invalid_argument(
+        "hand-eye calibration needs at least two pairs of views whose orientations differ by "
+        "more than " +
+        std::to_string(min_angle * 180.0 / M_PI) + " degrees; got " +
+        std::to_string(motions.size()));
+  }
+  // R_X = (M^T M)^(-1/2) M^T, through the SVD M = U S V^T: R_X = V U^T (det-corrected).
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(m, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  const Eigen::Vector3d s = svd.singularValues();
+  if (!(s[1] > 1e-3 * s[0])) {
+    throw std::invalid_argument(
+        "hand-eye calibration needs robot rotations about at least two non-parallel axes; the "
+        "poses rotate about one axis only");
+  }
+  Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+  d(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
+  const Eigen::Matrix3d rx = svd.matrixV() * d * svd.matrixU().transpose();
+  // Translation: (R_A - I) t_X = R_X t_B - t_A, stacked, least squares.
+  Eigen::MatrixXd c(3 * motions.size(), 3);
+  Eigen::VectorXd rhs(3 * motions.size());
+  for (std::size_t k = 0; k < motions.size(); ++k) {
+    c.middleRows<3>(3 * k) = motions[k].a.topLeftCorner<3, 3>() - Eigen::Matrix3d::Identity();
+    rhs.segment<3>(3 * k) =
+        rx * motions[k].b.topRightCorner<3, 1>() - motions[k].a.topRightCorner<3, 1>();
+  }
+  Eigen::Matrix4d x = Eigen::Matrix4d::Identity();
+  x.topLeftCorner<3, 3>() = rx;
+  x.topRightCorner<3, 1>() = c.colPivHouseholderQr().solve(rhs);
+  return x;
+}
+
+}  // namespace hmlvs::general

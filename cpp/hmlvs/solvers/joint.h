@@ -1,0 +1,108 @@
+// Joint calibration of the general sensor (model "opencv") from board corners and laser stripe
+// pixels: one Levenberg-Marquardt solve (Ceres) of
+//   - corner residuals: projected board corner - detected corner (pixels), and
+//   - laser residuals: the signed distance (mm) from the laser plane of the point where a stripe
+//     pixel's ray meets the board plane of its view,
+// each kind divided by its noise (sigma), optionally under a robust loss.
+//
+// The board pose of a view comes either from the robot chain
+//   camera_from_board_i = inv(hand_from_camera) inv(base_from_hand_i) base_from_board
+// (chain mode: hand_from_camera and base_from_board are unknowns, base_from_hand_i known), or
+// from a free per-view pose (camera mode: camera_from_board_i are unknowns; no robot needed).
+// Rotations live on SO(3) (unit quaternions), the laser normal on the unit sphere.
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <string>
+#include <vector>
+
+#include "hmlvs/model/general.h"
+#include "hmlvs/solvers/lm.h"
+
+namespace hmlvs::general {
+
+/// The data of one view.
+struct JointView {
+  Eigen::Matrix4d base_from_hand = Eigen::Matrix4d::Identity();  ///< chain mode
+  RowMatX2 corner_pixels;                                        ///< detected corners (n x 2)
+  RowMatX3 corner_points;  ///< the same corners in the board frame, mm (n x 3)
+  RowMatX2 laser_pixels;   ///< stripe pixels on the board (m x 2)
+};
+
+/// Everything the joint solve estimates.
+struct JointState {
+  Vector9d intrinsics = Vector9d::Zero();
+  Eigen::Vector4d laser_plane = Eigen::Vector4d(0, 1, 0, -100);    ///< (a, b, c, d), unit normal
+  Eigen::Matrix4d hand_from_camera = Eigen::Matrix4d::Identity();  ///< chain mode
+  Eigen::Matrix4d base_from_board = Eigen::Matrix4d::Identity();   ///< chain mode
+  std::vector<Eigen::Matrix4d> camera_from_board;                  ///< camera mode, per view
+};
+
+struct JointOptions {
+  bool chain = true;              ///< robot chain (true) or free per-view board poses
+  bool board_pose_known = false;  ///< chain mode: hold base_from_board at its given value
+  bool hand_eye_known = false;    ///< chain mode: hold hand_from_camera at its given value
+  bool laser = true;              ///< include the laser residuals and the plane
+  std::array<bool, kNumIntrinsics> fixed{};  ///< intrinsics held at their initial values
+  double corner_sigma = 0.1;                 ///< pixels
+  double laser_sigma = 0.05;                 ///< mm
+  LossKind loss = LossKind::kNone;
+  double loss_scale = 3.0;  ///< in units of sigma
+  int max_iterations = 100;
+  double function_tolerance = 1e-12;
+  double parameter_tolerance = 1e-12;
+  double gradient_tolerance = 1e-14;
+};
+
+struct JointResult {
+  JointState state;
+  double initial_cost = 0.0;  ///< Ceres' cost (1/2 sum of squared weighted residuals)
+  double final_cost = 0.0;
+  int iterations = 0;
+  std::string termination;
+  std::string message;
+  bool usable = false;
+  double seconds = 0.0;
+};
+
+/// Solves the joint problem from `initial`. Throws std::invalid_argument for bad input (views
+/// without corners, mismatched shapes, non-finite values, an initial state where a laser ray
+/// misses its board plane, fewer residuals than unknowns).
+JointResult SolveJoint(const std::vector<JointView>& views, const JointState& initial,
+                       const JointOptions& options);
+
+/// Unweighted residuals at `state`: per view, the corner residuals (n x 2, pixels) and the laser
+/// residuals (m, mm; NaN where the ray misses the board plane).
+struct JointResiduals {
+  std::vector<RowMatX2> corners;
+  std::vector<Eigen::VectorXd> laser;
+};
+JointResiduals EvaluateJoint(const std::vector<JointView>& views, const JointState& state,
+                             const JointOptions& options);
+
+/// The Jacobian of the weighted residuals (corners of every view, then laser pixels of every
+/// view, in order) with respect to the free unknowns in their tangent spaces, in the order
+/// intrinsics (free ones), hand_from_camera (rotation 3, translation 3), base_from_board
+/// (rotation 3, translation 3), laser plane (normal tangent 2, offset 1) in chain mode; in
+/// camera mode the per-view poses (6 each) replace the two transforms. Rotations are
+/// perturbed on the left (R <- exp([w]x) R), in radians. `names` receives the column names.
+Eigen::MatrixXd JointJacobian(const std::vector<JointView>& views, const JointState& state,
+                              const JointOptions& options, std::vector<std::string>* names);
+
+// ---------------------------------------------------------------------------------------------
+// Closed-form starting values.
+
+/// Hand-eye calibration AX = XB by Park and Martin (1994): X = hand_from_camera from the robot's
+/// base_from_hand poses and the camera's camera_from_board poses of the same views (all pairs
+/// of views whose relative rotation exceeds `min_angle` radians). Throws std::invalid_argument
+/// when the motions do not determine X (fewer than two pairs, or rotations about one axis only).
+Eigen::Matrix4d HandEyeParkMartin(const std::vector<Eigen::Matrix4d>& base_from_hand,
+                                  const std::vector<Eigen::Matrix4d>& camera_from_board,
+                                  double min_angle = 0.05);
+
+/// The mean of rigid transforms: the rotation closest (Frobenius) to the sum of rotations,
+/// and the mean translation.
+Eigen::Matrix4d MeanTransform(const std::vector<Eigen::Matrix4d>& transforms);
+
+}  // namespace hmlvs::general

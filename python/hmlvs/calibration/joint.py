@@ -1,0 +1,469 @@
+"""Joint calibration of the general sensor (``model="opencv"``) from board corners and stripes.
+
+No guess is needed. The steps:
+
+1. intrinsics and per-view board poses from the corners (Zhang's method, ``cv2.calibrateCamera``);
+2. with robot poses: the corner numbering made consistent over the views (a checkerboard looks
+   the same turned by 180 degrees; the robot's motion tells the two apart), the hand-eye
+   transform in closed form (Park and Martin, C++ core) and the board's pose in the base as
+   the mean over the views;
+3. the laser plane fitted to the stripe points placed on each view's board plane;
+4. one Levenberg-Marquardt solve (Ceres) of corner reprojection residuals (px) and laser
+   residuals (mm from the laser plane), each divided by its noise, which is estimated from the
+   residuals themselves; stripe pixels and corners far off (robust rule) are dropped and the
+   solve is repeated.
+
+With robot poses the board poses come from the chain ``inv(hand_from_camera) inv(base_from_hand)
+base_from_board`` (``chain`` mode); without them each view's board pose is free (``camera``
+mode: intrinsics and laser plane only).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+import time
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+from .. import _core
+from .._arrays import check_transform
+from ..models.opencv import DISTORTION_NAMES, OpenCvSensor
+
+_ROBUST_K = 4.0  # residuals beyond this many robust sigmas are dropped
+
+
+@dataclass(frozen=True)
+class BoardSpec:
+    """A checkerboard: ``rows`` x ``cols`` inner corners spaced ``square`` mm. Corner (r, c)
+    lies at (r * square, c * square, 0) in the board frame (as :class:`hmlvs.Checkerboard`)."""
+
+    rows: int
+    cols: int
+    square: float
+
+    def __post_init__(self) -> None:
+        if int(self.rows) < 2 or int(self.cols) < 2:
+            raise ValueError(f"a board needs at least 2 x 2 inner corners, got {self.rows} x "
+                             f"{self.cols}")
+        if not float(self.square) > 0:
+            raise ValueError(f"the board's square size must be > 0 mm, got {self.square}")
+
+    @classmethod
+    def of(cls, board: Any) -> "BoardSpec":
+        if isinstance(board, BoardSpec):
+            return board
+        if isinstance(board, dict):
+            return cls(int(board["rows"]), int(board["cols"]), float(board["square"]))
+        return cls(int(board.rows), int(board.cols), float(board.square))
+
+    def points(self, index: np.ndarray | None = None) -> np.ndarray:
+        """(k, 3) board-frame points of corner indices ``r * cols + c`` (all by default)."""
+        idx = np.arange(self.rows * self.cols) if index is None else np.asarray(index, int)
+        return np.stack([idx // self.cols * self.square, idx % self.cols * self.square,
+                         np.zeros(idx.size)], axis=1)
+
+    def flip(self) -> np.ndarray:
+        """The 180-degree turn of the board about its centre (4x4): corner index i and
+        rows*cols - 1 - i swap places."""
+        f = np.diag([-1.0, -1.0, 1.0, 1.0])
+        f[0, 3] = (self.rows - 1) * self.square
+        f[1, 3] = (self.cols - 1) * self.square
+        return f
+
+
+@dataclass
+class ViewData:
+    """What one view contributes: its corners, its stripe pixels and (optionally) its pose.
+
+    corner_pixels : (k, 2) detected corners; corner_index : (k,) their board indices
+    laser_pixels : (m, 2) stripe pixels (any that miss the board are dropped by the solve's
+        set-up); base_from_hand : the robot's 4x4 pose, None without a robot
+    """
+
+    id: str
+    corner_pixels: np.ndarray
+    corner_index: np.ndarray
+    laser_pixels: np.ndarray
+    base_from_hand: np.ndarray | None = None
+
+
+@dataclass
+class JointCalibration:
+    """The outcome of :func:`calibrate_joint`.
+
+    sensor : the calibrated :class:`OpenCvSensor`
+    std : standard deviation of each estimated quantity (px, mm, rad; rotations as rotation
+        vectors perturbed in the base/hand frame, the plane normal as 2 tangent angles)
+    names : the estimated quantities, in the order of ``covariance``
+    covariance : their covariance
+    corner_rms_px, laser_rms_mm : RMS of the residuals of the final solve
+    corner_sigma_px, laser_sigma_mm : the noise levels used as weights (estimated)
+    per_view : per view id: corners used, stripe pixels used, corner RMS (px), laser RMS (mm)
+    dropped : counts of corners and stripe pixels dropped as outliers
+    mode : "chain" (robot poses) or "camera" (free board poses)
+    rank, num_unknowns, condition : the Jacobian's numerical rank, size and condition number
+        (column-scaled); every quantity is determined when rank == num_unknowns
+    termination, iterations, seconds : of the final Levenberg-Marquardt solve
+    flipped : ids of views whose corner numbering was turned by 180 degrees
+    """
+
+    sensor: OpenCvSensor
+    std: dict[str, float]
+    names: list[str]
+    covariance: np.ndarray
+    corner_rms_px: float
+    laser_rms_mm: float
+    corner_sigma_px: float
+    laser_sigma_mm: float
+    per_view: dict[str, dict[str, float]]
+    dropped: dict[str, int]
+    mode: str
+    rank: int
+    num_unknowns: int
+    condition: float
+    termination: str
+    iterations: int
+    seconds: float
+    flipped: list[str] = field(default_factory=list)
+    camera_from_board: dict[str, np.ndarray] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def determined(self) -> bool:
+        return self.rank == self.num_unknowns
+
+
+def _rotation_angle(r: np.ndarray) -> float:
+    return math.acos(max(-1.0, min(1.0, (np.trace(r) - 1.0) / 2.0)))
+
+
+def _rodrigues(rvec: np.ndarray) -> np.ndarray:
+    import cv2
+
+    r, _ = cv2.Rodrigues(np.asarray(rvec, float).reshape(3, 1))
+    return r
+
+
+def _transform(r: np.ndarray, t: Any) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3] = r
+    m[:3, 3] = np.ravel(t)
+    return m
+
+
+def _inv(m: np.ndarray) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, :3] = m[:3, :3].T
+    out[:3, 3] = -m[:3, :3].T @ m[:3, 3]
+    return out
+
+
+def _cv_flags(distortion: Sequence[str]) -> int:
+    import cv2
+
+    flags = 0
+    if "k3" not in distortion:
+        flags |= cv2.CALIB_FIX_K3
+    if "k2" not in distortion:
+        flags |= cv2.CALIB_FIX_K2
+    if "k1" not in distortion:
+        flags |= cv2.CALIB_FIX_K1
+    if "p1" not in distortion and "p2" not in distortion:
+        flags |= cv2.CALIB_ZERO_TANGENT_DIST
+    return flags
+
+
+def _check_distortion(distortion: Iterable[str]) -> tuple[str, ...]:
+    terms = tuple(distortion)
+    bad = [t for t in terms if t not in DISTORTION_NAMES]
+    if bad:
+        raise ValueError(f"unknown distortion term {bad[0]!r}; choose among "
+                         f"{', '.join(DISTORTION_NAMES)}")
+    if ("p1" in terms) != ("p2" in terms):
+        raise ValueError("the tangential terms p1 and p2 go together: give both or neither")
+    return terms
+
+
+def initial_intrinsics(views: Sequence[ViewData], board: BoardSpec, image_size: tuple[int, int],
+                       distortion: Sequence[str] = DISTORTION_NAMES
+                       ) -> tuple[np.ndarray, list[np.ndarray], float]:
+    """Zhang's method (``cv2.calibrateCamera``): the 9 intrinsics, each view's camera_from_board
+    and the RMS reprojection error (px)."""
+    import cv2
+
+    obj = [board.points(v.corner_index).astype(np.float32) for v in views]
+    img = [np.asarray(v.corner_pixels, np.float32).reshape(-1, 1, 2) for v in views]
+    rms, k, dist, rvecs, tvecs = cv2.calibrateCamera(obj, img, tuple(int(s) for s in image_size),
+                                                     None, None, flags=_cv_flags(distortion))
+    d = np.zeros(5)
+    d[: min(5, dist.size)] = dist.ravel()[:5]
+    intr = np.array([k[0, 0], k[1, 1], k[0, 2], k[1, 2], *d])
+    poses = [_transform(_rodrigues(r), t) for r, t in zip(rvecs, tvecs)]
+    return intr, poses, float(rms)
+
+
+def consistent_numbering(base_from_hand: Sequence[np.ndarray],
+                         camera_from_board: Sequence[np.ndarray], board: BoardSpec
+                         ) -> list[bool]:
+    """Which views' corner numbering to turn by 180 degrees so that all views agree.
+
+    A turned numbering turns the view's board pose by 180 degrees about the board's normal.
+    Hand-eye calibration needs one board frame in every view. The test needs no hand-eye
+    estimate: for any two views the robot's relative rotation and the camera's relative
+    rotation have the same angle (A X = X B), so each view takes the numbering under which
+    these angles agree best with the other views (repeated until no view changes)."""
+    n = len(camera_from_board)
+    f = board.flip()
+    a_angle = np.array([[_rotation_angle((_inv(base_from_hand[i]) @ base_from_hand[j])[:3, :3])
+                         for j in range(n)] for i in range(n)])
+    flips = [False] * n
+
+    def pose(i: int, flipped: bool) -> np.ndarray:
+        return camera_from_board[i] @ f if flipped else camera_from_board[i]
+
+    def score(j: int, flipped: bool) -> float:
+        cj = pose(j, flipped)
+        d = [abs(_rotation_angle((pose(i, flips[i]) @ _inv(cj))[:3, :3]) - a_angle[i, j])
+             for i in range(n) if i != j]
+        return float(np.median(d)) if d else 0.0
+
+    for _ in range(3):
+        changed = False
+        for j in range(n):
+            keep, turn = score(j, flips[j]), score(j, not flips[j])
+            if turn < 0.5 * keep:
+                flips[j] = not flips[j]
+                changed = True
+        if not changed:
+            break
+    # Both labellings are valid board frames; keep the majority's.
+    if sum(flips) > n / 2:
+        flips = [not x for x in flips]
+    return flips
+
+
+def _board_plane_points(intr: np.ndarray, camera_from_board: np.ndarray, pixels: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Camera-frame points where the pixels' rays meet the board plane, and their board-frame
+    (x, y) coordinates; NaN where a ray does not meet it in front of the camera."""
+    und = _core._general_undistort(intr, np.ascontiguousarray(pixels, float)).pixels
+    rays = np.c_[und, np.ones(len(und))]
+    n = camera_from_board[:3, 2]
+    t = camera_from_board[:3, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        depth = (n @ t) / (rays @ n)
+    depth[~(depth > 0)] = np.nan
+    pts = rays * depth[:, None]
+    board_xy = ((pts - t) @ camera_from_board[:3, :3])[:, :2]
+    return pts, board_xy
+
+
+def on_board(board: BoardSpec, board_xy: np.ndarray, margin: float = 0.5) -> np.ndarray:
+    """Which board-frame points lie on the board: within ``margin`` squares of the inner
+    corners' rectangle (the printed board extends one square beyond them)."""
+    m = margin * board.square
+    x, y = board_xy[:, 0], board_xy[:, 1]
+    return ((x >= -m) & (x <= (board.rows - 1) * board.square + m)
+            & (y >= -m) & (y <= (board.cols - 1) * board.square + m))
+
+
+def fit_plane(points: np.ndarray) -> np.ndarray:
+    """Least-squares plane (a, b, c, d) through 3D points, unit normal, d < 0 (the origin on
+    the negative side)."""
+    c = points.mean(axis=0)
+    _, s, vt = np.linalg.svd(points - c, full_matrices=False)
+    if s.size < 3 or not s[1] > 1e-9 * max(s[0], 1e-300):
+        raise ValueError("the stripe points lie on a line, not a plane: the laser plane needs "
+                         "stripe points from views with the board at different angles")
+    n = vt[2]
+    plane = np.r_[n, -n @ c]
+    return -plane if plane[3] > 0 else plane
+
+
+def _robust_sigma(r: np.ndarray) -> float:
+    r = r[np.isfinite(r)]
+    if r.size == 0:
+        return float("nan")
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
+def _rms(r: np.ndarray) -> float:
+    r = r[np.isfinite(r)]
+    return float(np.sqrt(np.mean(r**2))) if r.size else float("nan")
+
+
+def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int, int], *,
+                    distortion: Iterable[str] = DISTORTION_NAMES,
+                    base_from_board: np.ndarray | None = None,
+                    use_robot: bool = True, robust: bool = True,
+                    max_iterations: int = 100) -> JointCalibration:
+    """Calibrate the general sensor from per-view corners and stripe pixels (module doc).
+
+    views : the views (:class:`ViewData`); each needs >= 6 corners
+    board : the board (:class:`BoardSpec`, :class:`hmlvs.Checkerboard` or a mapping with rows,
+        cols, square)
+    image_size : (width, height)
+    distortion : the distortion terms to estimate (others held at 0), e.g. ("k1", "k2")
+    base_from_board : the board's pose in the base, when measured (held fixed)
+    use_robot : use the views' robot poses (chain mode) when every view has one
+    robust : drop corners and stripe pixels beyond 4 robust sigmas and solve again
+    """
+    start = time.perf_counter()
+    board = BoardSpec.of(board)
+    terms = _check_distortion(distortion)
+    views = [v for v in views]
+    if len(views) < 3:
+        raise ValueError(f"the joint calibration needs at least 3 views with a detected board, "
+                         f"got {len(views)}")
+    for v in views:
+        if len(v.corner_index) < 6:
+            raise ValueError(f"view {v.id}: {len(v.corner_index)} corners; each view needs at "
+                             "least 6")
+    chain = use_robot and all(v.base_from_hand is not None for v in views)
+    if base_from_board is not None:
+        base_from_board = check_transform(base_from_board, "base_from_board")
+        if not chain:
+            raise ValueError("a given base_from_board needs robot poses for every view")
+    intr, cam_poses, _ = initial_intrinsics(views, board, image_size, terms)
+    corner_index = [np.asarray(v.corner_index, int) for v in views]
+    flipped: list[str] = []
+    warnings_out: list[str] = []
+    if chain:
+        bfh = [check_transform(v.base_from_hand, f"view {v.id} base_from_hand") for v in views]
+        flips = consistent_numbering(bfh, cam_poses, board)
+        n_corners = board.rows * board.cols
+        for i, fl in enumerate(flips):
+            if fl:
+                cam_poses[i] = cam_poses[i] @ board.flip()
+                corner_index[i] = n_corners - 1 - corner_index[i]
+                flipped.append(views[i].id)
+        hand_eye = _core._hand_eye_park_martin(bfh, cam_poses)
+        bfb0 = base_from_board if base_from_board is not None else _core._mean_transform(
+            [bfh[i] @ hand_eye @ cam_poses[i] for i in range(len(views))])
+
+    # Laser pixels on the board, and the initial laser plane through them.
+    laser_px: list[np.ndarray] = []
+    plane_pts = []
+    for i, v in enumerate(views):
+        px = np.asarray(v.laser_pixels, float).reshape(-1, 2)
+        if len(px) == 0:
+            laser_px.append(px)
+            continue
+        pts, xy = _board_plane_points(intr, cam_poses[i], px)
+        keep = on_board(board, xy) & np.isfinite(pts).all(axis=1)
+        laser_px.append(px[keep])
+        plane_pts.append(pts[keep])
+    all_pts = np.concatenate(plane_pts) if plane_pts else np.empty((0, 3))
+    if len(all_pts) < 10:
+        raise ValueError(f"only {len(all_pts)} stripe pixels fall on the board over all views; "
+                         "the laser plane needs stripe points on the board in several views")
+    plane = fit_plane(all_pts)
+
+    def make_views(keep_c: list[np.ndarray], keep_l: list[np.ndarray]) -> list[Any]:
+        out = []
+        for i, v in enumerate(views):
+            out.append(_core._JointView(
+                bfh[i] if chain else np.eye(4),
+                np.ascontiguousarray(np.asarray(v.corner_pixels, float)[keep_c[i]]),
+                np.ascontiguousarray(board.points(corner_index[i][keep_c[i]])),
+                np.ascontiguousarray(laser_px[i][keep_l[i]])))
+        return out
+
+    state = _core._JointState()
+    state.intrinsics = intr
+    state.laser_plane = plane
+    if chain:
+        state.hand_from_camera = hand_eye
+        state.base_from_board = bfb0
+    else:
+        state.camera_from_board = cam_poses
+    opts = _core._JointOptions()
+    opts.chain = chain
+    opts.board_pose_known = base_from_board is not None
+    opts.fixed = [False] * 4 + [name not in terms for name in DISTORTION_NAMES]
+    opts.max_iterations = int(max_iterations)
+    all_c = [np.ones(len(ci), bool) for ci in corner_index]
+    all_l = [np.ones(len(p), bool) for p in laser_px]
+    keep_c, keep_l = list(all_c), list(all_l)
+    # Noise levels start at typical values and are then estimated from the residuals.
+    opts.corner_sigma, opts.laser_sigma = 0.3, 0.1
+    result = None
+    for _ in range(4):
+        jv = make_views(keep_c, keep_l)
+        result = _core._solve_joint(jv, state, opts)
+        state = result.state
+        corners_r, laser_r = _core._evaluate_joint(jv, state, opts)
+        c_all = np.concatenate([c.ravel() for c in corners_r])
+        l_all = np.concatenate(laser_r) if laser_r else np.empty(0)
+        sc, sl = _rms(c_all), _rms(l_all)
+        changed = abs(sc / opts.corner_sigma - 1) > 0.05 or (
+            l_all.size > 0 and abs(sl / opts.laser_sigma - 1) > 0.05)
+        opts.corner_sigma, opts.laser_sigma = max(sc, 1e-6), max(sl if l_all.size else 1.0, 1e-6)
+        dropped_any = False
+        if robust:
+            full_c, full_l = _core._evaluate_joint(make_views(all_c, all_l), state, opts)
+            limit_c = _ROBUST_K * max(_robust_sigma(c_all) * math.sqrt(2), 1e-9)
+            limit_l = _ROBUST_K * max(_robust_sigma(l_all), 1e-9)
+            for i in range(len(views)):
+                new_c = np.hypot(full_c[i][:, 0], full_c[i][:, 1]) <= limit_c
+                new_l = np.isfinite(full_l[i]) & (np.abs(full_l[i]) <= limit_l)
+                if new_c.sum() < 6:
+                    new_c = keep_c[i]
+                if not np.array_equal(new_c, keep_c[i]) or not np.array_equal(new_l, keep_l[i]):
+                    dropped_any = True
+                keep_c[i], keep_l[i] = new_c, new_l
+        if not changed and not dropped_any:
+            break
+    assert result is not None
+    jv = make_views(keep_c, keep_l)
+    corners_r, laser_r = _core._evaluate_joint(jv, state, opts)
+    jac, names = _core._joint_jacobian(jv, state, opts)
+    cov, rank, cond = _covariance(jac)
+    std = {n: float(math.sqrt(max(cov[k, k], 0.0))) for k, n in enumerate(names)}
+    if rank < len(names):
+        warnings_out.append(f"the data determine {rank} of the {len(names)} unknowns; add views "
+                            "with the board at other angles")
+    per_view = {}
+    for i, v in enumerate(views):
+        per_view[v.id] = {"corners": int(keep_c[i].sum()), "laser_pixels": int(keep_l[i].sum()),
+                          "corner_rms_px": _rms(corners_r[i].ravel()) * math.sqrt(2),
+                          "laser_rms_mm": _rms(laser_r[i])}
+    st = state.intrinsics
+    sensor = OpenCvSensor(
+        camera_matrix=np.array([[st[0], 0, st[2]], [0, st[1], st[3]], [0, 0, 1.0]]),
+        dist_coeffs=st[4:], image_size=tuple(image_size), laser_plane=state.laser_plane,
+        hand_from_camera=state.hand_from_camera if chain else np.eye(4),
+        base_from_board=state.base_from_board if chain else None)
+    c_all = np.concatenate([c.ravel() for c in corners_r])
+    l_all = np.concatenate(laser_r)
+    return JointCalibration(
+        sensor=sensor, std=std, names=list(names), covariance=cov,
+        corner_rms_px=_rms(c_all) * math.sqrt(2), laser_rms_mm=_rms(l_all),
+        corner_sigma_px=float(opts.corner_sigma), laser_sigma_mm=float(opts.laser_sigma),
+        per_view=per_view,
+        dropped={"corners": int(sum((~k).sum() for k in keep_c)),
+                 "laser_pixels": int(sum((~k).sum() for k in keep_l))},
+        mode="chain" if chain else "camera", rank=rank, num_unknowns=len(names), condition=cond,
+        termination=result.termination, iterations=int(result.iterations),
+        seconds=time.perf_counter() - start, flipped=flipped,
+        camera_from_board={} if chain else {v.id: state.camera_from_board[i]
+                                            for i, v in enumerate(views)},
+        warnings=warnings_out)
+
+
+def _covariance(jac: np.ndarray) -> tuple[np.ndarray, int, float]:
+    """(J^T J)^-1 of the weighted residuals' Jacobian via the column-scaled SVD; its numerical
+    rank and condition number."""
+    scale = np.linalg.norm(jac, axis=0)
+    scale[scale == 0] = 1.0
+    js = jac / scale
+    _, s, vt = np.linalg.svd(js, full_matrices=False)
+    tol = 1e-10 * s[0] if s.size else 0.0
+    rank = int((s > tol).sum())
+    inv = np.where(s > tol, 1.0 / np.where(s > tol, s, 1.0) ** 2, 0.0)
+    cov_s = (vt.T * inv) @ vt
+    cov = cov_s / np.outer(scale, scale)
+    cond = float(s[0] / s[rank - 1]) if rank else float("inf")
+    return cov, rank, cond
