@@ -1,0 +1,243 @@
+// The general sensor model (model "opencv"): projection and its exact inverse, the joint
+// calibration's Jacobian against central differences, the closed-form hand-eye and the joint
+// solve on exact data.
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "hmlvs/model/general.h"
+#include "hmlvs/solvers/joint.h"
+
+namespace hmlvs::general {
+namespace {
+
+Vector9d Intrinsics() {
+  Vector9d in;
+  in << 1100, 1090, 512, 384, -0.165, 0.05, 0.0005, -0.0003, 0.01;
+  return in;
+}
+
+Eigen::Matrix4d Transform(const Eigen::Vector3d& rotvec, const Eigen::Vector3d& t) {
+  Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+  if (rotvec.norm() > 0) {
+    m.topLeftCorner<3, 3>() = Eigen::AngleAxisd(rotvec.norm(), rotvec.normalized()).matrix();
+  }
+  m.topRightCorner<3, 1>() = t;
+  return m;
+}
+
+struct Scene {
+  std::vector<JointView> views;
+  JointState truth;
+};
+
+// 12 views of a 6 x 9 board (25 mm squares) in chain mode, with exact corners and stripe pixels.
+Scene MakeScene(unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> tilt(-0.4, 0.4), shift(-20, 20), depth(-50, 50);
+  Scene s;
+  s.truth.intrinsics = Intrinsics();
+  s.truth.hand_from_camera = Transform({0.02, -0.03, 1.6}, {60, 5, -45});
+  s.truth.base_from_board = Transform({0.05, 0.02, 0.3}, {700, 50, 10});
+  Eigen::Vector3d n(0.03, 0.6, 0.8);
+  n.normalize();
+  s.truth.laser_plane << n, -n.dot(Eigen::Vector3d(0, 60, 400));
+  while (s.views.size() < 12) {
+    const Eigen::Matrix4d cb = Transform({tilt(rng), tilt(rng), tilt(rng)},
+                                         {-100 + shift(rng), -62 + shift(rng), 450 + depth(rng)});
+    JointView v;
+    v.base_from_hand = s.truth.base_from_board * cb.inverse() * s.truth.hand_from_camera.inverse();
+    v.corner_points.resize(54, 3);
+    v.corner_pixels.resize(54, 2);
+    for (int i = 0; i < 54; ++i) {
+      v.corner_points.row(i) << (i / 9) * 25.0, (i % 9) * 25.0, 0.0;
+      const Eigen::Vector3d p =
+          cb.topLeftCorner<3, 3>() * v.corner_points.row(i).transpose() + cb.topRightCorner<3, 1>();
+      ProjectPoint(s.truth.intrinsics.data(), p.data(), v.corner_pixels.row(i).data());
+    }
+    std::vector<Eigen::Vector2d> laser;
+    for (double x = -10; x <= 135; x += 1.0) {
+      // board point (x, y, 0) on the laser plane: solve for y
+      const Eigen::Vector3d r0 = cb.topLeftCorner<3, 3>().col(0) * x + cb.topRightCorner<3, 1>();
+      const double a = n.dot(cb.topLeftCorner<3, 3>().col(1));
+      const double y = -(n.dot(r0) + s.truth.laser_plane[3]) / a;
+      if (y < -10 || y > 210) continue;
+      const Eigen::Vector3d p = r0 + cb.topLeftCorner<3, 3>().col(1) * y;
+      Eigen::Vector2d px;
+      ProjectPoint(s.truth.intrinsics.data(), p.data(), px.data());
+      laser.push_back(px);
+    }
+    if (laser.size() < 30) continue;
+    v.laser_pixels.resize(static_cast<Eigen::Index>(laser.size()), 2);
+    for (std::size_t k = 0; k < laser.size(); ++k) v.laser_pixels.row(k) = laser[k];
+    s.views.push_back(v);
+  }
+  return s;
+}
+
+TEST(GeneralModel, UndistortInvertsProjection) {
+  const Vector9d in = Intrinsics();
+  for (double x = -0.45; x <= 0.45; x += 0.05) {
+    for (double y = -0.35; y <= 0.35; y += 0.05) {
+      const double p[3] = {x * 500, y * 500, 500};
+      double px[2];
+      ASSERT_TRUE(ProjectPoint(in.data(), p, px));
+      double ux, uy;
+      ASSERT_TRUE(UndistortNormalized(in.data(), px[0], px[1], &ux, &uy));
+      EXPECT_NEAR(ux, x, 1e-12);
+      EXPECT_NEAR(uy, y, 1e-12);
+    }
+  }
+}
+
+TEST(GeneralModel, UndistortRefusesFoldedRegion) {
+  Vector9d in = Intrinsics();
+  in[kK1] = -0.6;  // the distortion folds over at r ~ 0.75
+  double x, y;
+  EXPECT_FALSE(UndistortNormalized(in.data(), 512 + 1100 * 1.5, 384, &x, &y));
+}
+
+TEST(GeneralModel, LaserPointsLieOnThePlaneAndOnTheirRays) {
+  const Scene s = MakeScene(1);
+  const PointsResult r =
+      LaserPointsInCamera(s.truth.intrinsics, s.truth.laser_plane, s.views[0].laser_pixels, true);
+  for (Eigen::Index i = 0; i < r.points.rows(); ++i) {
+    const Eigen::Vector3d p = r.points.row(i);
+    EXPECT_NEAR(s.truth.laser_plane.head<3>().dot(p) + s.truth.laser_plane[3], 0.0, 1e-9);
+    double px[2];
+    ProjectPoint(s.truth.intrinsics.data(), p.data(), px);
+    EXPECT_NEAR(px[0], s.views[0].laser_pixels(i, 0), 1e-8);
+    EXPECT_NEAR(px[1], s.views[0].laser_pixels(i, 1), 1e-8);
+  }
+}
+
+// The weighted residuals of every view, stacked as JointJacobian orders them.
+Eigen::VectorXd Stacked(const std::vector<JointView>& views, const JointState& s,
+                        const JointOptions& o) {
+  const JointResiduals r = EvaluateJoint(views, s, o);
+  std::vector<double> out;
+  for (const auto& c : r.corners)
+    for (Eigen::Index i = 0; i < c.size(); ++i) out.push_back(c.data()[i] / o.corner_sigma);
+  for (const auto& l : r.laser)
+    for (Eigen::Index i = 0; i < l.size(); ++i) out.push_back(l[i] / o.laser_sigma);
+  return Eigen::Map<Eigen::VectorXd>(out.data(), static_cast<Eigen::Index>(out.size()));
+}
+
+Eigen::Matrix4d RotateLeft(const Eigen::Matrix4d& m, int axis, double h) {
+  Eigen::Matrix4d out = m;
+  out.topLeftCorner<3, 3>() =
+      Eigen::AngleAxisd(h, Eigen::Vector3d::Unit(axis)).matrix() * m.topLeftCorner<3, 3>();
+  return out;
+}
+
+TEST(GeneralModel, JointJacobianMatchesCentralDifferences) {
+  Scene s = MakeScene(2);
+  // Off the solution, so that no column is judged at a stationary point.
+  JointState at = s.truth;
+  at.intrinsics[kFx] += 3;
+  at.intrinsics[kK1] += 0.01;
+  at.hand_from_camera = RotateLeft(at.hand_from_camera, 0, 0.01);
+  at.laser_plane[3] += 1.0;
+  JointOptions o;
+  std::vector<std::string> names;
+  const Eigen::MatrixXd j = JointJacobian(s.views, at, o, &names);
+  ASSERT_EQ(names.size(), 24u);
+  ASSERT_EQ(j.cols(), 24);
+  auto numeric = [&](auto perturb, double h) {
+    JointState plus = at, minus = at;
+    perturb(&plus, h);
+    perturb(&minus, -h);
+    return Eigen::VectorXd((Stacked(s.views, plus, o) - Stacked(s.views, minus, o)) / (2 * h));
+  };
+  auto expect_column = [&](int col, const Eigen::VectorXd& d) {
+    const double scale = std::max(1.0, d.cwiseAbs().maxCoeff());
+    EXPECT_LT((j.col(col) - d).cwiseAbs().maxCoeff() / scale, 1e-5) << names[col];
+  };
+  for (int k = 0; k < kNumIntrinsics; ++k) {
+    const double h = k < 4 ? 1e-3 : 1e-6;
+    expect_column(k, numeric([k](JointState* st, double e) { st->intrinsics[k] += e; }, h));
+  }
+  for (int axis = 0; axis < 3; ++axis) {
+    expect_column(9 + axis, numeric(
+                                [axis](JointState* st, double e) {
+                                  st->hand_from_camera = RotateLeft(st->hand_from_camera, axis, e);
+                                },
+                                1e-6));
+    expect_column(
+        12 + axis,
+        numeric([axis](JointState* st, double e) { st->hand_from_camera(axis, 3) += e; }, 1e-4));
+    expect_column(15 + axis, numeric(
+                                 [axis](JointState* st, double e) {
+                                   st->base_from_board = RotateLeft(st->base_from_board, axis, e);
+                                 },
+                                 1e-6));
+    expect_column(
+        18 + axis,
+        numeric([axis](JointState* st, double e) { st->base_from_board(axis, 3) += e; }, 1e-4));
+  }
+  expect_column(23, numeric([](JointState* st, double e) { st->laser_plane[3] += e; }, 1e-4));
+  // The normal's two tangent columns must span the derivative along any direction normal to it.
+  const Eigen::Vector3d n = at.laser_plane.head<3>().normalized();
+  const Eigen::Vector3d e1 = n.unitOrthogonal(), e2 = n.cross(e1);
+  for (const Eigen::Vector3d& e : {e1, e2}) {
+    const Eigen::VectorXd d = numeric(
+        [&](JointState* st, double h) { st->laser_plane.head<3>() = (n + h * e).normalized(); },
+        1e-7);
+    const Eigen::MatrixXd t = j.middleCols(21, 2);
+    const Eigen::Vector2d c = t.colPivHouseholderQr().solve(d);
+    EXPECT_LT((t * c - d).cwiseAbs().maxCoeff() / d.cwiseAbs().maxCoeff(), 1e-5);
+  }
+}
+
+TEST(GeneralModel, HandEyeIsExactOnExactPoses) {
+  const Scene s = MakeScene(3);
+  std::vector<Eigen::Matrix4d> bfh, cfb;
+  for (const auto& v : s.views) {
+    bfh.push_back(v.base_from_hand);
+    cfb.push_back(s.truth.hand_from_camera.inverse() * v.base_from_hand.inverse() *
+                  s.truth.base_from_board);
+  }
+  const Eigen::Matrix4d x = HandEyeParkMartin(bfh, cfb);
+  EXPECT_LT((x - s.truth.hand_from_camera).cwiseAbs().maxCoeff(), 1e-9);
+}
+
+TEST(GeneralModel, HandEyeRefusesRotationsAboutOneAxis) {
+  const Eigen::Matrix4d hfc = Transform({0.1, 0.2, 1.5}, {50, 0, -40});
+  const Eigen::Matrix4d bfb = Transform({0, 0, 0.3}, {700, 0, 0});
+  std::vector<Eigen::Matrix4d> bfh, cfb;
+  for (int i = 0; i < 6; ++i) {
+    const Eigen::Matrix4d h = Transform({0, 0, 0.2 * i}, {600, 10.0 * i, 400});
+    bfh.push_back(h);
+    cfb.push_back(hfc.inverse() * h.inverse() * bfb);
+  }
+  EXPECT_THROW(HandEyeParkMartin(bfh, cfb), std::invalid_argument);
+}
+
+TEST(GeneralModel, JointSolveRecoversTheTruthOnExactData) {
+  const Scene s = MakeScene(4);
+  JointState start = s.truth;
+  start.intrinsics[kFx] *= 1.02;
+  start.intrinsics[kFy] *= 0.98;
+  start.intrinsics[kCx] += 6;
+  start.intrinsics[kK1] = -0.1;
+  start.intrinsics[kK3] = 0.0;
+  start.hand_from_camera = RotateLeft(start.hand_from_camera, 2, 0.03);
+  start.hand_from_camera(0, 3) += 3;
+  start.base_from_board = RotateLeft(start.base_from_board, 1, -0.02);
+  start.laser_plane.head<3>() =
+      (start.laser_plane.head<3>() + Eigen::Vector3d(0.02, 0, -0.01)).normalized();
+  start.laser_plane[3] += 5;
+  JointOptions o;
+  const JointResult r = SolveJoint(s.views, start, o);
+  EXPECT_EQ(r.termination, "CONVERGENCE");
+  EXPECT_LT((r.state.intrinsics - s.truth.intrinsics).cwiseAbs().maxCoeff(), 1e-6);
+  EXPECT_LT((r.state.hand_from_camera - s.truth.hand_from_camera).cwiseAbs().maxCoeff(), 1e-6);
+  EXPECT_LT((r.state.base_from_board - s.truth.base_from_board).cwiseAbs().maxCoeff(), 1e-6);
+  EXPECT_LT((r.state.laser_plane - s.truth.laser_plane).cwiseAbs().maxCoeff(), 1e-8);
+}
+
+}  // namespace
+}  // namespace hmlvs::general
