@@ -1,0 +1,204 @@
+"""The general sensor model (model "opencv") and its joint corner + laser calibration."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+from hmlvs import _core
+from hmlvs.calibration.joint import (
+    ViewData,
+    calibrate_joint,
+    consistent_numbering,
+    fit_plane,
+)
+from hmlvs.models.opencv import OpenCvSensor
+from joint_scene import default_truth, make_views, project, transform
+import numpy as np
+import pytest
+
+
+def _intrinsics(t) -> np.ndarray:
+    k = t.camera_matrix
+    return np.r_[k[0, 0], k[1, 1], k[0, 2], k[1, 2], t.dist]
+
+
+def test_projection_matches_opencv():
+    t = default_truth()
+    rng = np.random.default_rng(0)
+    pts = np.c_[rng.uniform(-250, 250, (200, 2)), rng.uniform(300, 700, 200)]
+    ours = _core._general_project(_intrinsics(t), pts).pixels
+    assert np.abs(ours - project(t, pts)).max() < 1e-9
+
+
+def test_undistortion_matches_opencv_iterative():
+    t = default_truth()
+    rng = np.random.default_rng(1)
+    px = np.c_[rng.uniform(0, 1023, 300), rng.uniform(0, 767, 300)]
+    ours = _core._general_undistort(_intrinsics(t), px)
+    assert ours.num_invalid == 0
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
+    ref = cv2.undistortPoints(px.reshape(-1, 1, 2), t.camera_matrix, t.dist, None, None, None,
+                                  crit)[:, 0]
+    # OpenCV's iteration stops at its own tolerance; ours re-projects exactly (below).
+    assert np.abs(ours.pixels - ref).max() < 1e-7
+    back = project(t, np.c_[ours.pixels, np.ones(len(px))])
+    assert np.abs(back - px).max() < 1e-9
+
+
+def _numpy_laser_points_in_base(t, pixels, poses):
+    """An independent model: OpenCV's undistortion, ray-plane intersection, the chain."""
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
+    und = cv2.undistortPoints(pixels.reshape(-1, 1, 2), t.camera_matrix, t.dist, None, None,
+                                  None, crit)[:, 0]
+    rays = np.c_[und, np.ones(len(und))]
+    depth = -t.plane[3] / (rays @ t.plane[:3])
+    cam = rays * depth[:, None]
+    hand = cam @ t.hand_from_camera[:3, :3].T + t.hand_from_camera[:3, 3]
+    return np.einsum("nij,nj->ni", poses[:, :3, :3], hand) + poses[:, :3, 3]
+
+
+def test_laser_points_in_base_match_an_independent_model():
+    views, _, t, laser_base = make_views(0, n_views=4, corner_noise=0, laser_noise=0)
+    for v, truth_pts in zip(views, laser_base):
+        poses = np.repeat(v.base_from_hand[None], len(v.laser_pixels), axis=0)
+        ours = _core._general_laser_base(_intrinsics(t), t.plane, t.hand_from_camera,
+                                         v.laser_pixels, poses.reshape(-1, 16), True).points
+        ref = _numpy_laser_points_in_base(t, v.laser_pixels, poses)
+        assert np.abs(ours - ref).max() < 1e-6
+        assert np.abs(ours - truth_pts).max() < 1e-6
+
+
+def test_laser_pixel_whose_ray_misses_the_plane_is_named():
+    t = default_truth()
+    plane = np.r_[0.0, 1.0, 0.0, -60.0]  # y = 60 mm: rays going up (v < cy) never meet it
+    with pytest.raises(ValueError, match=r"pixel 1 \(u=500, v=10\).*misses the laser plane"):
+        _core._general_laser_camera(_intrinsics(t), plane, np.array([[500, 700.0], [500, 10]]),
+                                    True)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_joint_calibration_recovers_the_sensor_within_its_uncertainty(seed):
+    views, board, t, laser_base = make_views(seed)
+    r = calibrate_joint(views, board, (1024, 768))
+    assert r.mode == "chain" and r.termination == "CONVERGENCE"
+    assert r.rank == r.num_unknowns == 24  # every unknown determined
+    s = r.sensor
+    z = []
+    got = s.intrinsics()
+    for name, true in zip(("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"),
+                          _intrinsics(t)):
+        z.append((got[name] - true) / r.std[name])
+    z.append((s.laser_plane[3] - t.plane[3]) / r.std["plane_d"])
+    for i, c in enumerate("xyz"):
+        z.append((s.hand_from_camera[i, 3] - t.hand_from_camera[i, 3]) / r.std[f"hand_t{c}"])
+        z.append((s.base_from_board[i, 3] - t.base_from_board[i, 3]) / r.std[f"board_t{c}"])
+    # Within 4 sigma each (21 numbers: a 4-sigma excursion has probability ~1e-3), and the
+    # z-scores spread like a standard normal (their RMS within [0.5, 1.6]).
+    z = np.array(z)
+    assert np.abs(z).max() < 4, z
+    assert 0.5 < np.sqrt(np.mean(z**2)) < 1.6, z
+    # The noise levels are estimated from the residuals: 0.1 px per axis, radial 0.14 px.
+    assert 0.12 < r.corner_rms_px < 0.16
+    # Mapped to the base, stripe pixels land on their true points within ~0.1 mm.
+    errs = []
+    for v, truth_pts in zip(views, laser_base):
+        poses = np.repeat(v.base_from_hand[None], len(v.laser_pixels), axis=0).reshape(-1, 16)
+        pts = _core._general_laser_base(np.r_[s.fx, s.fy, s.cx, s.cy, s.dist_coeffs],
+                                        s.laser_plane, s.hand_from_camera, v.laser_pixels,
+                                        poses, False).points
+        errs.append(np.linalg.norm(pts - truth_pts, axis=1))
+    # 0.1 px stripe noise alone moves a point by ~0.05-0.1 mm along the laser plane.
+    assert np.sqrt(np.mean(np.concatenate(errs) ** 2)) < 0.2
+
+
+def test_turned_corner_numbering_is_made_consistent():
+    views, board, t, _ = make_views(5, flip_every=3)
+    turned = [v.id for i, v in enumerate(views) if i % 3 == 1]
+    r = calibrate_joint(views, board, (1024, 768))
+    # Either the turned views are renumbered, or (majority rule) all the others are.
+    others = [v.id for v in views if v.id not in turned]
+    assert sorted(r.flipped) in (sorted(turned), sorted(others))
+    assert r.corner_rms_px < 0.2
+
+
+def test_consistent_numbering_flips_exactly_the_turned_views():
+    views, board, t, _ = make_views(6, n_views=10, corner_noise=0, laser_noise=0)
+    cams = [np.linalg.inv(t.hand_from_camera) @ np.linalg.inv(v.base_from_hand)
+            @ t.base_from_board for v in views]
+    turned = {1, 4, 7}
+    cams = [c @ board.flip() if i in turned else c for i, c in enumerate(cams)]
+    flips = consistent_numbering([v.base_from_hand for v in views], cams, board)
+    assert {i for i, f in enumerate(flips) if f} == turned
+
+
+def test_camera_mode_without_robot_poses():
+    views, board, t, _ = make_views(7)
+    for v in views:
+        v.base_from_hand = None
+    r = calibrate_joint(views, board, (1024, 768))
+    assert r.mode == "camera" and r.rank == r.num_unknowns
+    got = r.sensor.intrinsics()
+    assert abs(got["fx"] - 1100) < 4 * r.std["fx"]
+    assert abs(r.sensor.laser_plane[3] - t.plane[3]) < 4 * r.std["plane_d"]
+    assert np.allclose(r.sensor.hand_from_camera, np.eye(4))
+
+
+def test_fewer_distortion_terms():
+    truth = default_truth()
+    truth.dist = np.array([-0.165, 0.05, 0, 0, 0])
+    views, board, t, _ = make_views(8, truth=truth)
+    r = calibrate_joint(views, board, (1024, 768), distortion=("k1", "k2"))
+    assert r.num_unknowns == 24 - 3
+    assert r.sensor.dist_coeffs[2:].tolist() == [0, 0, 0]
+    assert abs(r.sensor.dist_coeffs[0] + 0.165) < 4 * r.std["k1"]
+
+
+def test_outlying_stripe_pixels_are_dropped():
+    views, board, t, _ = make_views(9)
+    rng = np.random.default_rng(0)
+    for v in views[:5]:  # reflections: 5 pixels per view 20 px off the stripe
+        k = rng.choice(len(v.laser_pixels), 5, replace=False)
+        v.laser_pixels[k, 1] += 20
+    r = calibrate_joint(views, board, (1024, 768))
+    assert r.dropped["laser_pixels"] >= 25
+    assert abs(r.sensor.laser_plane[3] - t.plane[3]) < 4 * r.std["plane_d"]
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda vs: vs[:2], "at least 3 views"),
+    (lambda vs: [ViewData("a", v.corner_pixels[:4], v.corner_index[:4], v.laser_pixels,
+                          v.base_from_hand) for v in vs], "needs at least 6"),
+])
+def test_bad_input_is_named(change, message):
+    views, board, _, _ = make_views(10, n_views=5)
+    with pytest.raises(ValueError, match=message):
+        calibrate_joint(change(views), board, (1024, 768))
+
+
+def test_bad_distortion_terms_are_named():
+    views, board, _, _ = make_views(10, n_views=4)
+    with pytest.raises(ValueError, match="unknown distortion term 'k4'"):
+        calibrate_joint(views, board, (1024, 768), distortion=("k1", "k4"))
+    with pytest.raises(ValueError, match="p1 and p2 go together"):
+        calibrate_joint(views, board, (1024, 768), distortion=("k1", "p1"))
+
+
+def test_stripe_on_a_line_cannot_give_a_plane():
+    pts = np.c_[np.linspace(0, 10, 20), np.zeros(20), np.full(20, 400.0)]
+    with pytest.raises(ValueError, match="lie on a line"):
+        fit_plane(pts)
+
+
+def test_opencv_sensor_validates():
+    k = np.array([[1000.0, 0, 500], [0, 1000, 400], [0, 0, 1]])
+    with pytest.raises(ValueError, match="hand_from_camera is not a rigid transform"):
+        OpenCvSensor(k, [0, 0, 0, 0, 0], (1000, 800), [0, 1, 1, -100], np.ones((4, 4)))
+    with pytest.raises(ValueError, match="non-zero normal"):
+        OpenCvSensor(k, [0, 0, 0, 0, 0], (1000, 800), [0, 0, 0, -100], np.eye(4))
+    s = OpenCvSensor(k, [0.1, 0, 0, 0], (1000, 800), [0, 2, 2, 100],
+                     transform([0, 0, 1], [1, 2, 3]))
+    assert s.laser_plane[3] < 0 and abs(np.linalg.norm(s.laser_plane[:3]) - 1) < 1e-12
+    back = OpenCvSensor.from_dict(s.to_dict())
+    assert np.allclose(back.hand_from_camera, s.hand_from_camera)
+    assert math.isclose(s.laser_plane_angle_deg(), 45.0)
