@@ -202,3 +202,16 @@ def test_opencv_sensor_validates():
     back = OpenCvSensor.from_dict(s.to_dict())
     assert np.allclose(back.hand_from_camera, s.hand_from_camera)
     assert math.isclose(s.laser_plane_angle_deg(), 45.0)
+
+
+def test_measure_works_with_the_general_model():
+    from hmlvs import measure
+    from hmlvs.models.base import SensorModel
+
+    views, _, t, laser_base = make_views(11, n_views=3, corner_noise=0, laser_noise=0)
+    sensor = OpenCvSensor(t.camera_matrix, t.dist, (1024, 768), t.plane, t.hand_from_camera)
+    assert isinstance(sensor, SensorModel)
+    cloud = measure(sensor, [v.laser_pixels for v in views],
+                    np.stack([v.base_from_hand for v in views]))
+    assert cloud.valid.all()
+    assert np.abs(cloud.points - np.concatenate(laser_base)).max() < 1e-6

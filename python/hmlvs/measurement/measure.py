@@ -14,7 +14,8 @@ from .._arrays import as_matrix
 from .._io import atomic_write
 from ..data.calibration_file import Calibration
 from ..geometry.robot import Robot
-from ..models.paper import points_in_base
+from ..models.base import SensorModel
+from ..models.paper import PaperSensor
 from ..models.params import Parameters
 
 
@@ -117,17 +118,24 @@ def read_ply(path: str | os.PathLike) -> dict[str, np.ndarray]:
     return {name: rec[name].copy() for name, _ in fields}
 
 
-def _params_of(calibration: Any) -> Parameters:
-    if isinstance(calibration, Calibration):
-        return calibration.params
-    if isinstance(calibration, Parameters):
-        return calibration
-    if hasattr(calibration, "params") and isinstance(calibration.params, Parameters):
-        return calibration.params  # a CalibrationResult
+def sensor_model(calibration: Any) -> SensorModel:
+    """The :class:`~hmlvs.models.base.SensorModel` of a calibration of either model: a
+    :class:`Calibration`, a calibration result, :class:`Parameters`, an :class:`OpenCvSensor`
+    or the path of a calibration file."""
     if isinstance(calibration, (str, os.PathLike)):
-        return Calibration.load(calibration).params
-    raise ValueError("calibration must be a Calibration, CalibrationResult, Parameters or the "
-                     "path of a calibration file")
+        calibration = Calibration.load(calibration)
+    if isinstance(calibration, SensorModel):
+        return calibration
+    sensor = getattr(calibration, "sensor", None)
+    if isinstance(sensor, SensorModel):
+        return sensor  # an opencv-model Calibration or JointCalibration
+    if isinstance(calibration, Parameters):
+        return PaperSensor(calibration)
+    params = getattr(calibration, "params", None)
+    if isinstance(params, Parameters):
+        return PaperSensor(params)  # a paper Calibration or CalibrationResult
+    raise ValueError("calibration must be a Calibration, a calibration result, Parameters, an "
+                     "OpenCvSensor or the path of a calibration file")
 
 
 def measure(calibration: Any, stripes: Sequence[Any] | np.ndarray, poses: Any = None, *,
@@ -152,7 +160,7 @@ def measure(calibration: Any, stripes: Sequence[Any] | np.ndarray, poses: Any = 
     -------
     PointCloud
     """
-    params = _params_of(calibration)
+    model = sensor_model(calibration)
     stripes = list(stripes) if not isinstance(stripes, np.ndarray) or stripes.ndim != 2 \
         else [stripes]
     if (poses is None) == (joints is None):
@@ -189,7 +197,7 @@ def measure(calibration: Any, stripes: Sequence[Any] | np.ndarray, poses: Any = 
     pidx = np.concatenate(pose_idx) if pose_idx else np.empty(0, np.int32)
     if pixels.shape[0] == 0:
         raise ValueError("no stripe pixels to measure")
-    pts, valid = points_in_base(params, pixels, poses[pidx], on_invalid=on_invalid)
+    pts, valid = model.points_in_base(pixels, poses[pidx], on_invalid=on_invalid)
     return PointCloud(pts, valid, pixels, pidx, np.concatenate(inten))
 
 

@@ -16,7 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from .._arrays import check_transform
+from .. import _core
+from .._arrays import as_matrix, as_poses, check_transform, same_rows
+from .base import OnInvalid, check_on_invalid
 
 DISTORTION_NAMES: tuple[str, ...] = ("k1", "k2", "p1", "p2", "k3")
 INTRINSIC_NAMES: tuple[str, ...] = ("fx", "fy", "cx", "cy", *DISTORTION_NAMES)
@@ -52,6 +54,7 @@ class OpenCvSensor:
     laser_plane: np.ndarray
     hand_from_camera: np.ndarray
     base_from_board: np.ndarray | None = field(default=None)
+    model: str = field(default="opencv", init=False)
 
     def __post_init__(self) -> None:
         k = _array(self.camera_matrix, (3, 3), "camera_matrix")
@@ -105,6 +108,46 @@ class OpenCvSensor:
     @property
     def cy(self) -> float:
         return float(self.camera_matrix[1, 2])
+
+    def intrinsics_vector(self) -> np.ndarray:
+        """[fx, fy, cx, cy, k1, k2, p1, p2, k3], the C++ core's order."""
+        return np.r_[self.fx, self.fy, self.cx, self.cy, self.dist_coeffs]
+
+    def project(self, camera_points: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Camera-frame points -> pixels (``cv2.projectPoints``); ``valid`` is False (NaN
+        row) for points not in front of the camera."""
+        r = _core._general_project(self.intrinsics_vector(),
+                                   as_matrix(camera_points, 3, "camera points"))
+        return np.array(r.pixels), np.asarray(r.valid, dtype=bool)
+
+    def undistort(self, pixels: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels -> undistorted normalised image points (x, y) (``cv2.undistortPoints``,
+        solved to convergence); ``valid`` is False where the distortion cannot be inverted."""
+        r = _core._general_undistort(self.intrinsics_vector(), as_matrix(pixels, 2, "pixels"))
+        return np.array(r.pixels), np.asarray(r.valid, dtype=bool)
+
+    def points_in_camera(self, pixels: Any, on_invalid: OnInvalid = "raise"
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """Stripe pixels -> camera-frame points on the laser plane (mm)."""
+        throw = check_on_invalid(on_invalid)
+        r = _core._general_laser_camera(self.intrinsics_vector(), self.laser_plane,
+                                        as_matrix(pixels, 2, "pixels"), throw)
+        return np.array(r.points), np.asarray(r.valid, dtype=bool)
+
+    def points_in_base(self, pixels: Any, poses: Any, on_invalid: OnInvalid = "raise"
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """Stripe pixels seen at base_from_hand poses (one per pixel) -> base-frame points:
+        ``base_from_hand @ hand_from_camera @ camera point``."""
+        throw = check_on_invalid(on_invalid)
+        px = as_matrix(pixels, 2, "pixels")
+        ps = as_poses(poses)
+        same_rows(pixels=px, poses=ps)
+        r = _core._general_laser_base(self.intrinsics_vector(), self.laser_plane,
+                                      self.hand_from_camera, px, ps, throw)
+        return np.array(r.points), np.asarray(r.valid, dtype=bool)
+
+    def hand_from_camera_matrix(self) -> np.ndarray:
+        return self.hand_from_camera.copy()
 
     def intrinsics(self) -> dict[str, float]:
         """fx, fy, cx, cy, k1, k2, p1, p2, k3 by name."""

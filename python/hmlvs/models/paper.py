@@ -6,20 +6,16 @@ as (m, 2) arrays of (u = column, v = row), and base_from_hand poses as (m, 4, 4)
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from .. import _core
 from .._arrays import as_matrix, as_params, as_poses, same_rows
-
-OnInvalid = Literal["raise", "mask"]
-
-
-def _check_on_invalid(on_invalid: str) -> bool:
-    if on_invalid not in ("raise", "mask"):
-        raise ValueError(f"on_invalid must be 'raise' or 'mask', got {on_invalid!r}")
-    return on_invalid == "raise"
+from .base import OnInvalid
+from .base import check_on_invalid as _check_on_invalid
+from .params import Parameters
 
 
 def points_in_camera(params: Any, pixels: Any, on_invalid: OnInvalid = "raise"
@@ -136,3 +132,23 @@ def residual_jacobian(params: Any, pixels: Any, poses: Any, references: Any
     r, j = _core._residual_jacobian(as_params(params), px, ps, ref)
     m = px.shape[0]
     return np.asarray(r).reshape(m, 3), np.asarray(j).reshape(m, 3, -1)
+
+
+@dataclass(frozen=True)
+class PaperSensor:
+    """The paper's model as a :class:`hmlvs.models.base.SensorModel` (for measurement and
+    export beside the general model)."""
+
+    params: Parameters
+    model: str = "paper"
+
+    def points_in_camera(self, pixels: Any, on_invalid: OnInvalid = "raise"
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        return points_in_camera(self.params, pixels, on_invalid)
+
+    def points_in_base(self, pixels: Any, poses: Any, on_invalid: OnInvalid = "raise"
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        return points_in_base(self.params, pixels, poses, on_invalid)
+
+    def hand_from_camera_matrix(self) -> np.ndarray:
+        return hand_from_camera(self.params)

@@ -101,10 +101,16 @@ def simulated_calibration(truth: Any = None, *, num_poses: int = 40, pixel_noise
 def _params_and_result(calibration: Any, truth: Any, readout: JointReadout, robot: Any,
                        seed: int) -> tuple[Any, Any]:
     """(parameters used to measure, the CalibrationResult or the given calibration)."""
-    from ..measurement.measure import _params_of
+    from ..measurement.measure import sensor_model
+    from ..models.paper import PaperSensor
+
     if calibration is None:
         calibration = simulated_calibration(truth, readout=readout, robot=robot, seed=seed)
-    return _params_of(calibration), calibration
+    model = sensor_model(calibration)
+    if not isinstance(model, PaperSensor):
+        raise ValueError("the paper's scenarios simulate the paper's sensor: give a calibration "
+                         f"of the paper's model, not of model {model.model!r}")
+    return model.params, calibration
 
 
 class _Progress:
