@@ -7,7 +7,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import cv2
-from hmlvs.calibration.joint import BoardSpec, ViewData
+from hmlvs.data.views import ViewData
+from hmlvs.geometry.board import BoardSpec
 import numpy as np
 
 

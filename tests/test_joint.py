@@ -215,3 +215,19 @@ def test_measure_works_with_the_general_model():
                     np.stack([v.base_from_hand for v in views]))
     assert cloud.valid.all()
     assert np.abs(cloud.points - np.concatenate(laser_base)).max() < 1e-6
+
+
+def test_held_out_views_are_checked_against_the_board_plane():
+    views, board, t, _ = make_views(12, n_views=24)
+    r = calibrate_joint(views[:18], board, (1024, 768), test=views[18:])
+    assert r.test_views == 6
+    # 0.1 px stripe noise moves points ~0.03 mm off the plane; a wrong laser plane does more.
+    assert r.test_rms_mm < 0.08
+    text = r.summary()
+    assert "held-out views (6)" in text and "every unknown is determined" in text
+    from hmlvs.calibration.joint import board_plane_errors
+    wrong = OpenCvSensor(r.sensor.camera_matrix, r.sensor.dist_coeffs, (1024, 768),
+                         r.sensor.laser_plane + [0, 0, 0, 1.0], r.sensor.hand_from_camera,
+                         r.sensor.base_from_board)
+    errs = np.concatenate(list(board_plane_errors(wrong, views[18:], board).values()))
+    assert np.sqrt(np.mean(errs**2)) > 5 * r.test_rms_mm

@@ -29,64 +29,11 @@ import numpy as np
 
 from .. import _core
 from .._arrays import check_transform
+from ..data.views import ViewData
+from ..geometry.board import BoardSpec
 from ..models.opencv import DISTORTION_NAMES, OpenCvSensor
 
 _ROBUST_K = 4.0  # residuals beyond this many robust sigmas are dropped
-
-
-@dataclass(frozen=True)
-class BoardSpec:
-    """A checkerboard: ``rows`` x ``cols`` inner corners spaced ``square`` mm. Corner (r, c)
-    lies at (r * square, c * square, 0) in the board frame (as :class:`hmlvs.Checkerboard`)."""
-
-    rows: int
-    cols: int
-    square: float
-
-    def __post_init__(self) -> None:
-        if int(self.rows) < 2 or int(self.cols) < 2:
-            raise ValueError(f"a board needs at least 2 x 2 inner corners, got {self.rows} x "
-                             f"{self.cols}")
-        if not float(self.square) > 0:
-            raise ValueError(f"the board's square size must be > 0 mm, got {self.square}")
-
-    @classmethod
-    def of(cls, board: Any) -> "BoardSpec":
-        if isinstance(board, BoardSpec):
-            return board
-        if isinstance(board, dict):
-            return cls(int(board["rows"]), int(board["cols"]), float(board["square"]))
-        return cls(int(board.rows), int(board.cols), float(board.square))
-
-    def points(self, index: np.ndarray | None = None) -> np.ndarray:
-        """(k, 3) board-frame points of corner indices ``r * cols + c`` (all by default)."""
-        idx = np.arange(self.rows * self.cols) if index is None else np.asarray(index, int)
-        return np.stack([idx // self.cols * self.square, idx % self.cols * self.square,
-                         np.zeros(idx.size)], axis=1)
-
-    def flip(self) -> np.ndarray:
-        """The 180-degree turn of the board about its centre (4x4): corner index i and
-        rows*cols - 1 - i swap places."""
-        f = np.diag([-1.0, -1.0, 1.0, 1.0])
-        f[0, 3] = (self.rows - 1) * self.square
-        f[1, 3] = (self.cols - 1) * self.square
-        return f
-
-
-@dataclass
-class ViewData:
-    """What one view contributes: its corners, its stripe pixels and (optionally) its pose.
-
-    corner_pixels : (k, 2) detected corners; corner_index : (k,) their board indices
-    laser_pixels : (m, 2) stripe pixels (any that miss the board are dropped by the solve's
-        set-up); base_from_hand : the robot's 4x4 pose, None without a robot
-    """
-
-    id: str
-    corner_pixels: np.ndarray
-    corner_index: np.ndarray
-    laser_pixels: np.ndarray
-    base_from_hand: np.ndarray | None = None
 
 
 @dataclass
@@ -130,9 +77,55 @@ class JointCalibration:
     camera_from_board: dict[str, np.ndarray] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
 
+    test_rms_mm: float | None = None
+    test_views: int = 0
+
     @property
     def determined(self) -> bool:
         return self.rank == self.num_unknowns
+
+    def summary(self) -> str:
+        """A few lines a user reads: what was estimated, how well, how sure."""
+        s = self.sensor
+        d = s.dist_coeffs
+        std = self.std
+        how = ("robot poses" if self.mode == "chain"
+               else "no robot poses: intrinsics and laser plane only")
+        nan = float("nan")
+        lines = [
+            f"model opencv, {self.mode} mode ({how}), {len(self.per_view)} views, "
+            f"{self.termination.lower()} after {self.iterations} LM iterations, "
+            f"{self.seconds:.2f} s",
+            f"camera: fx {s.fx:.2f} +- {std.get('fx', nan):.2g}, fy {s.fy:.2f} +- "
+            f"{std.get('fy', nan):.2g}, cx {s.cx:.2f} +- {std.get('cx', nan):.2g}, "
+            f"cy {s.cy:.2f} +- {std.get('cy', nan):.2g} px; distortion k1 {d[0]:.5f}, "
+            f"k2 {d[1]:.5f}, p1 {d[2]:.6f}, p2 {d[3]:.6f}, k3 {d[4]:.5f}",
+            f"laser plane: normal ({s.laser_plane[0]:.5f}, {s.laser_plane[1]:.5f}, "
+            f"{s.laser_plane[2]:.5f}), {-s.laser_plane[3]:.3f} +- "
+            f"{std.get('plane_d', nan):.2g} mm from the camera centre",
+        ]
+        if self.mode == "chain":
+            t = s.hand_from_camera[:3, 3]
+            rv = _rotation_vector(s.hand_from_camera[:3, :3])
+            lines.append(f"hand_from_camera: t ({t[0]:.3f}, {t[1]:.3f}, {t[2]:.3f}) mm, rotation "
+                         f"vector ({rv[0]:.5f}, {rv[1]:.5f}, {rv[2]:.5f}) rad "
+                         f"({math.degrees(float(np.linalg.norm(rv))):.2f} deg)")
+        lines.append(f"residuals: corners {self.corner_rms_px:.3f} px RMS, laser "
+                     f"{self.laser_rms_mm:.4f} mm RMS; dropped as outliers: "
+                     f"{self.dropped['corners']} corners, {self.dropped['laser_pixels']} stripe "
+                     "pixels")
+        if self.test_rms_mm is not None:
+            lines.append(f"held-out views ({self.test_views}): stripe points lie "
+                         f"{self.test_rms_mm:.4f} mm RMS from the board plane")
+        lines.append("every unknown is determined by the data" if self.determined else
+                     f"only {self.rank} of {self.num_unknowns} unknowns are determined")
+        return "\n".join(lines)
+
+
+def _rotation_vector(r: np.ndarray) -> np.ndarray:
+    import cv2
+
+    return cv2.Rodrigues(np.asarray(r, float))[0].ravel()
 
 
 def _rotation_angle(r: np.ndarray) -> float:
@@ -298,7 +291,8 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
                     distortion: Iterable[str] = DISTORTION_NAMES,
                     base_from_board: np.ndarray | None = None,
                     use_robot: bool = True, robust: bool = True,
-                    max_iterations: int = 100) -> JointCalibration:
+                    max_iterations: int = 100,
+                    test: Sequence[ViewData] | None = None) -> JointCalibration:
     """Calibrate the general sensor from per-view corners and stripe pixels (module doc).
 
     views : the views (:class:`ViewData`); each needs >= 6 corners
@@ -309,6 +303,8 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
     base_from_board : the board's pose in the base, when measured (held fixed)
     use_robot : use the views' robot poses (chain mode) when every view has one
     robust : drop corners and stripe pixels beyond 4 robust sigmas and solve again
+    test : held-out views: their stripe points' RMS distance from the board plane is reported
+        (``test_rms_mm``, see :func:`board_plane_errors`)
     """
     start = time.perf_counter()
     board = BoardSpec.of(board)
@@ -438,6 +434,11 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         base_from_board=state.base_from_board if chain else None)
     c_all = np.concatenate([c.ravel() for c in corners_r])
     l_all = np.concatenate(laser_r)
+    test_rms = None
+    if test:
+        errs = board_plane_errors(sensor, test, board, use_robot=chain)
+        e = np.concatenate(list(errs.values())) if errs else np.empty(0)
+        test_rms = _rms(e) if e.size else None
     return JointCalibration(
         sensor=sensor, std=std, names=list(names), covariance=cov,
         corner_rms_px=_rms(c_all) * math.sqrt(2), laser_rms_mm=_rms(l_all),
@@ -450,7 +451,7 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         seconds=time.perf_counter() - start, flipped=flipped,
         camera_from_board={} if chain else {v.id: state.camera_from_board[i]
                                             for i, v in enumerate(views)},
-        warnings=warnings_out)
+        warnings=warnings_out, test_rms_mm=test_rms, test_views=len(test or ()))
 
 
 def _covariance(jac: np.ndarray) -> tuple[np.ndarray, int, float]:
@@ -467,3 +468,37 @@ def _covariance(jac: np.ndarray) -> tuple[np.ndarray, int, float]:
     cov = cov_s / np.outer(scale, scale)
     cond = float(s[0] / s[rank - 1]) if rank else float("inf")
     return cov, rank, cond
+
+
+def board_plane_errors(sensor: OpenCvSensor, views: Sequence[ViewData], board: Any,
+                       use_robot: bool = True) -> dict[str, np.ndarray]:
+    """Per view, the signed distance (mm) of its stripe points on the board from the board's
+    plane: a check of the whole calibration on views it was not fitted to.
+
+    With robot poses (and the sensor's ``base_from_board``) the stripe points are mapped to the
+    base and compared with the one static board plane; without them, with the board plane of
+    the view's own corners (``solvePnP`` with the calibrated intrinsics)."""
+    import cv2
+
+    board = BoardSpec.of(board)
+    out: dict[str, np.ndarray] = {}
+    intr = sensor.intrinsics_vector()
+    for v in views:
+        px = np.asarray(v.laser_pixels, float).reshape(-1, 2)
+        chain = use_robot and v.base_from_hand is not None and sensor.base_from_board is not None
+        if chain:
+            cb = _inv(sensor.hand_from_camera) @ _inv(v.base_from_hand) @ sensor.base_from_board
+        else:
+            ok, rvec, tvec = cv2.solvePnP(board.points(v.corner_index),
+                                          np.asarray(v.corner_pixels, float),
+                                          sensor.camera_matrix, sensor.dist_coeffs)
+            if not ok:
+                continue
+            cb = _transform(_rodrigues(rvec), tvec)
+        _, xy = _board_plane_points(intr, cb, px) if len(px) else (None, np.empty((0, 2)))
+        keep = on_board(board, xy) if len(px) else np.zeros(0, bool)
+        pts, valid = sensor.points_in_camera(px[keep], on_invalid="mask") if keep.any() else (
+            np.empty((0, 3)), np.zeros(0, bool))
+        n, t = cb[:3, 2], cb[:3, 3]
+        out[v.id] = (pts[valid] - t) @ n
+    return out

@@ -70,3 +70,42 @@ class Checkerboard:
         t[:3, 2] = np.cross(self.row_direction, self.col_direction)
         t[:3, 3] = self.origin
         return t
+
+
+@dataclass(frozen=True)
+class BoardSpec:
+    """A checkerboard: ``rows`` x ``cols`` inner corners spaced ``square`` mm. Corner (r, c)
+    lies at (r * square, c * square, 0) in the board frame (as :class:`hmlvs.Checkerboard`)."""
+
+    rows: int
+    cols: int
+    square: float
+
+    def __post_init__(self) -> None:
+        if int(self.rows) < 2 or int(self.cols) < 2:
+            raise ValueError(f"a board needs at least 2 x 2 inner corners, got {self.rows} x "
+                             f"{self.cols}")
+        if not float(self.square) > 0:
+            raise ValueError(f"the board's square size must be > 0 mm, got {self.square}")
+
+    @classmethod
+    def of(cls, board: Any) -> "BoardSpec":
+        if isinstance(board, BoardSpec):
+            return board
+        if isinstance(board, dict):
+            return cls(int(board["rows"]), int(board["cols"]), float(board["square"]))
+        return cls(int(board.rows), int(board.cols), float(board.square))
+
+    def points(self, index: np.ndarray | None = None) -> np.ndarray:
+        """(k, 3) board-frame points of corner indices ``r * cols + c`` (all by default)."""
+        idx = np.arange(self.rows * self.cols) if index is None else np.asarray(index, int)
+        return np.stack([idx // self.cols * self.square, idx % self.cols * self.square,
+                         np.zeros(idx.size)], axis=1)
+
+    def flip(self) -> np.ndarray:
+        """The 180-degree turn of the board about its centre (4x4): corner index i and
+        rows*cols - 1 - i swap places."""
+        f = np.diag([-1.0, -1.0, 1.0, 1.0])
+        f[0, 3] = (self.rows - 1) * self.square
+        f[1, 3] = (self.cols - 1) * self.square
+        return f

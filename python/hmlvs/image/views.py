@@ -1,0 +1,98 @@
+"""Laser on/off images + robot poses -> the views of the general model's joint calibration.
+
+For every pair: the stripe (the same checks, difference image and extraction as the paper
+pipeline, :func:`hmlvs.image.session.stripe_from_pair`) and the whole board, found and numbered
+without any prior model (:func:`hmlvs.image.corners.detect_board`). Which stripe pixels lie on
+the board is decided by the calibration itself, once the board's pose in each view is known.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..data.views import ViewData
+from ..geometry.board import BoardSpec
+from .corners import detect_board
+from .session import (
+    ImageReport,
+    _read_manifest,
+    _read_pair,
+    _record_id,
+    _record_names,
+    _Reject,
+)
+
+
+def board_of(doc: dict[str, Any], board: Any, source: Any) -> tuple[BoardSpec, np.ndarray | None]:
+    """The board (rows, cols, square) of a manifest or the caller, and its measured pose in
+    the base when the manifest gives one (``origin``), else None."""
+    from ..geometry.board import Checkerboard
+
+    spec = board if board is not None else doc.get("board")
+    if spec is None:
+        raise ValueError(f"{source}: the manifest has no 'board' (rows, cols, square) and no "
+                         "board was given")
+    pose = None
+    if isinstance(spec, dict):
+        missing = [k for k in ("rows", "cols", "square") if k not in spec]
+        if missing:
+            raise ValueError(f"{source}: the board lacks {', '.join(missing)}")
+        if "origin" in spec:
+            pose = Checkerboard(**{k: (tuple(v) if isinstance(v, list) else v)
+                                   for k, v in spec.items()}).base_from_board()
+    elif isinstance(spec, Checkerboard):
+        pose = spec.base_from_board()
+    return BoardSpec.of(spec), pose
+
+
+def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
+                      joint_unit: str | None = None, channel: int | None = None,
+                      normalize: bool = True, min_stripe: int = 20, **stripe_options: Any
+                      ) -> tuple[list[ViewData], BoardSpec, tuple[int, int], np.ndarray | None,
+                                 list[ImageReport]]:
+    """An image session (a manifest, see docs/file-formats.md) -> joint-calibration views.
+
+    Returns (views, board, image size (w, h), the board's measured base_from_board or None,
+    one :class:`ImageReport` per pair). A pair without a stripe or without the whole board
+    is reported and skipped; the rest of the session goes through.
+    """
+    from ..geometry.robot import Robot
+
+    records, doc, folder = _read_manifest(source)
+    board_spec, board_pose = board_of(doc, board, source)
+    unit = doc.get("joint_unit", "rad") if joint_unit is None else joint_unit
+    if robot is None:
+        name = doc.get("robot")
+        needs_robot = any(isinstance(r, dict) and "joints" in r for r in records)
+        if needs_robot and name not in (None, Robot.scorbot_er7().name):
+            raise ValueError(f"the images were taken with robot {name!r}; pass its DH table "
+                             "(robot=hmlvs.Robot(...) or --robot FILE)")
+        robot = Robot.scorbot_er7()
+    views: list[ViewData] = []
+    reports: list[ImageReport] = []
+    size = None
+    for index, rec in enumerate(records):
+        pid = _record_id(rec, index)
+        on_name, off_name = _record_names(rec)
+        try:
+            pair = _read_pair(rec, index, folder, unit, robot, size, channel, normalize,
+                              stripe_options, min_stripe)
+            size = pair.size
+            try:
+                corners = detect_board(pair.off, board_spec)
+            except ValueError as e:
+                raise _Reject(str(e)) from None
+        except _Reject as e:
+            reports.append(ImageReport(pid, index, on_name, off_name, False, str(e)))
+            continue
+        views.append(ViewData(pid, np.asarray(corners.pixels, float),
+                              np.asarray(corners.index, int), pair.stripe.pixels, pair.pose))
+        reports.append(ImageReport(pid, index, pair.on_name, pair.off_name, True, "",
+                                   pair.stripe.counts(), len(corners.index),
+                                   int(pair.stripe.found.sum())))
+    if size is None:
+        raise ValueError("no image pair could be read: " +
+                         "; ".join(f"{r.id}: {r.reason}" for r in reports))
+    return views, board_spec, size, board_pose, reports
