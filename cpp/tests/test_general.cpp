@@ -192,6 +192,54 @@ TEST(GeneralModel, JointJacobianMatchesCentralDifferences) {
   }
 }
 
+TEST(GeneralModel, CameraModeJacobianMatchesCentralDifferences) {
+  Scene s = MakeScene(5);
+  s.views.resize(3);
+  JointState at = s.truth;
+  for (auto& v : s.views) {
+    at.camera_from_board.push_back(s.truth.hand_from_camera.inverse() * v.base_from_hand.inverse() *
+                                   s.truth.base_from_board);
+    v.base_from_hand.setIdentity();
+  }
+  at.intrinsics[kK2] += 0.02;
+  at.camera_from_board[1] = RotateLeft(at.camera_from_board[1], 1, 0.01);
+  at.laser_plane[3] += 1.0;
+  JointOptions o;
+  o.chain = false;
+  std::vector<std::string> names;
+  const Eigen::MatrixXd j = JointJacobian(s.views, at, o, &names);
+  ASSERT_EQ(j.cols(), 9 + 3 * 6 + 3);
+  auto numeric = [&](auto perturb, double h) {
+    JointState plus = at, minus = at;
+    perturb(&plus, h);
+    perturb(&minus, -h);
+    return Eigen::VectorXd((Stacked(s.views, plus, o) - Stacked(s.views, minus, o)) / (2 * h));
+  };
+  auto expect_column = [&](int col, const Eigen::VectorXd& d) {
+    const double scale = std::max(1.0, d.cwiseAbs().maxCoeff());
+    EXPECT_LT((j.col(col) - d).cwiseAbs().maxCoeff() / scale, 1e-5) << names[col];
+  };
+  for (int k = 0; k < kNumIntrinsics; ++k) {
+    expect_column(
+        k, numeric([k](JointState* st, double e) { st->intrinsics[k] += e; }, k < 4 ? 1e-3 : 1e-6));
+  }
+  for (int view = 0; view < 3; ++view) {
+    for (int axis = 0; axis < 3; ++axis) {
+      expect_column(9 + 6 * view + axis, numeric(
+                                             [=](JointState* st, double e) {
+                                               st->camera_from_board[view] =
+                                                   RotateLeft(st->camera_from_board[view], axis, e);
+                                             },
+                                             1e-6));
+      expect_column(
+          12 + 6 * view + axis,
+          numeric([=](JointState* st, double e) { st->camera_from_board[view](axis, 3) += e; },
+                  1e-4));
+    }
+  }
+  expect_column(29, numeric([](JointState* st, double e) { st->laser_plane[3] += e; }, 1e-4));
+}
+
 TEST(GeneralModel, HandEyeIsExactOnExactPoses) {
   const Scene s = MakeScene(3);
   std::vector<Eigen::Matrix4d> bfh, cfb;

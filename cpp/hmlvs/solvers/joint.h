@@ -50,8 +50,8 @@ struct JointOptions {
   LossKind loss = LossKind::kNone;
   double loss_scale = 3.0;  ///< in units of sigma
   int max_iterations = 100;
-  double function_tolerance = 1e-12;
-  double parameter_tolerance = 1e-12;
+  double function_tolerance = 1e-10;
+  double parameter_tolerance = 1e-10;
   double gradient_tolerance = 1e-14;
 };
 

@@ -33,7 +33,7 @@ from ..data.views import ViewData
 from ..geometry.board import BoardSpec
 from ..models.opencv import DISTORTION_NAMES, OpenCvSensor
 
-_ROBUST_K = 4.0  # residuals beyond this many robust sigmas are dropped
+_ROBUST_K = 5.0  # residuals beyond this many robust sigmas are dropped (Gaussian: 6e-7)
 
 
 @dataclass
@@ -302,7 +302,7 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
     distortion : the distortion terms to estimate (others held at 0), e.g. ("k1", "k2")
     base_from_board : the board's pose in the base, when measured (held fixed)
     use_robot : use the views' robot poses (chain mode) when every view has one
-    robust : drop corners and stripe pixels beyond 4 robust sigmas and solve again
+    robust : drop corners and stripe pixels beyond 5 robust sigmas and solve again
     test : held-out views: their stripe points' RMS distance from the board plane is reported
         (``test_rms_mm``, see :func:`board_plane_errors`)
     """
@@ -322,7 +322,7 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         base_from_board = check_transform(base_from_board, "base_from_board")
         if not chain:
             raise ValueError("a given base_from_board needs robot poses for every view")
-    intr, cam_poses, _ = initial_intrinsics(views, board, image_size, terms)
+    intr, cam_poses, cv_rms = initial_intrinsics(views, board, image_size, terms)
     corner_index = [np.asarray(v.corner_index, int) for v in views]
     flipped: list[str] = []
     warnings_out: list[str] = []
@@ -356,6 +356,12 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         raise ValueError(f"only {len(all_pts)} stripe pixels fall on the board over all views; "
                          "the laser plane needs stripe points on the board in several views")
     plane = fit_plane(all_pts)
+    # Stripe pixels far off that plane (reflections, stray light) go before the first solve.
+    plane_res = [p @ plane[:3] + plane[3] for p in plane_pts]
+    sigma_l0 = _robust_sigma(np.concatenate(plane_res))
+    if robust and sigma_l0 > 0:
+        inlier = [np.abs(r) <= _ROBUST_K * sigma_l0 for r in plane_res]
+        plane = fit_plane(np.concatenate([p[k] for p, k in zip(plane_pts, inlier)]))
 
     def make_views(keep_c: list[np.ndarray], keep_l: list[np.ndarray]) -> list[Any]:
         out = []
@@ -383,8 +389,19 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
     all_c = [np.ones(len(ci), bool) for ci in corner_index]
     all_l = [np.ones(len(p), bool) for p in laser_px]
     keep_c, keep_l = list(all_c), list(all_l)
+    if robust and sigma_l0 > 0:
+        j = 0
+        for i, px in enumerate(laser_px):
+            if len(px):
+                keep_l[i] = inlier[j]
+                j += 1
     # Noise levels start at typical values and are then estimated from the residuals.
-    opts.corner_sigma, opts.laser_sigma = 0.3, 0.1
+    # Noise levels from the set-up's residuals (OpenCV's RMS is per corner, over both axes),
+    # then re-estimated from the solve's; a second solve only when they move by > 20 % or
+    # outliers are dropped (the weights' ratio barely moves the solution).
+    opts.corner_sigma = max(cv_rms / math.sqrt(2), 1e-3)
+    opts.laser_sigma = max(_rms(np.concatenate(plane_res)[np.concatenate(
+        [k for k in keep_l if len(k)])]) if sigma_l0 > 0 else 0.1, 1e-4)
     result = None
     for _ in range(4):
         jv = make_views(keep_c, keep_l)
@@ -394,8 +411,9 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         c_all = np.concatenate([c.ravel() for c in corners_r])
         l_all = np.concatenate(laser_r) if laser_r else np.empty(0)
         sc, sl = _rms(c_all), _rms(l_all)
-        changed = abs(sc / opts.corner_sigma - 1) > 0.05 or (
-            l_all.size > 0 and abs(sl / opts.laser_sigma - 1) > 0.05)
+        # Only the ratio of the two weights moves the solution (a common factor does not).
+        changed = l_all.size > 0 and abs((sc / sl) / (opts.corner_sigma / opts.laser_sigma)
+                                         - 1) > 0.2
         opts.corner_sigma, opts.laser_sigma = max(sc, 1e-6), max(sl if l_all.size else 1.0, 1e-6)
         dropped_any = False
         if robust:
@@ -460,7 +478,10 @@ def _covariance(jac: np.ndarray) -> tuple[np.ndarray, int, float]:
     scale = np.linalg.norm(jac, axis=0)
     scale[scale == 0] = 1.0
     js = jac / scale
-    _, s, vt = np.linalg.svd(js, full_matrices=False)
+    # QR first: the SVD of the small triangular factor has the same singular values and
+    # right vectors, and costs nothing next to the SVD of the tall Jacobian.
+    r = np.linalg.qr(np.asfortranarray(js), mode="r") if js.shape[0] > js.shape[1] else js
+    _, s, vt = np.linalg.svd(r, full_matrices=False)
     tol = 1e-10 * s[0] if s.size else 0.0
     rank = int((s > tol).sum())
     inv = np.where(s > tol, 1.0 / np.where(s > tol, s, 1.0) ** 2, 0.0)
