@@ -285,7 +285,7 @@ def _read_csv(path: Path, rotation: str | None, fmt: PoseFormat
         raise ValueError(f"{path}: the pose file holds no poses")
     id_col = None
     header_line = None
-    if not all(_is_number(f) for f in rows[0][1]):  # a header
+    if not any(_is_number(f) for f in rows[0][1]):  # a header: names, no numbers
         header_line, header = rows.pop(0)
         names = [h.lower() for h in header]
         if names.count("id") > 1:
