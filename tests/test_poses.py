@@ -224,3 +224,22 @@ def test_manifest_pose_file_missing(tmp_path):
     path = _stripe_manifest(tmp_path, [{}], pose_file="gone.csv")
     with pytest.raises(ValueError, match="manifest.json: the pose_file .*gone.csv does not exist"):
         read_manifest(path)
+
+
+def test_the_documented_ur_example_reads(tmp_path):
+    """docs/file-formats.md's UR-style pose file and manifest, as written there."""
+    import pathlib
+    import re
+
+    doc = (pathlib.Path(__file__).parents[1] / "docs" / "file-formats.md").read_text()
+    csv = re.search(r"```text\n# poses.csv\n(.*?)```", doc, re.S).group(1)
+    manifest = re.search(r"```yaml\n# manifest.yaml\n(.*?)```", doc, re.S).group(1)
+    (tmp_path / "poses.csv").write_text(csv)
+    (tmp_path / "manifest.yaml").write_text(manifest)
+    entries, _, _ = read_manifest(tmp_path / "manifest.yaml")
+    assert [e["id"] for e in entries] == ["p000", "p001"]
+    assert (entries[1]["on"], entries[1]["off"]) == ("p001_on.png", "p001_off.png")  # not bools
+    p0 = entries[0]["pose"]
+    np.testing.assert_allclose(p0[:3, 3], [412.0, -110.5, 355.0])
+    # rotation vector pi/sqrt(2) (1, -1, 0): half a turn about (1, -1, 0), the flange down
+    np.testing.assert_allclose(p0[:3, :3], [[0, -1, 0], [-1, 0, 0], [0, 0, -1]], atol=1e-4)

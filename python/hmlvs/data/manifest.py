@@ -78,6 +78,8 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
         where = f"{path}: entry {i}"
         if not isinstance(e, dict):
             raise ValueError(f"{where} is not a mapping")
+        if True in e or False in e:  # YAML 1.1 reads the keys on/off as booleans
+            e = {("on" if k is True else "off" if k is False else k): v for k, v in e.items()}
         if "id" not in e or not str(e["id"]).strip():
             raise ValueError(f"{where} has no id; every entry needs a unique id that pairs its "
                              "files with its readings")
