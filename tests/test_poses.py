@@ -243,3 +243,17 @@ def test_the_documented_ur_example_reads(tmp_path):
     np.testing.assert_allclose(p0[:3, 3], [412.0, -110.5, 355.0])
     # rotation vector pi/sqrt(2) (1, -1, 0): half a turn about (1, -1, 0), the flange down
     np.testing.assert_allclose(p0[:3, :3], [[0, -1, 0], [-1, 0, 0], [0, 0, -1]], atol=1e-4)
+
+
+def test_a_matrix_printed_with_few_decimals_becomes_an_exact_rotation(tmp_path):
+    import hmlvs
+
+    r = rotation_from_vector([0.3, -1.1, 0.4])
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = r, [512.25, -33.5, 401.0]
+    text = ",".join(f"{v:.5f}" for v in m.ravel()) + "\n"   # |R^T R - I| ~ 1e-5
+    (tmp_path / "m.csv").write_text(text)
+    _, poses = read_poses(tmp_path / "m.csv", unit="mm")
+    assert np.abs(poses[0, :3, :3].T @ poses[0, :3, :3] - np.eye(3)).max() < 1e-12
+    np.testing.assert_allclose(poses[0], m, atol=2e-5)
+    hmlvs.models.paper.validate_poses(poses)  # the C++ core's check (1e-6) passes too

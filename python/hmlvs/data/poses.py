@@ -179,6 +179,11 @@ def _check_rigid(pose: np.ndarray) -> np.ndarray:
     if err > 1e-4 or float(np.linalg.det(r)) < 0:
         raise ValueError(f"the rotation part is not a rotation matrix (R^T R differs from I by "
                          f"{err:.3g}, det {float(np.linalg.det(r)):.3g})")
+    # a matrix printed with a few decimals: the nearest rotation, an exact last row
+    u, _, vt = np.linalg.svd(r)
+    pose = pose.copy()
+    pose[:3, :3] = u @ vt
+    pose[3] = [0.0, 0.0, 0.0, 1.0]
     return pose
 
 
@@ -194,7 +199,7 @@ def pose_from_row(values: Any, rotation: str, fmt: PoseFormat) -> np.ndarray:
         raise ValueError(f"the pose has a value that is not finite: {v.tolist()}")
     pose = np.eye(4)
     if rotation == "matrix":
-        pose = v.reshape(4, 4).copy()
+        pose = v.reshape(4, 4)
     elif rotation == "quaternion":
         if fmt.quaternion_order is None:
             raise ValueError("the pose has a quaternion but its order is not named (it is "
@@ -205,7 +210,7 @@ def pose_from_row(values: Any, rotation: str, fmt: PoseFormat) -> np.ndarray:
     else:
         pose[:3, :3] = rotation_from_vector(v[3:])
         pose[:3, 3] = v[:3]
-    _check_rigid(pose)
+    pose = _check_rigid(pose)
     pose[:3, 3] *= UNITS[fmt.unit]
     return pose
 
