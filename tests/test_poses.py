@@ -257,3 +257,18 @@ def test_a_matrix_printed_with_few_decimals_becomes_an_exact_rotation(tmp_path):
     assert np.abs(poses[0, :3, :3].T @ poses[0, :3, :3] - np.eye(3)).max() < 1e-12
     np.testing.assert_allclose(poses[0], m, atol=2e-5)
     hmlvs.models.paper.validate_poses(poses)  # the C++ core's check (1e-6) passes too
+
+
+def test_records_in_code_take_pose_mappings_in_mm(tmp_path):
+    """Records passed as a list (no manifest): a rotation-vector mapping in mm works, a
+    quaternion (no order can be named) rejects only its record."""
+    (tmp_path / "s.csv").write_text("300,200\n")
+    stripe = str(tmp_path / "s.csv")
+    recs = [{"id": "a", "stripe": stripe,
+             "pose": {"position": [500, 0, 300], "rotation_vector": [0, 0, math.pi / 2]}},
+            {"id": "b", "stripe": stripe,
+             "pose": {"position": [500, 0, 300], "quaternion": [0, 0, 0, 1]}}]
+    ids, _, poses, reports = stripes_from_images(recs)
+    assert ids == ["a"] and not reports[1].ok
+    assert "its order is not named" in reports[1].reason
+    np.testing.assert_allclose(poses[0, :3, :3], [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-12)

@@ -380,7 +380,7 @@ def _record_pose(rec: dict[str, Any], robot: Any, unit: str) -> tuple[np.ndarray
         try:
             return None, pose_from_entry(rec["pose"], PoseFormat())
         except ValueError as e:
-            raise _Reject(f"'pose': {e}") from None
+            raise _Reject(str(e)) from None
     if "joints" not in rec:
         raise _Reject("the record lacks 'joints' (or 'pose')")
     joints = np.asarray(rec["joints"], dtype=float).reshape(-1)
