@@ -82,9 +82,14 @@ def test_quaternion_order_is_the_named_one(tmp_path):
     _, b = read_poses(tmp_path / "wxyz.csv", unit="mm", quaternion_order="wxyz")
     np.testing.assert_allclose(a[0, :3, :3], rz60, atol=1e-12)
     np.testing.assert_allclose(b[0], a[0], atol=1e-12)
-    # the same file read in the other order is another rotation (hence: never guessed)
-    _, wrong = read_poses(tmp_path / "xyzw.csv", unit="mm", quaternion_order="wxyz")
+    # the same numbers read in the other order are another rotation (hence: never guessed)
+    (tmp_path / "bare.csv").write_text(f"100,200,300,0,0,{s!r},{c!r}\n")
+    _, wrong = read_poses(tmp_path / "bare.csv", unit="mm", quaternion_order="wxyz")
     assert np.abs(wrong[0, :3, :3] - rz60).max() > 0.5
+    # a header naming the quaternion's columns must agree with the order given
+    with pytest.raises(ValueError, match="the header orders the quaternion qx,qy,qz,qw but "
+                       "quaternion_order wxyz was given"):
+        read_poses(tmp_path / "xyzw.csv", unit="mm", quaternion_order="wxyz")
     # a quaternion off by rounding is normalised
     (tmp_path / "r.csv").write_text(f"0,0,900,0,0,{s * 1.001!r},{c * 1.001!r}\n")
     _, r = read_poses(tmp_path / "r.csv", unit="mm", quaternion_order="xyzw")
@@ -123,6 +128,9 @@ def _write(tmp_path, name, text):
          r"a.csv: pose 1 repeats the id 'p1' of pose 0"),
         ("a.csv", "x,y,z,rx,ry,rz\n", {"unit": "mm"}, r"a.csv: the pose file holds a header but "
          "no poses"),
+        ("a.csv", "x,y,z,qw,qx,qy,qz\n500,0,300,1,0,0,0\n",
+         {"unit": "mm", "quaternion_order": "xyzw"}, r"a.csv: line 1: the header orders the "
+         "quaternion qw,qx,qy,qz but quaternion_order xyzw was given"),
         ("a.yaml", "- [500, 0, 300, 0, 0, 1]\n", {}, r"a.yaml: the length unit of the positions"),
         ("a.yaml", "pose_format: {unit: m, quaternion_order: xyzw}\nposes:\n"
          "  - {id: a, position: [0.5, 0, 0.3], quaternion: [0, 0, 0, 2]}\n", {},

@@ -298,6 +298,12 @@ def _read_csv(path: Path, rotation: str | None, fmt: PoseFormat
         id_col = names.index("id") if "id" in names else None
         if not rows:
             raise ValueError(f"{path}: the pose file holds a header but no poses")
+        quat = [n for n in names if n in ("qx", "qy", "qz", "qw")]
+        if len(quat) == 4 and fmt.quaternion_order is not None \
+                and "".join(n[1] for n in quat) != fmt.quaternion_order:
+            raise ValueError(f"{path}: line {header_line}: the header orders the quaternion "
+                             f"{','.join(quat)} but quaternion_order {fmt.quaternion_order} "
+                             "was given")
     width = len(rows[0][1])
     ncols = width - (id_col is not None)
     form = _form_of(ncols, rotation, str(path))
