@@ -160,6 +160,19 @@ def test_cli_report_and_measure_on_a_dataset(tmp_path, capsys, calibrated):
     assert e.value.code == 2 and "nope.yaml: no such calibration file" in capsys.readouterr().err
 
 
+def test_report_says_why_the_solve_stopped_in_a_sentence(tmp_path, calibrated):
+    import html
+
+    sim, result = calibrated
+    assert result.termination_message.startswith(str(result.termination))
+    assert "LM iterations" in result.termination_message
+    text = write_report(result, sim.fit, tmp_path / "r.html").read_text()
+    assert f"{result.method}: {html.escape(result.termination_message)}</td>" in text
+    evaluated = hmlvs.calibration.solvers.evaluate(result.params, sim.fit)
+    text = write_report(evaluated, sim.fit, tmp_path / "e.html").read_text()
+    assert "not solved: parameters evaluated as given</td>" in text
+
+
 def test_atomic_write_keeps_old_file_on_error_and_normal_permissions(tmp_path):
     import os
 
@@ -206,7 +219,7 @@ def test_ctrl_c_stops_a_long_calibration_promptly(tmp_path, extra):
 
 
 @pytest.mark.parametrize("command", ["simulate", "demo", "calibrate", "design", "report",
-                                     "measure", "study", "scenario"])
+                                     "measure", "study", "scenario", "export"])
 def test_every_command_has_help_with_an_example(command, capsys):
     with pytest.raises(SystemExit) as e:
         cli_main([command, "--help"])

@@ -404,6 +404,20 @@ def demo(
     typer.echo(f"\ncalibration written to {path}")
 
 
+_ROBOT_OPTION = typer.Option(
+    None, "--robot", help="Robot description (YAML/JSON, what hmlvs.Robot.to_dict writes) "
+    "for joint readings; default: the manifest's robot, else SCORBOT ER-VII.")
+
+
+def _load_robot(path: Optional[Path]):
+    """The --robot file's Robot, or None."""
+    if path is None:
+        return None
+    from .data.robot_file import load_robot
+
+    return load_robot(path)
+
+
 @app.command()
 def calibrate(
     data: Path = typer.Argument(..., help="Calibration data set (.npz or .json), or an image "
@@ -431,6 +445,7 @@ def calibrate(
                              "paper's) or homography (every stripe point on the board)."),
     save_data: Optional[Path] = typer.Option(None, help="Save the data set extracted from "
                                              "images here (.npz or .json)."),
+    robot: Optional[Path] = _ROBOT_OPTION,
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, no per-image "
                                "lines and no warnings on the terminal (--json collects them)."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary, warnings included."),
@@ -449,10 +464,11 @@ def calibrate(
     image_reports = []
     with _guard(as_json), _collect_warnings() as caught:
         fixed_names, why = _resolve_fixed(fixed, free)
+        arm = _load_robot(robot)
         if _is_manifest(data):
             from .image.session import dataset_from_images
 
-            ds, image_reports = dataset_from_images(data, mode=mode)
+            ds, image_reports = dataset_from_images(data, mode=mode, robot=arm)
             if not (as_json or quiet):
                 for r in image_reports:
                     typer.echo(str(r))
@@ -467,7 +483,7 @@ def calibrate(
                                  iterations=iterations, loss=loss, loss_scale=loss_scale,
                                  seed=seed, threads=threads,
                                  progress=_solve_progress(as_json or quiet))
-        path = Calibration.from_result(result, ds).save(out)
+        path = Calibration.from_result(result, ds, robot=arm).save(out)
         report_path = None
         if report is not None:
             from .report.html import write_report
@@ -580,6 +596,7 @@ def report(
     out: Path = typer.Option(Path("report.html"), "--out", "-o", help="HTML file to write."),
     mode: str = typer.Option("corners", help="Calibration points from images: corners or "
                              "homography (as for calibrate)."),
+    robot: Optional[Path] = _ROBOT_OPTION,
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
     """Write a self-contained HTML report for a calibration file on a data set or images.
@@ -597,10 +614,13 @@ def report(
         if _is_manifest(data):
             from .image.session import dataset_from_images
 
-            ds, image_reports = dataset_from_images(data, mode=mode)
+            ds, image_reports = dataset_from_images(data, mode=mode, robot=_load_robot(robot))
         else:
             ds = Dataset.load(data)
         test_ds = Dataset.load(test) if test is not None else None
+        if cal.params is None:
+            raise ValueError(f"{calibration}: a calibration of the {cal.model} model has no "
+                             "paper parameters to report on")
         result = evaluate(cal.params, ds, test_ds, method=cal.method or "loaded",
                           fixed=cal.fixed)
         path = write_report(result, ds, out, test=test_ds, std=cal.std,
@@ -622,18 +642,30 @@ def measure(
                                   "or an image manifest (folder or manifest.json)."),
     out: Path = typer.Option(Path("cloud.ply"), "--out", "-o",
                              help="Point cloud to write (.ply or .csv)."),
+    robot: Optional[Path] = _ROBOT_OPTION,
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
     """Measure 3D points in the robot base frame with a calibrated sensor.
 
     Example: hmlvs measure calibration.yaml scan/ --out cloud.ply
     """
+    import numpy as np
+
     from .data.calibration_file import Calibration
-    from .measurement.measure import measure_source
+    from .data.dataset import Dataset
+    from .measurement.measure import measure as measure_points
+    from .measurement.measure import measure_images
 
     with _guard(as_json):
         cal = Calibration.load(calibration)
-        cloud, info = measure_source(cal, source)
+        if _is_manifest(source):
+            result = measure_images(cal, source, robot=_load_robot(robot))
+            cloud, info = result.cloud, result.summary()
+        else:
+            ds = Dataset.load(source)
+            cloud = measure_points(cal, [ds.pixels[i:i + 1] for i in range(len(ds))], ds.poses)
+            err = np.linalg.norm(cloud.points - ds.points, axis=1)[cloud.valid]
+            info = {"rms_mm": float(np.sqrt(np.mean(err**2))) if err.size else None}
         path = cloud.save(out)
     summary = {"cloud": str(path), "points": cloud.num_valid,
                "invalid": len(cloud) - cloud.num_valid, **info}
@@ -642,9 +674,41 @@ def measure(
         return
     typer.echo(f"{cloud.num_valid} points measured ({len(cloud) - cloud.num_valid} rays missed "
                "the laser plane)")
-    if "rms_mm" in info:
+    if info.get("rms_mm") is not None:
         typer.echo(f"RMS distance to the reference points: {info['rms_mm']:.4g} mm")
     typer.echo(f"point cloud written to {path}")
+
+
+@app.command("export")
+def export_calibration(
+    calibration: Path = typer.Argument(..., help="Calibration file (.yaml or .json)."),
+    fmt: str = typer.Option(..., "--format", "-f", help="opencv (cv::FileStorage YAML), ros "
+                            "(camera_info YAML) or json."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="File to write (atomically); "
+                                       "default: print to stdout."),
+    image_size: Optional[tuple[int, int]] = typer.Option(
+        None, "--image-size", help="Image width and height (px) for a paper-model "
+        "calibration's distortion fit; default 2 Cu x 2 Cv."),
+    camera_name: str = typer.Option("hmlvs_camera", help="camera_name of the ros format."),
+) -> None:
+    """Export a calibration's camera, laser plane and hand-eye transform for OpenCV, ROS or
+    any JSON reader (a paper-model calibration is converted to OpenCV's camera model).
+
+    Example: hmlvs export calibration.yaml --format ros --out camera_info.yaml
+    """
+    from .data.export import export, export_text
+
+    with _guard():
+        if out is None:
+            text = export_text(calibration, fmt, image_size=image_size,
+                               camera_name=camera_name)
+        else:
+            path = export(calibration, fmt, out, image_size=image_size,
+                          camera_name=camera_name)
+    if out is None:
+        typer.echo(text, nl=False)
+    else:
+        typer.echo(f"{fmt} export written to {path}")
 
 
 @app.command()

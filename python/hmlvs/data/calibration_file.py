@@ -17,6 +17,11 @@ Format ``hmlvs-calibration`` version 1, as YAML (``.yaml``/``.yml``) or JSON (``
     hmlvs_version: 0.1.0
     hand_from_camera: [[...4x4...]]          # derived, for C++/ROS users (mm)
     robot: {...}                             # optional DH description (hmlvs.Robot.to_dict)
+    model: paper                             # or opencv (then 'sensor' holds the calibration
+    sensor: {...}                            # and 'parameters' may be absent):
+                                             # hmlvs.models.opencv.OpenCvSensor.to_dict
+
+A file without ``model`` is a paper-model file.
 
 See docs/file-formats.md for the full description.
 """
@@ -37,12 +42,14 @@ import yaml
 
 from .._io import atomic_write, existing_file
 from ..geometry.robot import Robot
+from ..models.opencv import OpenCvSensor
 from ..models.paper import hand_from_camera
 from ..models.params import NAMES, UNITS, Parameters
 from .dataset import Dataset, check_format
 
 FORMAT = "hmlvs-calibration"
 FORMAT_VERSION = 1
+MODELS = ("paper", "opencv")
 
 
 def dataset_hash(ds: Dataset) -> str:
@@ -56,9 +63,13 @@ def dataset_hash(ds: Dataset) -> str:
 
 @dataclass
 class Calibration:
-    """A calibrated sensor as stored on disk."""
+    """A calibrated sensor as stored on disk.
 
-    params: Parameters
+    ``model`` is "paper" (the 14 ``params``) or "opencv" (``sensor``, an
+    :class:`~hmlvs.models.opencv.OpenCvSensor`; ``params`` then may be None).
+    """
+
+    params: Parameters | None = None
     std: dict[str, float | None] = field(default_factory=dict)
     fixed: tuple[str, ...] = ()
     fit_rms: float | None = None
@@ -69,6 +80,18 @@ class Calibration:
     created: str | None = None
     hmlvs_version: str | None = None
     robot: Robot | None = None
+    sensor: OpenCvSensor | None = None
+    model: str = "paper"
+
+    def __post_init__(self) -> None:
+        if self.model not in MODELS:
+            raise ValueError(f"unknown sensor model {self.model!r}; the models are "
+                             f"{', '.join(MODELS)}")
+        if self.model == "paper" and self.params is None:
+            raise ValueError("a paper-model calibration needs its 14 parameters")
+        if self.model == "opencv" and self.sensor is None:
+            raise ValueError("an opencv-model calibration needs its sensor "
+                             "(hmlvs.models.opencv.OpenCvSensor)")
 
     @classmethod
     def from_result(cls, result: Any, dataset: Dataset | None = None,
@@ -88,12 +111,16 @@ class Calibration:
                    hmlvs_version=__version__, robot=robot)
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        d: dict[str, Any] = {
             "format": FORMAT,
             "version": FORMAT_VERSION,
+            "model": self.model,
             "units": {"length": "mm", "angle": "rad", "pixel": "px", "k": "1/mm^2"},
-            "parameters": {n: float(getattr(self.params, n)) for n in NAMES},
-            "std": {n: self.std.get(n) for n in NAMES},
+        }
+        if self.params is not None:
+            d["parameters"] = {n: float(getattr(self.params, n)) for n in NAMES}
+            d["std"] = {n: self.std.get(n) for n in NAMES}
+        d.update({
             "fixed": list(self.fixed),
             "fit_rms_mm": self.fit_rms,
             "test_rms_mm": self.test_rms,
@@ -102,9 +129,13 @@ class Calibration:
             "data_sha256": self.data_sha256,
             "created": self.created,
             "hmlvs_version": self.hmlvs_version,
-            "hand_from_camera": hand_from_camera(self.params).tolist(),
+            "hand_from_camera": (hand_from_camera(self.params) if self.sensor is None
+                                 else self.sensor.hand_from_camera).tolist(),
             "robot": None if self.robot is None else self.robot.to_dict(),
-        }
+        })
+        if self.sensor is not None:
+            d["sensor"] = self.sensor.to_dict()
+        return d
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write atomically as YAML (.yaml/.yml) or JSON (.json)."""
@@ -136,24 +167,44 @@ class Calibration:
         units = d.get("units", {})
         if units and (units.get("length", "mm") != "mm" or units.get("angle", "rad") != "rad"):
             raise ValueError(f"{source}: units must be mm and rad, got {units}")
+        model = d.get("model", "paper")
+        if model not in MODELS:
+            raise ValueError(f"{source}: unknown sensor model {model!r}; the models are "
+                             f"{', '.join(MODELS)}")
         p = d.get("parameters")
-        if not isinstance(p, dict):
-            raise ValueError(f"{source}: 'parameters' must map the 14 parameter names to values")
-        try:
-            params = Parameters.from_dict(p)
-        except ValueError as e:
-            raise ValueError(f"{source}: {e}") from None
+        params = None
+        if model == "paper" or p is not None:
+            if not isinstance(p, dict):
+                raise ValueError(f"{source}: 'parameters' must map the 14 parameter names to "
+                                 "values")
+            try:
+                params = Parameters.from_dict(p)
+            except ValueError as e:
+                raise ValueError(f"{source}: {e}") from None
+        sensor = None
+        if model == "opencv" or d.get("sensor") is not None:
+            if d.get("sensor") is None:
+                raise ValueError(f"{source}: a calibration of model opencv needs a 'sensor' "
+                                 "block (camera_matrix, dist_coeffs, image_size, laser_plane, "
+                                 "hand_from_camera)")
+            sensor = OpenCvSensor.from_dict(d["sensor"], source=f"{source}: sensor")
         robot = None
         if d.get("robot"):
-            robot = Robot.from_dict(d["robot"])
+            from .robot_file import robot_from_dict
+
+            robot = robot_from_dict(d["robot"], f"{source}: robot")
         std = d.get("std") or {}
         return cls(params=params, std={n: std.get(n) for n in NAMES},
                    fixed=tuple(d.get("fixed") or ()), fit_rms=d.get("fit_rms_mm"),
                    test_rms=d.get("test_rms_mm"), num_points=d.get("num_points"),
                    method=d.get("method"), data_sha256=d.get("data_sha256"),
-                   created=d.get("created"), hmlvs_version=d.get("hmlvs_version"), robot=robot)
+                   created=d.get("created"), hmlvs_version=d.get("hmlvs_version"), robot=robot,
+                   sensor=sensor, model=model)
 
     def table(self) -> str:
+        if self.params is None:
+            assert self.sensor is not None
+            return "\n".join(f"{n:<7} {v:>14.7g}" for n, v in self.sensor.intrinsics().items())
         lines = [f"{'param':<7} {'unit':<7} {'value':>14} {'std':>11}"]
         for n in NAMES:
             s = self.std.get(n)

@@ -6,14 +6,23 @@ Format ``hmlvs-images`` version 1, JSON (``manifest.json``) or YAML (``.yaml``/`
     version: 1
     image_size: [640, 480]          # optional; every pair must have this size
     joint_unit: rad                 # or deg
-    robot: SCORBOT ER-VII           # optional name (a different arm must be passed in code)
+    robot: SCORBOT ER-VII           # optional: a built-in arm's name, or a mapping in the
+                                    # hmlvs.Robot.to_dict form (DH table)
+    pose_format: {unit: m, quaternion_order: xyzw}   # how 'pose' entries are written
+    pose_file: poses.csv            # optional: every pose from a file (see hmlvs.data.poses)
     board: {rows: 6, cols: 8, square: 30.0, origin: [700, 90, 0], ...}   # for calibration
     poses:
       - id: p000                    # unique: pairs the files with the readings explicitly
         on: p000_on.png             # laser-on frame  } or  stripe: p000.csv  (u, v[, intensity])
         off: p000_off.png           # laser-off frame }
         joints: [0.1, -0.8, ...]    # joint readings, or
-        # pose: [[...4x4 base_from_hand, mm...]]
+        # pose: [[...4x4 base_from_hand...]], or {position: [x, y, z], quaternion: [4]}
+        #       or {position: [x, y, z], rotation_vector: [rx, ry, rz]} (rad)
+
+Positions are in ``pose_format``'s unit (default mm; a quaternion needs the order named). With
+a ``pose_file`` no entry has joints or pose: the file's ``id`` column pairs its rows with the
+entries, or without one its rows pair in order. :func:`read_manifest` returns every entry's
+pose as a 4x4 in mm.
 
 File names are relative to the manifest's folder. A malformed manifest (no id, a repeated id,
 an entry with neither or both of joints/pose, or neither images nor a stripe list) raises a
@@ -33,6 +42,7 @@ import yaml
 
 from .._io import atomic_write
 from .dataset import check_format
+from .poses import PoseFormat, pose_from_entry, read_poses
 
 FORMAT = "hmlvs-images"
 VERSION = 1
@@ -60,11 +70,16 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
     entries = doc.get("poses")
     if not isinstance(entries, list):
         raise ValueError(f"{path}: the manifest's 'poses' must be a list of entries")
+    fmt = PoseFormat.from_dict(doc.get("pose_format"), str(path))
+    file_poses = _pose_file(doc, fmt, path) if doc.get("pose_file") is not None else None
+    out: list[dict[str, Any]] = []
     seen: dict[str, int] = {}
     for i, e in enumerate(entries):
         where = f"{path}: entry {i}"
         if not isinstance(e, dict):
             raise ValueError(f"{where} is not a mapping")
+        if True in e or False in e:  # YAML 1.1 reads the keys on/off as booleans
+            e = {("on" if k is True else "off" if k is False else k): v for k, v in e.items()}
         if "id" not in e or not str(e["id"]).strip():
             raise ValueError(f"{where} has no id; every entry needs a unique id that pairs its "
                              "files with its readings")
@@ -73,13 +88,20 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
         if pid in seen:
             raise ValueError(f"{where} repeats the id of entry {seen[pid]}")
         seen[pid] = i
-        if ("joints" in e) == ("pose" in e):
+        e = dict(e)
+        if file_poses is not None:
+            if "joints" in e or "pose" in e:
+                raise ValueError(f"{where} has '{'joints' if 'joints' in e else 'pose'}' but "
+                                 f"the manifest gives every pose in its pose_file "
+                                 f"{doc['pose_file']}")
+        elif ("joints" in e) == ("pose" in e):
             raise ValueError(f"{where} must have either 'joints' or 'pose' (not both)")
         if "pose" in e:
-            pose = np.asarray(e["pose"], dtype=float) if _numeric(e["pose"]) else None
-            if pose is None or pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
-                raise ValueError(f"{where}: 'pose' must be a finite 4x4 base_from_hand matrix")
-        elif not _numeric(e["joints"]) or np.ndim(e["joints"]) != 1:
+            try:
+                e["pose"] = pose_from_entry(e["pose"], fmt)
+            except ValueError as err:
+                raise ValueError(f"{where}: {err}") from None
+        elif "joints" in e and (not _numeric(e["joints"]) or np.ndim(e["joints"]) != 1):
             raise ValueError(f"{where}: 'joints' must be a list of numbers")
         has_images = "on" in e or "off" in e
         if has_images == ("stripe" in e):
@@ -87,7 +109,51 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
                              "stripe list ('stripe'), not both or neither")
         if has_images and not ("on" in e and "off" in e):
             raise ValueError(f"{where} names only one of 'on' and 'off'")
-    return entries, doc, path.parent
+        out.append(e)
+    if file_poses is not None:
+        _pair_poses(out, file_poses, doc["pose_file"], path)
+    return out, doc, path.parent
+
+
+def _pose_file(doc: dict[str, Any], fmt: PoseFormat, path: Path
+               ) -> tuple[list[str] | None, np.ndarray]:
+    """The manifest's ``pose_file`` read with its ``pose_format``: (ids or None, poses in mm)."""
+    name = doc["pose_file"]
+    if not isinstance(name, str) or not name.strip():
+        raise ValueError(f"{path}: 'pose_file' must be a file name, got {name!r}")
+    file = Path(name)
+    file = file if file.is_absolute() else path.parent / file
+    if not file.is_file():
+        raise ValueError(f"{path}: the pose_file {file} does not exist")
+    raw = doc.get("pose_format") or {}
+    unit = raw.get("unit") if file.suffix.lower() in (".yaml", ".yml") else fmt.unit
+    return read_poses(file, quaternion_order=fmt.quaternion_order, unit=unit)
+
+
+def _pair_poses(entries: list[dict[str, Any]], file_poses: tuple[list[str] | None, np.ndarray],
+                name: str, path: Path) -> None:
+    """Give every entry its pose from the pose file: by id when the file has an id column,
+    else by row order (then the counts must match)."""
+    ids, poses = file_poses
+    if ids is None:
+        if len(poses) != len(entries):
+            raise ValueError(f"{path}: the pose_file {name} has {len(poses)} poses but the "
+                             f"manifest has {len(entries)} entries; without an id column the "
+                             "rows pair with the entries in order, so the counts must match")
+        for e, pose in zip(entries, poses):
+            e["pose"] = pose
+        return
+    row = {pid: k for k, pid in enumerate(ids)}
+    missing = [str(e["id"]) for e in entries if str(e["id"]) not in row]
+    if missing:
+        raise ValueError(f"{path}: the pose_file {name} has no pose for the id(s) "
+                         f"{', '.join(missing[:5])}{' ...' if len(missing) > 5 else ''}")
+    extra = sorted(set(ids) - {str(e["id"]) for e in entries})
+    if extra:
+        raise ValueError(f"{path}: the pose_file {name} has poses for id(s) no entry has: "
+                         f"{', '.join(extra[:5])}{' ...' if len(extra) > 5 else ''}")
+    for e in entries:
+        e["pose"] = poses[row[str(e["id"])]]
 
 
 def _numeric(x: Any) -> bool:

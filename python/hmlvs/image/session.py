@@ -138,9 +138,7 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
             b = doc["board"]
             board = Checkerboard(**{k: tuple(v) if isinstance(v, list) else v
                                     for k, v in b.items()})
-        if robot is None and doc.get("robot") not in (None, Robot.scorbot_er7().name):
-            raise ValueError(f"the images were taken with robot {doc.get('robot')!r}; pass "
-                             "robot=hmlvs.Robot(...) with its DH table")
+        robot = _manifest_robot(doc, robot, source)
         if isinstance(doc.get("image_size"), list) and len(doc["image_size"]) == 2:
             size = (int(doc["image_size"][0]), int(doc["image_size"][1]))
     if unit not in ("rad", "deg"):
@@ -237,9 +235,7 @@ def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | Non
     else:
         records, doc, folder = _read_manifest(source)
         unit = doc.get("joint_unit", "rad") if unit is None else unit
-        if robot is None and doc.get("robot") not in (None, Robot.scorbot_er7().name):
-            raise ValueError(f"the images were taken with robot {doc.get('robot')!r}; pass "
-                             "robot=hmlvs.Robot(...) with its DH table")
+        robot = _manifest_robot(doc, robot, source)
     if unit not in ("rad", "deg"):
         raise ValueError(f"joint_unit must be 'rad' or 'deg', got {unit!r}")
     if not records:
@@ -359,14 +355,32 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray, *, normalize: bool = True,
     return extract_stripe(d, **opts)
 
 
+def _manifest_robot(doc: dict[str, Any], robot: Any, source: Any) -> Any:
+    """The arm of a manifest: ``robot`` when given; else the manifest's ``robot:``, a built-in
+    arm's name or a mapping in the :meth:`hmlvs.Robot.to_dict` form; else None (the default,
+    SCORBOT ER-VII)."""
+    from ..data.robot_file import robot_from_description
+
+    if robot is not None or doc.get("robot") is None:
+        return robot
+    return robot_from_description(doc["robot"], str(source))
+
+
 def _record_pose(rec: dict[str, Any], robot: Any, unit: str) -> tuple[np.ndarray | None,
                                                                      np.ndarray]:
-    """(joints in rad or None, base_from_hand pose) of a record; raises _Reject."""
+    """(joints in rad or None, base_from_hand pose in mm) of a record; raises _Reject.
+
+    A ``pose`` is a 4x4 matrix (mm) or a mapping ``{position, quaternion | rotation_vector}``
+    (see :func:`hmlvs.data.poses.pose_from_entry`; records from a manifest come with their
+    ``pose_format`` applied, as 4x4 in mm).
+    """
     if "pose" in rec:
-        pose = np.asarray(rec["pose"], dtype=float)
-        if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
-            raise _Reject("'pose' must be a finite 4x4 base_from_hand matrix")
-        return None, pose
+        from ..data.poses import PoseFormat, pose_from_entry
+
+        try:
+            return None, pose_from_entry(rec["pose"], PoseFormat())
+        except ValueError as e:
+            raise _Reject(str(e)) from None
     if "joints" not in rec:
         raise _Reject("the record lacks 'joints' (or 'pose')")
     joints = np.asarray(rec["joints"], dtype=float).reshape(-1)

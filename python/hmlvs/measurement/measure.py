@@ -253,6 +253,18 @@ class MeasureResult:
                 "ids": list(self.ids)}
 
 
+def _calibration_robot(calibration: Any, source: Any) -> Robot | None:
+    """The calibration's robot, unless the manifest names another arm (by a name that is not
+    the calibration robot's, or by a DH mapping): the manifest says which arm took the images."""
+    robot = getattr(calibration, "robot", None)
+    if robot is None or isinstance(source, (list, tuple)):
+        return robot
+    from ..data.manifest import read_manifest
+
+    declared = read_manifest(source)[1].get("robot")
+    return robot if declared is None or declared == robot.name else None
+
+
 def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
                    **options: Any) -> MeasureResult:
     """Laser on/off image pairs + joint readings (an image manifest, see docs/file-formats.md,
@@ -267,7 +279,8 @@ def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
     """
     from ..image.session import stripes_from_images
 
-    robot = robot or getattr(calibration, "robot", None)
+    if robot is None:
+        robot = _calibration_robot(calibration, source)
     ids, stripes, poses, reports = stripes_from_images(source, robot=robot, **options)
     rejected = tuple(RejectedPair(str(r.id), str(r.reason)) for r in reports if not r.ok)
     if not stripes:

@@ -211,6 +211,7 @@ def render_report(result: Any, ds: Dataset, test: Dataset | None = None,
     img = "".join(f'<figure><img alt="{captions[k]}" src="{v}"><figcaption>{captions[k]}'
                   f"</figcaption></figure>" for k, v in figs.items())
     now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    stopped = getattr(result, "termination_message", "") or str(result.termination)
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>
@@ -226,7 +227,7 @@ img {{ max-width: 520px; border: 1px solid #ddd; }}
 </style></head><body>
 <h1>{html.escape(title)}</h1>
 <table class="summary">
-<tr><td>method</td><td>{html.escape(result.method)} ({html.escape(result.termination)})</td></tr>
+<tr><td>method</td><td>{html.escape(result.method)}: {html.escape(stopped)}</td></tr>
 <tr><td>fit RMS of ||E_i||</td><td>{fit_txt}</td></tr>
 <tr><td>held-out RMS</td><td>{test_txt}</td></tr>
 <tr><td>{"solve" if evaluated else "iterations, time"}</td><td>{run_txt}</td></tr>

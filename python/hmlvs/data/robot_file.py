@@ -1,0 +1,75 @@
+"""Robot descriptions from files and manifests: the :meth:`hmlvs.Robot.to_dict` mapping as
+YAML or JSON, or the name of a built-in arm."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, Callable
+
+import yaml
+
+from .._io import atomic_write, existing_file
+from ..geometry.robot import Robot
+
+#: the arms hmlvs knows by name
+BUILTIN: dict[str, Callable[[], Robot]] = {"SCORBOT ER-VII": Robot.scorbot_er7}
+
+
+def robot_from_dict(d: Any, source: str) -> Robot:
+    """A Robot from its ``to_dict`` mapping; ValueError naming ``source`` and the problem."""
+    if not isinstance(d, dict):
+        raise ValueError(f"{source}: a robot description is a mapping with 'links' (the "
+                         f"hmlvs.Robot.to_dict form), got {type(d).__name__}")
+    if not isinstance(d.get("links"), list) or not d["links"]:
+        raise ValueError(f"{source}: the robot description needs 'links', a list of DH rows "
+                         "{a, alpha, d, offset, prismatic, theta}")
+    try:
+        return Robot.from_dict(d)
+    except (ValueError, TypeError, AttributeError) as e:
+        raise ValueError(f"{source}: malformed robot description ({e})") from None
+
+
+def robot_from_description(value: Any, source: str) -> Robot:
+    """A manifest's ``robot:``: a built-in arm's name or a ``to_dict`` mapping."""
+    if isinstance(value, str):
+        make = BUILTIN.get(value.strip())
+        if make is None:
+            raise ValueError(
+                f"{source}: the robot {value!r} is not a built-in arm (hmlvs knows "
+                f"{', '.join(repr(n) for n in BUILTIN)}); give its DH description: "
+                "--robot FILE on the command line, robot=hmlvs.Robot(...) in code, or the "
+                "hmlvs.Robot.to_dict mapping under 'robot:' in the manifest")
+        return make()
+    return robot_from_dict(value, f"{source}: robot")
+
+
+def load_robot(path: str | os.PathLike) -> Robot:
+    """Read a robot description file (YAML or JSON holding what :meth:`Robot.to_dict`
+    writes; a document with a ``robot:`` mapping, such as a calibration file, also works)."""
+    path = existing_file(path, "robot description file")
+    try:
+        text = path.read_text(encoding="utf-8")
+        d = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, yaml.YAMLError) as e:
+        raise ValueError(f"{path}: unreadable robot description ({type(e).__name__}: {e})") \
+            from None
+    if isinstance(d, dict) and "links" not in d and isinstance(d.get("robot"), dict):
+        d = d["robot"]
+    return robot_from_dict(d, str(path))
+
+
+def save_robot(robot: Robot, path: str | os.PathLike) -> Path:
+    """Write ``robot.to_dict()`` atomically as YAML (.yaml/.yml) or JSON (.json)."""
+    path = Path(path)
+    d = robot.to_dict()
+    if path.suffix.lower() in (".yaml", ".yml"):
+        text = yaml.safe_dump(d, sort_keys=False, default_flow_style=None)
+    elif path.suffix.lower() == ".json":
+        text = json.dumps(d, indent=2)
+    else:
+        raise ValueError(f"{path}: robot descriptions are .yaml, .yml or .json")
+    with atomic_write(path) as fh:
+        fh.write(text)
+    return path
