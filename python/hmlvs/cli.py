@@ -404,6 +404,84 @@ def demo(
     typer.echo(f"\ncalibration written to {path}")
 
 
+def _resolve_model(model: str, data: Path) -> str:
+    """The sensor model to calibrate: as asked, or (auto) opencv for an image manifest without
+    a measured board pose, paper otherwise."""
+    if model not in ("auto", "opencv", "paper"):
+        raise ValueError(f"--model must be opencv, paper or auto, got {model!r}")
+    if model != "auto":
+        if model == "opencv" and not _is_manifest(data):
+            raise ValueError(f"{data}: the opencv model is calibrated from images (a manifest); "
+                             "a data set of calibration points is for --model paper")
+        return model
+    if not _is_manifest(data):
+        return "paper"
+    from .data.manifest import read_manifest
+
+    _, doc, _ = read_manifest(data)
+    board = doc.get("board")
+    return "paper" if isinstance(board, dict) and "origin" in board else "opencv"
+
+
+def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: Optional[Path],
+                      distortion: str, quiet: bool, as_json: bool) -> None:
+    """hmlvs calibrate --model opencv: images -> views -> joint calibration -> file."""
+    from .calibration.joint import calibrate_joint
+    from .data.calibration_file import Calibration
+    from .image.views import views_from_images
+
+    with _guard(as_json), _collect_warnings() as caught:
+        arm = _load_robot(robot)
+        terms = tuple(t.strip() for t in distortion.split(",") if t.strip())
+        views, board, size, board_pose, reports = views_from_images(data, robot=arm)
+        if not (as_json or quiet):
+            for r in reports:
+                typer.echo(f"{r.id}: rejected: {r.reason}" if not r.ok else
+                           f"{r.id}: {r.corners} corners, stripe in "
+                           f"{r.stripe.get('FOUND', 0)} scan lines")
+        if not views:
+            raise ValueError("no view has both the whole board and a stripe:\n" + "\n".join(
+                f"  {r.id}: {r.reason}" for r in reports))
+        test_views = []
+        if holdout > 0:
+            if not 0 < holdout < 1:
+                raise ValueError(f"--holdout must be a fraction in (0, 1), got {holdout}")
+            import numpy as np
+
+            rng = np.random.default_rng(seed)
+            n_test = max(1, int(round(holdout * len(views))))
+            pick = set(rng.choice(len(views), n_test, replace=False).tolist())
+            test_views = [v for i, v in enumerate(views) if i in pick]
+            views = [v for i, v in enumerate(views) if i not in pick]
+        result = calibrate_joint(views, board, size, distortion=terms,
+                                 base_from_board=board_pose, test=test_views or None)
+        path = Calibration.from_joint(result, robot=arm).save(out)
+    warns = _gather(caught, result.warnings)
+    if as_json:
+        s = result.sensor
+        _echo_json({"calibration": str(path), "model": "opencv", "mode": result.mode,
+                    "camera_matrix": s.camera_matrix.tolist(),
+                    "dist_coeffs": s.dist_coeffs.tolist(), "image_size": list(s.image_size),
+                    "laser_plane": s.laser_plane.tolist(),
+                    "hand_from_camera": s.hand_from_camera.tolist(),
+                    "base_from_board": None if s.base_from_board is None
+                    else s.base_from_board.tolist(),
+                    "std": result.std, "corner_rms_px": result.corner_rms_px,
+                    "laser_rms_mm": result.laser_rms_mm, "test_rms_mm": result.test_rms_mm,
+                    "determined": result.determined, "rank": result.rank,
+                    "unknowns": result.num_unknowns, "dropped": result.dropped,
+                    "flipped": result.flipped, "termination": result.termination,
+                    "iterations": result.iterations, "seconds": result.seconds,
+                    "warnings": warns,
+                    "images": [{"id": r.id, "ok": r.ok, "reason": r.reason,
+                                "corners": r.corners} for r in reports]})
+        return
+    typer.echo(result.summary())
+    if not quiet:
+        _show_warnings(warns)
+    typer.echo(f"calibration written to {path}")
+
+
 _ROBOT_OPTION = typer.Option(
     None, "--robot", help="Robot description (YAML/JSON, what hmlvs.Robot.to_dict writes) "
     "for joint readings; default: the manifest's robot, else SCORBOT ER-VII.")
@@ -446,11 +524,23 @@ def calibrate(
     save_data: Optional[Path] = typer.Option(None, help="Save the data set extracted from "
                                              "images here (.npz or .json)."),
     robot: Optional[Path] = _ROBOT_OPTION,
+    model: str = typer.Option(
+        "auto", help="Sensor model: opencv (OpenCV intrinsics and distortion, a 3-DoF laser "
+        "plane, any hand-eye rotation; calibrated from the board's corners and the stripe "
+        "together, no guess needed) or paper (the paper's 14 parameters, from calibration "
+        "points). auto: opencv for images whose manifest gives no board pose, else paper."),
+    distortion: str = typer.Option(
+        "k1,k2,p1,p2,k3", help="opencv model: the distortion terms to estimate (the others "
+        "stay 0), e.g. k1,k2."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, no per-image "
                                "lines and no warnings on the terminal (--json collects them)."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary, warnings included."),
 ) -> None:
-    """Identify the sensor parameters from a calibration data set or laser on/off images.
+    """Calibrate the sensor from laser on/off images (or, paper model, a calibration data set).
+
+    --model opencv (the default for images without a measured board pose) estimates the
+    camera, the laser plane, the hand-eye transform and the board's pose from the images and
+    robot poses alone.
 
     Su, Sv, Cu and Cv are held at their initial (datasheet) values by default: laser points
     alone cannot determine them (MODEL.md; docs/glossary.md, "scale gauge", "flat direction").
@@ -462,6 +552,11 @@ def calibrate(
     from .data.dataset import Dataset
 
     image_reports = []
+    with _guard(as_json):
+        chosen = _resolve_model(model, data)
+    if chosen == "opencv":
+        _calibrate_opencv(data, out, holdout, seed, robot, distortion, quiet, as_json)
+        return
     with _guard(as_json), _collect_warnings() as caught:
         fixed_names, why = _resolve_fixed(fixed, free)
         arm = _load_robot(robot)

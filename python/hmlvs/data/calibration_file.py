@@ -110,6 +110,20 @@ class Calibration:
                        timespec="seconds"),
                    hmlvs_version=__version__, robot=robot)
 
+    @classmethod
+    def from_joint(cls, result: Any, robot: Robot | None = None) -> "Calibration":
+        """The calibration file of a general-model (opencv) joint calibration
+        (:class:`hmlvs.calibration.joint.JointCalibration`)."""
+        from .. import __version__
+
+        return cls(params=None, sensor=result.sensor, model="opencv", std=dict(result.std),
+                   fit_rms=float(result.laser_rms_mm), test_rms=result.test_rms_mm,
+                   num_points=int(sum(v["laser_pixels"] for v in result.per_view.values())),
+                   method=f"joint-lm ({result.mode})",
+                   created=datetime.datetime.now(datetime.timezone.utc).isoformat(
+                       timespec="seconds"),
+                   hmlvs_version=__version__, robot=robot)
+
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {
             "format": FORMAT,
@@ -135,6 +149,9 @@ class Calibration:
         })
         if self.sensor is not None:
             d["sensor"] = self.sensor.to_dict()
+            if self.params is None:
+                # the joint solve's standard deviations: px, mm, rad (rotation vectors)
+                d["std"] = {k: (None if v is None else float(v)) for k, v in self.std.items()}
         return d
 
     def save(self, path: str | os.PathLike) -> Path:
@@ -194,7 +211,10 @@ class Calibration:
 
             robot = robot_from_dict(d["robot"], f"{source}: robot")
         std = d.get("std") or {}
-        return cls(params=params, std={n: std.get(n) for n in NAMES},
+        if not isinstance(std, dict):
+            raise ValueError(f"{source}: 'std' must map names to standard deviations")
+        return cls(params=params, std={n: std.get(n) for n in NAMES} if params is not None
+                   else dict(std),
                    fixed=tuple(d.get("fixed") or ()), fit_rms=d.get("fit_rms_mm"),
                    test_rms=d.get("test_rms_mm"), num_points=d.get("num_points"),
                    method=d.get("method"), data_sha256=d.get("data_sha256"),
@@ -204,7 +224,11 @@ class Calibration:
     def table(self) -> str:
         if self.params is None:
             assert self.sensor is not None
-            return "\n".join(f"{n:<7} {v:>14.7g}" for n, v in self.sensor.intrinsics().items())
+            lines = [f"{'name':<7} {'value':>14} {'std':>11}"]
+            for n, v in self.sensor.intrinsics().items():
+                sd = self.std.get(n)
+                lines.append(f"{n:<7} {v:>14.7g} {'-' if sd is None else f'{sd:.3g}':>11}")
+            return "\n".join(lines)
         lines = [f"{'param':<7} {'unit':<7} {'value':>14} {'std':>11}"]
         for n in NAMES:
             s = self.std.get(n)
