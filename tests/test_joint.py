@@ -13,7 +13,8 @@ from hmlvs.calibration.joint import (
     fit_plane,
 )
 from hmlvs.models.opencv import OpenCvSensor
-from joint_scene import default_truth, make_views, project, transform
+from hmlvs.sim.features import default_truth, project, transform
+from hmlvs.sim.features import synthetic_views as make_views
 import numpy as np
 import pytest
 

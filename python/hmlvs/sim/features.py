@@ -1,18 +1,23 @@
-"""Synthetic features of a general sensor (model "opencv") for the joint calibration's tests:
-exact board corners and stripe pixels of views looking at a board, projected with OpenCV
-(cv2.projectPoints), independent of the C++ model, plus Gaussian noise."""
+"""Synthetic features of a general sensor (model "opencv"): board corners and stripe pixels of
+views looking at a board, projected with OpenCV (``cv2.projectPoints``, independent of the C++
+model), plus Gaussian noise. For tests and benchmarks of the joint calibration without images
+(:mod:`hmlvs.sim.general` renders images)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
-from hmlvs.data.views import ViewData
-from hmlvs.geometry.board import BoardSpec
 import numpy as np
 
+from ..data.views import ViewData
+from ..geometry.board import BoardSpec
 
-def transform(rotvec, t) -> np.ndarray:
+
+def transform(rotvec: Any, t: Any) -> np.ndarray:
+    """4x4 transform of a rotation vector (rad) and a translation."""
+
     m = np.eye(4)
     m[:3, :3] = cv2.Rodrigues(np.asarray(rotvec, float).reshape(3, 1))[0]
     m[:3, 3] = t
@@ -21,6 +26,9 @@ def transform(rotvec, t) -> np.ndarray:
 
 @dataclass
 class Truth:
+    """The general sensor behind synthetic features (OpenCV camera, laser plane (a, b, c, d),
+    hand_from_camera, base_from_board)."""
+
     camera_matrix: np.ndarray
     dist: np.ndarray
     hand_from_camera: np.ndarray
@@ -29,6 +37,8 @@ class Truth:
 
 
 def default_truth() -> Truth:
+    """A general sensor unlike the paper's: 1024 x 768, k1 -0.165, a laser plane 1.5 degrees
+    out of the camera's y-z plane, the camera turned ~90 degrees about the flange axis."""
     n = np.array([0.026, 0.6, 0.8])  # 1.5 degrees out of the camera's y-z plane
     n /= np.linalg.norm(n)
     return Truth(camera_matrix=np.array([[1100.0, 0, 512], [0, 1090, 384], [0, 0, 1]]),
@@ -39,12 +49,14 @@ def default_truth() -> Truth:
 
 
 def project(truth: Truth, camera_points: np.ndarray) -> np.ndarray:
+    """Camera-frame points -> pixels with cv2.projectPoints."""
+
     px, _ = cv2.projectPoints(np.asarray(camera_points, float), np.zeros(3), np.zeros(3),
                               truth.camera_matrix, truth.dist)
     return px[:, 0]
 
 
-def make_views(seed: int, n_views: int = 20, corner_noise: float = 0.1,
+def synthetic_views(seed: int, n_views: int = 20, corner_noise: float = 0.1,
                laser_noise: float = 0.1, truth: Truth | None = None,
                board: BoardSpec | None = None, flip_every: int = 0
                ) -> tuple[list[ViewData], BoardSpec, Truth, list[np.ndarray]]:
