@@ -532,6 +532,13 @@ def calibrate(
     distortion: str = typer.Option(
         "k1,k2,p1,p2,k3", help="opencv model: the distortion terms to estimate (the others "
         "stay 0), e.g. k1,k2."),
+    initial: Optional[Path] = typer.Option(
+        None, help="paper model: initial guess, a calibration file of either model (an opencv "
+        "one is converted) or a YAML/JSON mapping of parameter names to values "
+        "(docs/file-formats.md)."),
+    bounds: Optional[Path] = typer.Option(
+        None, help="paper model: search bounds, a YAML/JSON mapping of parameter names to "
+        "[lower, upper] or {plus_minus: h} around the initial guess; others keep Table 2."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, no per-image "
                                "lines and no warnings on the terminal (--json collects them)."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary, warnings included."),
@@ -574,7 +581,18 @@ def calibrate(
         test_ds = Dataset.load(test) if test is not None else None
         if test_ds is None and holdout > 0:
             ds, test_ds = ds.split(1.0 - holdout, seed=seed, by_pose=True)
+        guess = bounds_obj = None
+        if initial is not None:
+            from .data.guess import read_initial
+
+            guess = read_initial(initial)
+        if bounds is not None:
+            from .data.guess import read_bounds
+            from .models.params import Parameters
+
+            bounds_obj = read_bounds(bounds, guess or Parameters.nominal())
         result = run_calibration(ds, method=method, test=test_ds, fixed=fixed_names, runs=runs,
+                                 initial=guess, bounds=bounds_obj,
                                  iterations=iterations, loss=loss, loss_scale=loss_scale,
                                  seed=seed, threads=threads,
                                  progress=_solve_progress(as_json or quiet))

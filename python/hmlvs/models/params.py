@@ -222,6 +222,26 @@ class Bounds:
         hi[zero] = TABLE2_UPPER[zero] * s
         return cls(lo, hi)
 
+    @classmethod
+    def plus_minus(cls, center: Parameters | np.ndarray,
+                   half_widths: Mapping[str, float] | Sequence[float],
+                   base: "Bounds | None" = None) -> "Bounds":
+        """Absolute ranges ``center +- half_width`` (in each parameter's unit, e.g. tx +- 5 mm,
+        phi +- 0.1 rad), for the parameters named in a mapping (the others keep ``base``,
+        default Table 2) or for all 14 from a sequence."""
+        q0 = center.to_array() if isinstance(center, Parameters) else np.asarray(center, float)
+        base = cls.table2() if base is None else base
+        lo, hi = base.lower.copy(), base.upper.copy()
+        items = (half_widths.items() if isinstance(half_widths, Mapping)
+                 else zip(NAMES, half_widths))
+        for name, h in items:
+            i = param_index(name)
+            h = float(h)
+            if not (h >= 0 and math.isfinite(h)):
+                raise ValueError(f"the +- half-width of {name} must be a number >= 0, got {h}")
+            lo[i], hi[i] = q0[i] - h, q0[i] + h
+        return cls(lo, hi)
+
     def contains(self, params: Parameters | np.ndarray) -> bool:
         q = params.to_array() if isinstance(params, Parameters) else np.asarray(params, float)
         return bool(np.all(q >= self.lower) and np.all(q <= self.upper))

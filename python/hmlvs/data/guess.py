@@ -1,0 +1,105 @@
+"""A user's initial guess and search bounds for the paper model (``--initial``, ``--bounds``).
+
+Initial guess: a calibration file of either model (an opencv calibration is converted by
+:func:`hmlvs.models.convert.paper_params_of`), or a YAML/JSON mapping of parameter names to
+values (the others nominal)::
+
+    f: 8.2
+    H: 135
+    theta: 0.45
+
+Bounds: a YAML/JSON mapping; each named parameter gets an absolute range or a +- half-width
+around the initial guess (same unit as the parameter); the others keep Table 2::
+
+    f: [6, 10]                 # absolute range
+    tx: {plus_minus: 5}        # initial tx +- 5 mm
+    phi: {plus_minus: 0.1}     # initial phi +- 0.1 rad
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Any
+
+import yaml
+
+from .._io import existing_file
+from ..models.params import NAMES, Bounds, Parameters, param_index
+
+
+def _read_mapping(path: str | os.PathLike, what: str) -> dict[str, Any]:
+    path = existing_file(path, what)
+    try:
+        text = path.read_text(encoding="utf-8")
+        d = json.loads(text) if path.suffix == ".json" else yaml.safe_load(text)
+    except (json.JSONDecodeError, yaml.YAMLError, UnicodeDecodeError) as e:
+        raise ValueError(f"{path}: malformed {what} ({e})") from None
+    if not isinstance(d, dict):
+        raise ValueError(f"{path}: the {what} must be a mapping of parameter names, got "
+                         f"{type(d).__name__}")
+    return d
+
+
+def read_initial(path: str | os.PathLike, su: float | None = None) -> Parameters:
+    """The initial guess in a file (module doc). ``su`` (mm/px) is the pixel pitch used to
+    convert an opencv calibration (default: the nominal 0.0074)."""
+    d = _read_mapping(path, "initial guess")
+    if d.get("format") == "hmlvs-calibration":
+        from ..models.convert import paper_params_of
+        from .calibration_file import Calibration
+
+        cal = Calibration.from_dict(d, source=str(path))
+        if cal.params is not None:
+            return cal.params
+        assert cal.sensor is not None
+        return paper_params_of(cal.sensor) if su is None else paper_params_of(cal.sensor, su)
+    values = Parameters.nominal().to_dict()
+    for name, v in d.items():
+        try:
+            param_index(str(name))
+        except ValueError as e:
+            raise ValueError(f"{path}: {e}") from None
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ValueError(f"{path}: {name} must be a number, got {v!r}")
+        values[str(name)] = float(v)
+    try:
+        return Parameters.from_dict(values)
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
+
+
+def read_bounds(path: str | os.PathLike, initial: Parameters) -> Bounds:
+    """The search bounds in a file (module doc), +- ranges taken around ``initial``."""
+    d = _read_mapping(path, "bounds file")
+    q0 = initial.to_array()
+    b = Bounds.table2()
+    lo, hi = b.lower.copy(), b.upper.copy()
+    for name, v in d.items():
+        try:
+            i = param_index(str(name))
+        except ValueError as e:
+            raise ValueError(f"{path}: {e}") from None
+        if isinstance(v, dict) and set(v) == {"plus_minus"}:
+            h = v["plus_minus"]
+            if isinstance(h, bool) or not isinstance(h, (int, float)) or not h >= 0:
+                raise ValueError(f"{path}: {name}: plus_minus must be a number >= 0, got {h!r}")
+            lo[i], hi[i] = q0[i] - h, q0[i] + h
+        elif (isinstance(v, list) and len(v) == 2
+              and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+            lo[i], hi[i] = float(v[0]), float(v[1])
+        else:
+            raise ValueError(f"{path}: {name} must be [lower, upper] or {{plus_minus: h}}, got "
+                             f"{v!r}")
+    try:
+        bounds = Bounds(lo, hi)
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
+    outside = [n for k, n in enumerate(NAMES) if not lo[k] <= q0[k] <= hi[k]]
+    if outside:
+        raise ValueError(f"{path}: the initial value of {', '.join(outside)} lies outside its "
+                         "bounds")
+    return bounds
+
+
+__all__ = ["read_initial", "read_bounds"]
