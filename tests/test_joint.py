@@ -232,3 +232,21 @@ def test_held_out_views_are_checked_against_the_board_plane():
                          r.sensor.base_from_board)
     errs = np.concatenate(list(board_plane_errors(wrong, views[18:], board).values()))
     assert np.sqrt(np.mean(errs**2)) > 5 * r.test_rms_mm
+
+
+def test_joint_report_shows_views_residuals_and_figures(tmp_path):
+    from hmlvs.report.joint import write_joint_report
+
+    views, board, _, _ = make_views(13, n_views=8)
+    r = calibrate_joint(views, board, (1024, 768))
+    assert set(r.residuals) == {v.id for v in views}
+    assert r.residuals["v00"]["corner_residuals"].shape == (54, 2)
+    path = write_joint_report(r, tmp_path / "report.html")
+    text = path.read_text()
+    for piece in ("Reprojection error per view", "Corner residuals over the image",
+                  "Laser residuals", "<td>v07</td><td>used</td>", "fx",
+                  "hand_from_camera rotation vector"):
+        assert piece in text, piece
+    assert text.count("data:image/png;base64,") == 3
+    with pytest.raises(ValueError, match="is an .html file"):
+        write_joint_report(r, tmp_path / "report.txt")

@@ -424,7 +424,8 @@ def _resolve_model(model: str, data: Path) -> str:
 
 
 def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: Optional[Path],
-                      distortion: str, quiet: bool, as_json: bool) -> None:
+                      distortion: str, report: Optional[Path], quiet: bool,
+                      as_json: bool) -> None:
     """hmlvs calibrate --model opencv: images -> views -> joint calibration -> file."""
     from .calibration.joint import calibrate_joint
     from .data.calibration_file import Calibration
@@ -456,10 +457,16 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
         result = calibrate_joint(views, board, size, distortion=terms,
                                  base_from_board=board_pose, test=test_views or None)
         path = Calibration.from_joint(result, robot=arm).save(out)
+        report_path = None
+        if report is not None:
+            from .report.joint import write_joint_report
+
+            report_path = write_joint_report(result, report, image_reports=reports)
     warns = _gather(caught, result.warnings)
     if as_json:
         s = result.sensor
         _echo_json({"calibration": str(path), "model": "opencv", "mode": result.mode,
+                    "report": None if report_path is None else str(report_path),
                     "camera_matrix": s.camera_matrix.tolist(),
                     "dist_coeffs": s.dist_coeffs.tolist(), "image_size": list(s.image_size),
                     "laser_plane": s.laser_plane.tolist(),
@@ -480,6 +487,8 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
     if not quiet:
         _show_warnings(warns)
     typer.echo(f"calibration written to {path}")
+    if report_path is not None:
+        typer.echo(f"report written to {report_path}")
 
 
 _ROBOT_OPTION = typer.Option(
@@ -562,7 +571,7 @@ def calibrate(
     with _guard(as_json):
         chosen = _resolve_model(model, data)
     if chosen == "opencv":
-        _calibrate_opencv(data, out, holdout, seed, robot, distortion, quiet, as_json)
+        _calibrate_opencv(data, out, holdout, seed, robot, distortion, report, quiet, as_json)
         return
     with _guard(as_json), _collect_warnings() as caught:
         fixed_names, why = _resolve_fixed(fixed, free)

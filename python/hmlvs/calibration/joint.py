@@ -54,6 +54,9 @@ class JointCalibration:
         (column-scaled); every quantity is determined when rank == num_unknowns
     termination, iterations, seconds : of the final Levenberg-Marquardt solve
     flipped : ids of views whose corner numbering was turned by 180 degrees
+    residuals : per view id: ``corner_pixels`` (k, 2) and ``corner_residuals`` (k, 2, px,
+        projected - detected), ``laser_pixels`` (m, 2) and ``laser_residuals`` (m, mm from
+        the laser plane), of the points used
     """
 
     sensor: OpenCvSensor
@@ -79,6 +82,7 @@ class JointCalibration:
 
     test_rms_mm: float | None = None
     test_views: int = 0
+    residuals: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
 
     @property
     def determined(self) -> bool:
@@ -469,7 +473,12 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         seconds=time.perf_counter() - start, flipped=flipped,
         camera_from_board={} if chain else {v.id: state.camera_from_board[i]
                                             for i, v in enumerate(views)},
-        warnings=warnings_out, test_rms_mm=test_rms, test_views=len(test or ()))
+        warnings=warnings_out, test_rms_mm=test_rms, test_views=len(test or ()),
+        residuals={v.id: {"corner_pixels": np.asarray(v.corner_pixels, float)[keep_c[i]],
+                          "corner_residuals": np.asarray(corners_r[i]),
+                          "laser_pixels": laser_px[i][keep_l[i]],
+                          "laser_residuals": np.asarray(laser_r[i])}
+                   for i, v in enumerate(views)})
 
 
 def _covariance(jac: np.ndarray) -> tuple[np.ndarray, int, float]:

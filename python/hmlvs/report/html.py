@@ -160,6 +160,31 @@ def _views(image_reports: Any) -> str:
             + "".join(rows) + "</table>")
 
 
+_STYLE = """
+body { font-family: sans-serif; margin: 2em; color: #222; max-width: 1100px; }
+table { border-collapse: collapse; margin: 1em 0; }
+td, th { border: 1px solid #bbb; padding: 3px 8px; text-align: right; font-size: 13px; }
+td:nth-child(3) { text-align: left; }
+th { background: #eee; }
+.summary td { text-align: left; }
+li.warn { color: #a40; font-weight: bold; }
+figure { display: inline-block; margin: 0.5em; vertical-align: top; }
+img { max-width: 520px; border: 1px solid #ddd; }
+"""
+
+
+def _page(title: str, body: str) -> str:
+    """A whole self-contained HTML page around ``body``."""
+    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+            f"<title>{html.escape(title)}</title>\n<style>{_STYLE}</style></head><body>\n"
+            f"{body}</body></html>\n")
+
+
+def _figures_html(figs: dict[str, str], captions: dict[str, str]) -> str:
+    return "".join(f'<figure><img alt="{captions[k]}" src="{v}"><figcaption>{captions[k]}'
+                   f"</figcaption></figure>" for k, v in figs.items())
+
+
 def render_report(result: Any, ds: Dataset, test: Dataset | None = None,
                   truth: Parameters | None = None, title: str = "hmlvs calibration report",
                   std: dict[str, float | None] | None = None, image_reports: Any = None,
@@ -208,24 +233,10 @@ def render_report(result: Any, ds: Dataset, test: Dataset | None = None,
     captions = {"hist": "Residual histogram", "points": "Per-point distance errors",
                 "convergence": "PSO convergence (paper Fig. 11)",
                 "cloud": "Reference against measured points"}
-    img = "".join(f'<figure><img alt="{captions[k]}" src="{v}"><figcaption>{captions[k]}'
-                  f"</figcaption></figure>" for k, v in figs.items())
+    img = _figures_html(figs, captions)
     now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     stopped = getattr(result, "termination_message", "") or str(result.termination)
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
-<style>
-body {{ font-family: sans-serif; margin: 2em; color: #222; max-width: 1100px; }}
-table {{ border-collapse: collapse; margin: 1em 0; }}
-td, th {{ border: 1px solid #bbb; padding: 3px 8px; text-align: right; font-size: 13px; }}
-td:nth-child(3) {{ text-align: left; }}
-th {{ background: #eee; }}
-.summary td {{ text-align: left; }}
-li.warn {{ color: #a40; font-weight: bold; }}
-figure {{ display: inline-block; margin: 0.5em; vertical-align: top; }}
-img {{ max-width: 520px; border: 1px solid #ddd; }}
-</style></head><body>
-<h1>{html.escape(title)}</h1>
+    return _page(title, f"""<h1>{html.escape(title)}</h1>
 <table class="summary">
 <tr><td>method</td><td>{html.escape(result.method)}: {html.escape(stopped)}</td></tr>
 <tr><td>fit RMS of ||E_i||</td><td>{fit_txt}</td></tr>
@@ -245,8 +256,7 @@ img {{ max-width: 520px; border: 1px solid #ddd; }}
 {_views(image_reports)}
 <h2>Figures</h2>
 {img}
-</body></html>
-"""
+""")
 
 
 def write_report(result: Any, ds: Dataset, path: str | os.PathLike, test: Dataset | None = None,
