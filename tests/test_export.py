@@ -232,7 +232,11 @@ def test_bad_model_blocks(tmp_path, change, match):
         Calibration.load(tmp_path / "c.json")
 
 
-def test_measuring_with_an_opencv_calibration_says_it_is_not_supported(tmp_path):
+def test_measuring_with_an_opencv_calibration_file_uses_its_sensor(tmp_path):
     cal = Calibration(sensor=_opencv_sensor(), model="opencv")
-    with pytest.raises(ValueError, match="opencv model, which has no paper parameters"):
-        hmlvs.measure(cal, [np.zeros((1, 2))], np.eye(4))
+    path = cal.save(tmp_path / "cal.yaml")
+    px = np.array([[300.0, 400.0], [320.0, 420.0]])
+    cloud = hmlvs.measure(path, [px], np.eye(4))
+    expected, ok = cal.sensor.points_in_base(px, np.stack([np.eye(4)] * 2), on_invalid="mask")
+    assert ok.all() and np.array_equal(cloud.valid, ok)
+    assert np.allclose(cloud.points[ok], expected[ok])

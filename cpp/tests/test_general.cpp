@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 #include <cmath>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include "hmlvs/model/general.h"
@@ -133,6 +134,38 @@ Eigen::Matrix4d RotateLeft(const Eigen::Matrix4d& m, int axis, double h) {
   return out;
 }
 
+// The analytic Jacobian of a state against central differences of the stacked residuals.
+struct JacobianCheck {
+  const std::vector<JointView>& views;
+  const JointState& at;
+  const JointOptions& options;
+  std::vector<std::string> names;  // before j: JointJacobian fills it while j is built
+  Eigen::MatrixXd j;
+
+  JacobianCheck(const std::vector<JointView>& v, const JointState& s, const JointOptions& o)
+      : views(v), at(s), options(o), j(JointJacobian(v, s, o, &names)) {}
+
+  template <typename Perturb>
+  Eigen::VectorXd Numeric(Perturb perturb, double h) const {
+    JointState plus = at, minus = at;
+    perturb(&plus, h);
+    perturb(&minus, -h);
+    return (Stacked(views, plus, options) - Stacked(views, minus, options)) / (2 * h);
+  }
+
+  void ExpectColumn(int col, const Eigen::VectorXd& d) const {
+    const double scale = std::max(1.0, d.cwiseAbs().maxCoeff());
+    EXPECT_LT((j.col(col) - d).cwiseAbs().maxCoeff() / scale, 1e-5) << names[col];
+  }
+
+  void ExpectIntrinsics() const {
+    for (int k = 0; k < kNumIntrinsics; ++k) {
+      ExpectColumn(k, Numeric([k](JointState* st, double e) { st->intrinsics[k] += e; },
+                              k < 4 ? 1e-3 : 1e-6));
+    }
+  }
+};
+
 TEST(GeneralModel, JointJacobianMatchesCentralDifferences) {
   Scene s = MakeScene(2);
   // Off the solution, so that no column is judged at a stationary point.
@@ -142,41 +175,24 @@ TEST(GeneralModel, JointJacobianMatchesCentralDifferences) {
   at.hand_from_camera = RotateLeft(at.hand_from_camera, 0, 0.01);
   at.laser_plane[3] += 1.0;
   JointOptions o;
-  std::vector<std::string> names;
-  const Eigen::MatrixXd j = JointJacobian(s.views, at, o, &names);
-  ASSERT_EQ(names.size(), 24u);
-  ASSERT_EQ(j.cols(), 24);
-  auto numeric = [&](auto perturb, double h) {
-    JointState plus = at, minus = at;
-    perturb(&plus, h);
-    perturb(&minus, -h);
-    return Eigen::VectorXd((Stacked(s.views, plus, o) - Stacked(s.views, minus, o)) / (2 * h));
-  };
-  auto expect_column = [&](int col, const Eigen::VectorXd& d) {
-    const double scale = std::max(1.0, d.cwiseAbs().maxCoeff());
-    EXPECT_LT((j.col(col) - d).cwiseAbs().maxCoeff() / scale, 1e-5) << names[col];
-  };
-  for (int k = 0; k < kNumIntrinsics; ++k) {
-    const double h = k < 4 ? 1e-3 : 1e-6;
-    expect_column(k, numeric([k](JointState* st, double e) { st->intrinsics[k] += e; }, h));
-  }
-  for (int axis = 0; axis < 3; ++axis) {
-    expect_column(9 + axis, numeric(
-                                [axis](JointState* st, double e) {
-                                  st->hand_from_camera = RotateLeft(st->hand_from_camera, axis, e);
-                                },
-                                1e-6));
-    expect_column(
-        12 + axis,
-        numeric([axis](JointState* st, double e) { st->hand_from_camera(axis, 3) += e; }, 1e-4));
-    expect_column(15 + axis, numeric(
-                                 [axis](JointState* st, double e) {
-                                   st->base_from_board = RotateLeft(st->base_from_board, axis, e);
-                                 },
-                                 1e-6));
-    expect_column(
-        18 + axis,
-        numeric([axis](JointState* st, double e) { st->base_from_board(axis, 3) += e; }, 1e-4));
+  const JacobianCheck c(s.views, at, o);
+  ASSERT_EQ(c.names.size(), 24u);
+  ASSERT_EQ(c.j.cols(), 24);
+  auto numeric = [&](auto perturb, double h) { return c.Numeric(perturb, h); };
+  auto expect_column = [&](int col, const Eigen::VectorXd& d) { c.ExpectColumn(col, d); };
+  const Eigen::MatrixXd& j = c.j;
+  c.ExpectIntrinsics();
+  // hand_from_camera (columns 9-14), then base_from_board (15-20): rotation, translation
+  for (auto [first, member] :
+       {std::pair{9, &JointState::hand_from_camera}, std::pair{15, &JointState::base_from_board}}) {
+    for (int axis = 0; axis < 3; ++axis) {
+      auto rotate = [axis, m = member](JointState* st, double e) {
+        st->*m = RotateLeft(st->*m, axis, e);
+      };
+      auto shift = [axis, m = member](JointState* st, double e) { (st->*m)(axis, 3) += e; };
+      expect_column(first + axis, numeric(rotate, 1e-6));
+      expect_column(first + 3 + axis, numeric(shift, 1e-4));
+    }
   }
   expect_column(23, numeric([](JointState* st, double e) { st->laser_plane[3] += e; }, 1e-4));
   // The normal's two tangent columns must span the derivative along any direction normal to it.

@@ -43,3 +43,37 @@ def existing_file(path: str | os.PathLike, what: str) -> Path:
     if not path.is_file():
         raise ValueError(f"{path}: no such {what}")
     return path
+
+
+def read_document(path: str | os.PathLike, what: str) -> object:
+    """The YAML (or, for .json, JSON) document in an existing file; ValueError naming the file
+    and ``what`` when it is missing or malformed."""
+    import json
+
+    import yaml
+
+    path = existing_file(path, what)
+    try:
+        text = path.read_text(encoding="utf-8")
+        return json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, yaml.YAMLError) as e:
+        raise ValueError(f"{path}: malformed {what} ({type(e).__name__}: {e})") from None
+
+
+def write_document(path: str | os.PathLike, d: object, what: str) -> Path:
+    """Write ``d`` atomically as YAML (.yaml/.yml) or JSON (.json); other suffixes are refused
+    naming ``what``."""
+    import json
+
+    import yaml
+
+    path = Path(path)
+    if path.suffix.lower() in (".yaml", ".yml"):
+        text = yaml.safe_dump(d, sort_keys=False, default_flow_style=None)
+    elif path.suffix.lower() == ".json":
+        text = json.dumps(d, indent=2)
+    else:
+        raise ValueError(f"{path}: {what} files are .yaml, .yml or .json")
+    with atomic_write(path) as fh:
+        fh.write(text)
+    return path

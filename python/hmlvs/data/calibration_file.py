@@ -31,16 +31,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import datetime
 import hashlib
-import json
 import math
 import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from .._io import atomic_write, existing_file
+from .._io import read_document, write_document
 from ..geometry.robot import Robot
 from ..models.opencv import OpenCvSensor
 from ..models.paper import hand_from_camera
@@ -156,26 +154,11 @@ class Calibration:
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write atomically as YAML (.yaml/.yml) or JSON (.json)."""
-        path = Path(path)
-        d = self.to_dict()
-        if path.suffix in (".yaml", ".yml"):
-            text = yaml.safe_dump(d, sort_keys=False, default_flow_style=None)
-        elif path.suffix == ".json":
-            text = json.dumps(d, indent=2)
-        else:
-            raise ValueError(f"{path}: calibration files are .yaml, .yml or .json")
-        with atomic_write(path) as fh:
-            fh.write(text)
-        return path
+        return write_document(path, self.to_dict(), "calibration")
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "Calibration":
-        path = existing_file(path, "calibration file")
-        try:
-            text = path.read_text(encoding="utf-8")
-            d = json.loads(text) if path.suffix == ".json" else yaml.safe_load(text)
-        except (json.JSONDecodeError, yaml.YAMLError, UnicodeDecodeError) as e:
-            raise ValueError(f"{path}: malformed calibration file ({e})") from None
+        d = read_document(path, "calibration file")
         return cls.from_dict(d, source=str(path))
 
     @classmethod

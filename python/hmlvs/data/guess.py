@@ -18,23 +18,15 @@ around the initial guess (same unit as the parameter); the others keep Table 2::
 
 from __future__ import annotations
 
-import json
 import os
 from typing import Any
 
-import yaml
-
-from .._io import existing_file
+from .._io import read_document
 from ..models.params import NAMES, Bounds, Parameters, param_index
 
 
 def _read_mapping(path: str | os.PathLike, what: str) -> dict[str, Any]:
-    path = existing_file(path, what)
-    try:
-        text = path.read_text(encoding="utf-8")
-        d = json.loads(text) if path.suffix == ".json" else yaml.safe_load(text)
-    except (json.JSONDecodeError, yaml.YAMLError, UnicodeDecodeError) as e:
-        raise ValueError(f"{path}: malformed {what} ({e})") from None
+    d = read_document(path, what)
     if not isinstance(d, dict):
         raise ValueError(f"{path}: the {what} must be a mapping of parameter names, got "
                          f"{type(d).__name__}")

@@ -3,14 +3,11 @@ YAML or JSON, or the name of a built-in arm."""
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Any, Callable
 
-import yaml
-
-from .._io import atomic_write, existing_file
+from .._io import read_document, write_document
 from ..geometry.robot import Robot
 
 #: the arms hmlvs knows by name
@@ -48,13 +45,7 @@ def robot_from_description(value: Any, source: str) -> Robot:
 def load_robot(path: str | os.PathLike) -> Robot:
     """Read a robot description file (YAML or JSON holding what :meth:`Robot.to_dict`
     writes; a document with a ``robot:`` mapping, such as a calibration file, also works)."""
-    path = existing_file(path, "robot description file")
-    try:
-        text = path.read_text(encoding="utf-8")
-        d = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, yaml.YAMLError) as e:
-        raise ValueError(f"{path}: unreadable robot description ({type(e).__name__}: {e})") \
-            from None
+    d = read_document(path, "robot description file")
     if isinstance(d, dict) and "links" not in d and isinstance(d.get("robot"), dict):
         d = d["robot"]
     return robot_from_dict(d, str(path))
@@ -62,14 +53,4 @@ def load_robot(path: str | os.PathLike) -> Robot:
 
 def save_robot(robot: Robot, path: str | os.PathLike) -> Path:
     """Write ``robot.to_dict()`` atomically as YAML (.yaml/.yml) or JSON (.json)."""
-    path = Path(path)
-    d = robot.to_dict()
-    if path.suffix.lower() in (".yaml", ".yml"):
-        text = yaml.safe_dump(d, sort_keys=False, default_flow_style=None)
-    elif path.suffix.lower() == ".json":
-        text = json.dumps(d, indent=2)
-    else:
-        raise ValueError(f"{path}: robot descriptions are .yaml, .yml or .json")
-    with atomic_write(path) as fh:
-        fh.write(text)
-    return path
+    return write_document(path, robot.to_dict(), "robot description")
