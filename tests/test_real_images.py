@@ -11,7 +11,13 @@ from pathlib import Path
 
 import cv2
 from hmlvs.geometry.board import Checkerboard
-from hmlvs.image.corners import BoardNotFoundError, detect_board, flip_board_numbering
+from hmlvs.image.corners import (
+    BoardNotFoundError,
+    CornerOptions,
+    detect_board,
+    find_corners,
+    flip_board_numbering,
+)
 import numpy as np
 import pytest
 
@@ -117,3 +123,32 @@ def test_detect_board_without_a_board_says_so():
     # the wrong pattern size is not a board either
     with pytest.raises(BoardNotFoundError):
         detect_board(_gray("left01.jpg"), Checkerboard(rows=7, cols=9, square=1.0))
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"max_error": "x"}, "corners.max_error must be a positive number, got 'x'"),
+    ({"max_error": 0}, "corners.max_error must be a positive number, got 0"),
+    ({"max_error": float("nan")}, "corners.max_error must be a positive number"),
+    ({"extend": "yes"}, "corners.extend must be true or false, got 'yes'"),
+    ({"fallback": 1}, "corners.fallback must be true or false, got 1"),
+])
+def test_corner_options_are_checked(kwargs, message):
+    with pytest.raises(ValueError, match=message.replace("(", r"\(")):
+        CornerOptions(**kwargs)
+
+
+def test_corner_options_from_a_mapping_reject_unknown_names():
+    assert CornerOptions.from_dict({"max_error": 0.5}).max_error == 0.5
+    with pytest.raises(ValueError, match="unknown corner option.* max_err; valid: extend, "
+                                         "max_error, fallback"):
+        CornerOptions.from_dict({"max_err": 0.5})
+
+
+def test_find_corners_takes_options_or_the_old_keywords(detected):
+    gray = _gray("left03.jpg")
+    old = find_corners(gray, BOARD, extend=False, max_error=0.3)
+    new = find_corners(gray, BOARD, options=CornerOptions(extend=False, max_error=0.3))
+    np.testing.assert_array_equal(old.pixels, new.pixels)
+    np.testing.assert_array_equal(new.pixels, detected["left03.jpg"].pixels)
+    with pytest.raises(ValueError, match="options must be a CornerOptions"):
+        find_corners(gray, BOARD, options={"extend": False})
