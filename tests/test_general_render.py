@@ -11,7 +11,7 @@ import cv2
 import hmlvs
 from hmlvs.data.manifest import read_manifest
 from hmlvs.geometry.board import Checkerboard
-from hmlvs.image.corners import detect_board
+from hmlvs.image.corners import detect_board, flip_board_numbering
 from hmlvs.sim.general import (
     RAY_TOLERANCE,
     example_sensor,
@@ -93,6 +93,8 @@ def test_session_geometry(seed):
         v = s.stripe_v[i][on]
         assert on.sum() > 200
         assert np.isfinite(v).all() and v.min() > 20 and v.max() < h - 21
+        px = s.stripe_pixels(i)
+        assert len(px) == on.sum() and np.all(px[:, 0] == np.nonzero(on)[0])
     # the views differ: roll about the optical axis spans a wide range
     rolls = [math.degrees(math.atan2(c[0, 1] - c[1, 1], c[1, 0] - c[0, 0]))
              for c in s.corners]
@@ -203,3 +205,17 @@ def test_written_session_reads_back(tmp_path):
         img = cv2.imread(str(folder / e["on"]), cv2.IMREAD_UNCHANGED)
         assert img.tobytes() == r.on[k].tobytes()
     assert (folder / "truth.json").is_file()
+
+
+def test_a_view_rolled_past_90_degrees_is_numbered_turned_and_flip_restores_it():
+    """detect_board's top-left rule is only consistent while views roll by less than ~90
+    degrees: a camera rolled ~170 degrees sees r0c0 at the bottom right and gets the
+    numbering turned by 180 degrees; flip_board_numbering restores it."""
+    s = general_session(views=1, seed=11, roll_deg=(160.0, 175.0))
+    _, off = render_general_view(s, 0)
+    c = detect_board(off, s.board)
+    wrong = np.linalg.norm(c.pixels - s.corners[0][c.index], axis=1)
+    assert np.median(wrong) > 20  # labels off by whole squares
+    f = flip_board_numbering(c)
+    err = np.linalg.norm(f.pixels - s.corners[0][f.index], axis=1)
+    assert np.sqrt(np.mean(err ** 2)) < 0.3

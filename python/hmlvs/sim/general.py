@@ -105,6 +105,14 @@ class GeneralSession:
     def __len__(self) -> int:
         return int(self.base_from_hand.shape[0])
 
+    def stripe_pixels(self, i: int, on_board: bool = True) -> np.ndarray:
+        """(k, 2) true stripe pixels (u, v) of view ``i``, one per image column (u integer),
+        only those on the board's pattern unless ``on_board`` is False."""
+        v = self.stripe_v[i]
+        keep = self.stripe_on_board[i] if on_board else np.isfinite(v)
+        u = np.nonzero(keep)[0]
+        return np.stack([u.astype(float), v[u]], axis=1)
+
 
 def _project(sensor: OpenCvSensor, camera_from_x: np.ndarray, pts: np.ndarray) -> np.ndarray:
     """Pixels (n, 2) of points (n, 3) given in a frame x, by cv2.projectPoints."""
@@ -278,7 +286,10 @@ def general_session(sensor: OpenCvSensor | None = None, board: Checkerboard | No
         if not ((edge[:, 0] >= m) & (edge[:, 0] <= w - 1 - m) & (edge[:, 1] >= m)
                 & (edge[:, 1] <= h - 1 - m)).all():
             continue
-        v, on = _true_stripe(truth, bfc, placed)
+        try:
+            v, on = _true_stripe(truth, bfc, placed)
+        except ValueError:  # the line folds back in the image (strong distortion): skip
+            continue
         # the laser line must cross the whole pattern, clear of the image border
         if on.sum() < 0.5 * np.ptp(edge[:, 0]):
             continue
