@@ -12,6 +12,7 @@ import hmlvs
 from hmlvs.data.manifest import read_manifest
 from hmlvs.geometry.board import Checkerboard
 from hmlvs.image.corners import detect_board, flip_board_numbering
+from hmlvs.sim import RenderOptions
 from hmlvs.sim.general import (
     RAY_TOLERANCE,
     example_sensor,
@@ -219,3 +220,20 @@ def test_a_view_rolled_past_90_degrees_is_numbered_turned_and_flip_restores_it()
     f = flip_board_numbering(c)
     err = np.linalg.norm(f.pixels - s.corners[0][f.index], axis=1)
     assert np.sqrt(np.mean(err ** 2)) < 0.3
+
+
+def test_speckle_modulates_the_laser_light_only():
+    s = general_session(views=1, seed=2)
+    plain = RenderOptions(noise=0.0, speckle=0.0)
+    speckled = RenderOptions(noise=0.0, speckle=0.3)
+    on0, off0 = render_general_view(s, 0, plain)
+    on1, off1 = render_general_view(s, 0, speckled)
+    assert off0.tobytes() == off1.tobytes()  # the ambient frame has no speckle
+    d0 = hmlvs.difference_image(on0, off0).astype(float)
+    d1 = hmlvs.difference_image(on1, off1).astype(float)
+    lit = d0 > 20
+    ratio = d1[lit] / d0[lit]
+    assert ratio.std() > 0.1  # a grainy stripe ...
+    assert abs(np.median(ratio) - 1.0) < 0.1  # ... of about the same brightness
+    with pytest.raises(ValueError, match="speckle must be a finite number >= 0"):
+        RenderOptions(speckle=-0.1)
