@@ -2,13 +2,65 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
+from numbers import Real
 from typing import Any
 
 import numpy as np
 
 from ..models.paper import project
 from .stripe import _as_gray
+
+# ------------------------------------------------------------------------------------------
+# Options
+
+
+@dataclass(frozen=True)
+class CornerOptions:
+    """Options of :func:`find_corners` and :func:`detect_board`, checked on construction: a
+    wrong type or value gives a ``ValueError`` naming the option.
+
+    Attributes
+    ----------
+    extend : follow the board's homography to corners outside the detected grid
+    max_error : a detected corner matches a predicted one within this fraction of the corner
+        spacing (``find_corners`` with ``expected`` only)
+    fallback : when ``findChessboardCornersSB`` finds no whole board, try the classic
+        ``findChessboardCorners`` (+ ``cornerSubPix``) before giving up (whole board only)
+    """
+
+    extend: bool = True
+    max_error: float = 0.35
+    fallback: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("extend", "fallback"):
+            v = getattr(self, name)
+            if not isinstance(v, (bool, np.bool_)):
+                raise ValueError(f"corners.{name} must be true or false, got {v!r}")
+            object.__setattr__(self, name, bool(v))
+        v = self.max_error
+        if isinstance(v, bool) or not isinstance(v, Real) or not (np.isfinite(v) and v > 0):
+            raise ValueError(f"corners.max_error must be a positive number, got {v!r}")
+        object.__setattr__(self, "max_error", float(v))
+
+    @classmethod
+    def from_dict(cls, values: Any) -> "CornerOptions":
+        """Options from a mapping (a configuration file's ``corners:`` block); an unknown
+        name raises ``ValueError`` listing the valid ones."""
+        if not isinstance(values, dict):
+            raise ValueError(f"corner options must be a mapping, got {type(values).__name__}")
+        valid = [f.name for f in fields(cls)]
+        unknown = sorted(str(k) for k in values if k not in valid)
+        if unknown:
+            raise ValueError(f"unknown corner option(s) {', '.join(unknown)}; valid: "
+                             f"{', '.join(valid)}")
+        return cls(**values)
+
+
+class BoardNotFoundError(ValueError):
+    """No (whole) checkerboard was found in the image."""
+
 
 # ------------------------------------------------------------------------------------------
 # Checkerboard corners
@@ -25,8 +77,9 @@ class Corners:
     anchor : (k,) True for corners found by ``findChessboardCornersSB``, False for corners
         added by following the board's homography into the rest of the image
     board : the :class:`~hmlvs.Checkerboard` the indices refer to
-    rule : how the ordering was fixed: "expected" (nearest to predicted pixels) or
-        "top-left" (the marker-free rule for a fully visible board)
+    rule : how the ordering was fixed: "expected" (nearest to predicted pixels),
+        "top-left" (the marker-free rule for a fully visible board, :func:`detect_board`) or
+        "top-left flipped" (that numbering turned by 180 degrees, :func:`flip_board_numbering`)
     """
 
     pixels: np.ndarray
@@ -103,7 +156,8 @@ def _match(px: np.ndarray, pred: np.ndarray, radius: float) -> tuple[np.ndarray,
 
 
 def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | None = None,
-                 extend: bool = True, max_error: float = 0.35) -> Corners:
+                 extend: bool = True, max_error: float = 0.35,
+                 options: CornerOptions | None = None) -> Corners:
     """Checkerboard corners of an image (laser off), numbered on the board.
 
     OpenCV's ``findChessboardCornersSB`` gives sub-pixel corners. Which board corners they
@@ -129,12 +183,20 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
     remaining corners inside the image, which are refined the same way and kept when they
     move less than 15 % of the spacing (repeated as the set grows).
 
-    Raises ``ValueError`` if the image is not an 8- or 16-bit image, no board is found, or
-    the corners cannot be numbered.
+    ``options`` (a :class:`CornerOptions`) holds ``extend``, ``max_error`` and ``fallback``
+    instead of the keywords (which are then ignored).
+
+    Raises ``ValueError`` if the image is not an 8- or 16-bit image or the corners cannot be
+    numbered, and :class:`BoardNotFoundError` (a ``ValueError``) if no board is found.
     """
     import cv2
 
     from ..geometry.board import Checkerboard
+    if options is None:
+        options = CornerOptions(extend=extend, max_error=max_error)
+    elif not isinstance(options, CornerOptions):
+        raise ValueError(f"options must be a CornerOptions, got {options!r}")
+    extend, max_error = options.extend, options.max_error
     board = Checkerboard() if board is None else board
     gray = _as_gray(image, "the image", None)
     if gray.dtype == np.uint16:
@@ -152,8 +214,8 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
         ok, found, _ = cv2.findChessboardCornersSBWithMeta(gray, (3, 3),
                                                            flags | cv2.CALIB_CB_LARGER)
         if not ok or found is None or len(found) < 4:
-            raise ValueError("no checkerboard found in the image (findChessboardCornersSB "
-                             "found no 3 x 3 grid of corners)")
+            raise BoardNotFoundError("no checkerboard found in the image "
+                                     "(findChessboardCornersSB found no 3 x 3 grid of corners)")
         det = found.reshape(-1, 2).astype(float)
         spacing = _spacing(det)
         radius = max_error * spacing
@@ -188,13 +250,7 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
                              "them reversed): numbering them would label every corner wrong")
         rule = "expected"
     else:
-        # by keyword: the Python signature takes ``corners`` third
-        ok, found = cv2.findChessboardCornersSB(gray, (board.cols, board.rows), flags=flags)
-        if not ok or found is None:
-            raise ValueError(f"no fully visible {board.rows} x {board.cols} checkerboard found "
-                             "in the image; for a partly visible board pass the expected "
-                             "corner pixels")
-        grid = found.reshape(board.rows, board.cols, 2).astype(float)
+        grid = _whole_board(gray, board, options.fallback)
         spacing = _spacing(grid.reshape(-1, 2))
         base = np.arange(n_board).reshape(board.rows, board.cols)
         cands = [base, base[::-1, ::-1], base[::-1, :], base[:, ::-1]]
@@ -244,6 +300,73 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
             anchor = np.concatenate([anchor, np.zeros(int(keep.sum()), bool)])
     order = np.argsort(idx)
     return Corners(px[order], idx[order], anchor[order], board, rule, (w, h))
+
+
+def _whole_board(gray: np.ndarray, board: Any, fallback: bool) -> np.ndarray:
+    """(rows, cols, 2) pixels of a fully visible board's corners in OpenCV's grid order:
+    ``findChessboardCornersSB``, else (``fallback``) the classic ``findChessboardCorners``;
+    raises :class:`BoardNotFoundError`."""
+    import cv2
+    size = (board.cols, board.rows)
+    # by keyword: the Python signature takes ``corners`` third
+    ok, found = cv2.findChessboardCornersSB(
+        gray, size, flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY)
+    tried = "findChessboardCornersSB"
+    if (not ok or found is None) and fallback:
+        ok, found = cv2.findChessboardCorners(
+            gray, size, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        tried += " and findChessboardCorners"
+    if not ok or found is None or found.size != 2 * board.rows * board.cols:
+        raise BoardNotFoundError(
+            f"no fully visible {board.rows} x {board.cols} checkerboard found in the image "
+            f"({tried} found none); for a partly visible board pass the expected corner "
+            "pixels to find_corners")
+    return found.reshape(board.rows, board.cols, 2).astype(float)
+
+
+def detect_board(image: np.ndarray, board: Any,
+                 options: CornerOptions | None = None) -> Corners:
+    """The corners of a fully visible checkerboard, numbered without any prior model.
+
+    ``findChessboardCornersSB`` (falling back to ``findChessboardCorners``, see
+    :class:`CornerOptions`) finds the ``board.rows x board.cols`` inner corners, which are
+    refined with ``cornerSubPix`` as in :func:`find_corners`.
+
+    Numbering rule (``Corners.rule == "top-left"``): a checkerboard looks the same turned by
+    180 degrees (and, if square, by 90), so the image alone cannot tell corner r0c0 from the
+    opposite one. Of the numberings with the board's handedness (the camera sees the side
+    ``board.normal`` points to; with the default board that is the side where the board
+    frame's z = x (rows) x y (columns) axis points), the one whose r0c0 is nearest the
+    image's top-left corner (smallest u + v) is returned. This is consistent between views
+    only while the board appears rotated by less than about 90 degrees from one view to the
+    next. A hand-mounted camera that rolls further sees some views numbered the other way
+    round: those views need :func:`flip_board_numbering`, decided by the caller (e.g. from
+    the robot poses).
+
+    Returns
+    -------
+    Corners (all ``board.rows * board.cols`` corners unless some lie too close to the image
+    border for the refinement window)
+
+    Raises
+    ------
+    BoardNotFoundError (a ``ValueError``) when no whole board is found; ``ValueError`` for
+    an image that is not 8- or 16-bit.
+    """
+    return find_corners(image, board, None, options=options)
+
+
+def flip_board_numbering(corners: Corners) -> Corners:
+    """The same corners numbered from the opposite board corner (a 180-degree turn of the
+    board: (r, c) -> (rows - 1 - r, cols - 1 - c)). The handedness is kept; applying it
+    twice gives the original numbering."""
+    board = corners.board
+    idx = board.rows * board.cols - 1 - np.asarray(corners.index)
+    order = np.argsort(idx)
+    rule = corners.rule[:-len(" flipped")] if corners.rule.endswith(" flipped") \
+        else corners.rule + " flipped"
+    return replace(corners, pixels=corners.pixels[order], index=idx[order],
+                   anchor=corners.anchor[order], rule=rule)
 
 
 def predicted_corners(params: Any, pose: np.ndarray, board: Any) -> np.ndarray:

@@ -61,6 +61,9 @@ class RenderOptions:
     spurious : relative intensity of a laser reflection: a second copy of the stripe offset
         by ``spurious_offset`` px over the columns ``spurious_columns`` (fractions of the
         width); 0 for none
+    speckle : relative standard deviation of laser speckle, a multiplicative log-normal
+        pattern (mean 1) of grains ``speckle_grain`` px (Gaussian sigma) on the laser light
+        only; 0 for none
     """
 
     supersample: int = 3
@@ -79,6 +82,8 @@ class RenderOptions:
     spurious: float = 0.0
     spurious_offset: float = 20.0
     spurious_columns: tuple[float, float] = (0.6, 0.8)
+    speckle: float = 0.0
+    speckle_grain: float = 1.0
 
     def __post_init__(self) -> None:
         if not (isinstance(self.supersample, (int, np.integer)) and self.supersample >= 1
@@ -88,7 +93,7 @@ class RenderOptions:
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         for name in ("blur_sigma", "laser", "ambient", "noise", "spurious", "margin",
-                     "glare_radius"):
+                     "glare_radius", "speckle", "speckle_grain"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {v}")
@@ -247,30 +252,19 @@ def _true_stripe_rows(q: np.ndarray, pose: np.ndarray, board: Checkerboard,
     return out
 
 
-def render_pose(params: Any, pose: np.ndarray, board: Checkerboard | None = None,
-                image_size: tuple[int, int] = (640, 480), options: RenderOptions | None = None,
-                rng: np.random.Generator | None = None) -> RenderedPose:
-    """Render the laser-on and laser-off images seen at one base_from_hand pose.
+def _board_exposures(rays: np.ndarray, bfc: np.ndarray, board: Checkerboard, o: RenderOptions,
+                     laser_distance: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Ambient and laser exposure (h, w) of the board plane, and the laser-plane distance
+    (mm) at the pixel centres (NaN where a ray misses the plane).
 
-    Parameters
-    ----------
-    params : true sensor parameters (:class:`hmlvs.Parameters` or 14-vector)
-    pose : (4, 4) base_from_hand transform
-    board : the checkerboard (default: the paper's)
-    image_size : (width, height) in pixels
-    options : :class:`RenderOptions`
-    rng : random generator for the sensor noise (default: seeded with 0)
+    ``rays`` (h*s, w*s, 3) are the camera rays of the supersample positions (s =
+    ``o.supersample``, the centre sample of each pixel at its integer position), ``bfc`` the
+    4x4 board_from_camera transform and ``laser_distance`` maps camera-frame points (..., 3)
+    to their signed distance (mm) from the laser plane. The sensor model enters only through
+    these two, so any camera model renders with the same shading.
     """
-    q = as_params(params)
-    board = Checkerboard() if board is None else board
-    o = RenderOptions() if options is None else options
-    rng = np.random.default_rng(0) if rng is None else rng
-    w, h = (int(image_size[0]), int(image_size[1]))
-    if w < 8 or h < 8:
-        raise ValueError(f"image_size must be at least 8 x 8 pixels, got {image_size}")
     s = o.supersample
-    rays = _sample_rays(q, (w, h), s)
-    bfc = _board_from_camera(q, pose, board)
+    h, w = rays.shape[0] // s, rays.shape[1] // s
     ambient = np.empty((h, w))
     laser = np.empty((h, w))
     d_centres = np.empty((h, w))
@@ -293,7 +287,7 @@ def render_pose(params: Any, pose: np.ndarray, board: Checkerboard | None = None
                           np.nan_to_num(np.hypot(gxu, gxv), nan=1.0),
                           np.nan_to_num(np.hypot(gyu, gyv), nan=1.0), board, o)
         alb = np.where(hit, alb, 0.0)
-        d = _laser_distance(q, ray * t[..., None])
+        d = laser_distance(ray * t[..., None])
         # distance to the stripe curve in pixels: d (mm) over its gradient (mm per px)
         gv, gu = np.gradient(d, 1.0 / s)
         dpx = d / np.hypot(gu, gv)
@@ -308,14 +302,49 @@ def render_pose(params: Any, pose: np.ndarray, board: Checkerboard | None = None
         ambient[r0:r1] = az.reshape(r1 - r0, s, w, s).mean(axis=(1, 3))
         laser[r0:r1] = lz.reshape(r1 - r0, s, w, s).mean(axis=(1, 3))
         d_centres[r0:r1] = d[s // 2::s, s // 2::s]
+    return ambient, laser, d_centres
+
+
+def _add_glare(ambient: np.ndarray, stripe_v: np.ndarray, o: RenderOptions) -> np.ndarray:
+    """The ambient exposure with ``o.glare``'s highlight centred on the stripe (if on)."""
+    if not o.glare:
+        return ambient
+    h, w = ambient.shape
+    u0 = o.glare_at * (w - 1)
+    v0 = np.interp(u0, np.arange(w)[np.isfinite(stripe_v)],
+                   stripe_v[np.isfinite(stripe_v)]) if np.isfinite(stripe_v).any() else h / 2
+    vv, uu = np.mgrid[0:h, 0:w]
+    return ambient + 400.0 * np.exp(-0.5 * ((uu - u0) ** 2 + (vv - v0) ** 2)
+                                    / o.glare_radius ** 2)
+
+
+def render_pose(params: Any, pose: np.ndarray, board: Checkerboard | None = None,
+                image_size: tuple[int, int] = (640, 480), options: RenderOptions | None = None,
+                rng: np.random.Generator | None = None) -> RenderedPose:
+    """Render the laser-on and laser-off images seen at one base_from_hand pose.
+
+    Parameters
+    ----------
+    params : true sensor parameters (:class:`hmlvs.Parameters` or 14-vector)
+    pose : (4, 4) base_from_hand transform
+    board : the checkerboard (default: the paper's)
+    image_size : (width, height) in pixels
+    options : :class:`RenderOptions`
+    rng : random generator for the sensor noise (default: seeded with 0)
+    """
+    q = as_params(params)
+    board = Checkerboard() if board is None else board
+    o = RenderOptions() if options is None else options
+    rng = np.random.default_rng(0) if rng is None else rng
+    w, h = (int(image_size[0]), int(image_size[1]))
+    if w < 8 or h < 8:
+        raise ValueError(f"image_size must be at least 8 x 8 pixels, got {image_size}")
+    rays = _sample_rays(q, (w, h), o.supersample)
+    bfc = _board_from_camera(q, pose, board)
+    ambient, laser, d_centres = _board_exposures(
+        rays, bfc, board, o, lambda cam: _laser_distance(q, cam))
     stripe_v = _true_stripe_rows(q, pose, board, (w, h), d_centres)
-    if o.glare:
-        u0 = o.glare_at * (w - 1)
-        v0 = np.interp(u0, np.arange(w)[np.isfinite(stripe_v)],
-                       stripe_v[np.isfinite(stripe_v)]) if np.isfinite(stripe_v).any() else h / 2
-        vv, uu = np.mgrid[0:h, 0:w]
-        ambient = ambient + 400.0 * np.exp(-0.5 * ((uu - u0) ** 2 + (vv - v0) ** 2)
-                                           / o.glare_radius ** 2)
+    ambient = _add_glare(ambient, stripe_v, o)
     on, off = _finish_frames(ambient, laser, o, rng)
     return RenderedPose(on, off, stripe_v)
 
@@ -323,8 +352,16 @@ def render_pose(params: Any, pose: np.ndarray, board: Checkerboard | None = None
 def _finish_frames(ambient: np.ndarray, laser: np.ndarray, o: RenderOptions,
                    rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Exposure (h, w) of the ambient light and of the laser -> the 8-bit laser-on and
-    laser-off frames: optics blur, independent sensor noise per frame, rounding."""
+    laser-off frames: laser speckle, optics blur, independent sensor noise per frame,
+    rounding (saturating at 255)."""
     import cv2
+    if o.speckle > 0:
+        grain = rng.normal(0.0, 1.0, laser.shape)
+        if o.speckle_grain > 0:
+            grain = cv2.GaussianBlur(grain, (0, 0), o.speckle_grain,
+                                     borderType=cv2.BORDER_REFLECT)
+            grain /= max(float(grain.std()), 1e-12)
+        laser = laser * np.exp(o.speckle * grain - 0.5 * o.speckle ** 2)
     frames = []
     for img in (ambient + laser, ambient):
         if o.blur_sigma > 0:
