@@ -70,6 +70,10 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
             raise ValueError(f"the images were taken with robot {name!r}; pass its DH table "
                              "(robot=hmlvs.Robot(...) or --robot FILE)")
         robot = Robot.scorbot_er7()
+    from ..geometry.board import Checkerboard
+
+    detector_board = Checkerboard(rows=board_spec.rows, cols=board_spec.cols,
+                                  square=board_spec.square)
     views: list[ViewData] = []
     reports: list[ImageReport] = []
     size = None
@@ -81,7 +85,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
                               stripe_options, min_stripe)
             size = pair.size
             try:
-                corners = detect_board(pair.off, board_spec)
+                corners = detect_board(pair.off, detector_board)
             except ValueError as e:
                 raise _Reject(str(e)) from None
         except _Reject as e:
