@@ -9,6 +9,26 @@ from pathlib import Path
 import tempfile
 from typing import IO, Iterator
 
+_TMP_PREFIX = ".hmlvs-"
+_STALE_SECONDS = 3600.0
+
+
+def _remove_stale(folder: Path) -> None:
+    """Remove our temporary files that a killed write left behind (older than an hour: no
+    write of ours takes that long)."""
+    import time
+
+    now = time.time()
+    try:
+        for p in folder.glob(f"{_TMP_PREFIX}*.tmp"):
+            try:
+                if now - p.stat().st_mtime > _STALE_SECONDS:
+                    p.unlink()
+            except OSError:
+                pass
+    except OSError:
+        pass
+
 
 @contextmanager
 def atomic_write(path: str | os.PathLike, mode: str = "w", encoding: str | None = "utf-8"
@@ -17,9 +37,19 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", encoding: str | None 
 
     If the block raises, the temporary file is removed and ``path`` is left as it was.
     """
+    import errno
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise NotADirectoryError(errno.ENOTDIR, "Not a directory", str(path.parent)) from None
+    if path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
+    _remove_stale(path.parent)
+    # A short temporary name (not derived from the target's), so that any legal target name
+    # works; the prefix marks it as ours for _remove_stale.
+    fd, tmp = tempfile.mkstemp(prefix=_TMP_PREFIX, suffix=".tmp", dir=path.parent)
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual permissions
@@ -45,6 +75,30 @@ def existing_file(path: str | os.PathLike, what: str) -> Path:
     return path
 
 
+def plain(obj: object) -> object:
+    """``obj`` with numpy scalars and arrays as Python numbers and lists, tuples as lists, and
+    every non-finite float (NaN, inf) as None: what JSON and YAML can hold."""
+    import math
+
+    if isinstance(obj, dict):
+        return {str(k): plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [plain(v) for v in obj]
+    if hasattr(obj, "tolist") and callable(obj.tolist):  # numpy arrays and scalars
+        return plain(obj.tolist())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def json_text(obj: object, indent: int | None = 2) -> str:
+    """Valid JSON of ``obj`` (:func:`plain`: ``null`` where a number is not finite, never
+    ``NaN``)."""
+    import json
+
+    return json.dumps(plain(obj), indent=indent, allow_nan=False, default=str)
+
+
 def read_document(path: str | os.PathLike, what: str) -> object:
     """The YAML (or, for .json, JSON) document in an existing file; ValueError naming the file
     and ``what`` when it is missing or malformed."""
@@ -63,15 +117,13 @@ def read_document(path: str | os.PathLike, what: str) -> object:
 def write_document(path: str | os.PathLike, d: object, what: str) -> Path:
     """Write ``d`` atomically as YAML (.yaml/.yml) or JSON (.json); other suffixes are refused
     naming ``what``."""
-    import json
-
     import yaml
 
     path = Path(path)
     if path.suffix.lower() in (".yaml", ".yml"):
-        text = yaml.safe_dump(d, sort_keys=False, default_flow_style=None)
+        text = yaml.safe_dump(plain(d), sort_keys=False, default_flow_style=None)
     elif path.suffix.lower() == ".json":
-        text = json.dumps(d, indent=2)
+        text = json_text(d)
     else:
         raise ValueError(f"{path}: {what} files are .yaml, .yml or .json")
     with atomic_write(path) as fh:

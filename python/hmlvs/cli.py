@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 from contextlib import contextmanager
-import json
 from pathlib import Path
 from typing import Iterator, Optional
 
 import typer
 
-from ._io import atomic_write
+from ._io import atomic_write, json_text
 
 app = typer.Typer(
     name="hmlvs",
@@ -20,25 +19,69 @@ app = typer.Typer(
 )
 
 
+_DEBUG = False  # --debug: internal errors show their traceback
+
+
+def _fault(e: OSError) -> str:
+    """One line for an environment fault (paths, permissions, disk space): what and where,
+    and what to do."""
+    import errno
+
+    what = {
+        errno.ENOSPC: "the disk is full: free some space or write elsewhere",
+        errno.EDQUOT: "the disk quota is exceeded: free some space or write elsewhere",
+        errno.EACCES: "permission denied: choose a location you can write to (or read)",
+        errno.EPERM: "operation not permitted: choose another location",
+        errno.EROFS: "the file system is read-only: choose another location",
+        errno.EISDIR: "is a folder: give a file name",
+        errno.ENOTDIR: "a part of this path is a file, not a folder",
+        errno.ENAMETOOLONG: "the file name is too long: choose a shorter one",
+        errno.ENOENT: "no such file or folder",
+    }.get(e.errno or 0, e.strerror or str(e))
+    where = e.filename if e.filename is not None else ""
+    return f"{where}: {what}" if where else what
+
+
+def _error_lines(text: str) -> list[str]:
+    # A message of several lines (e.g. one per rejected image pair) keeps its lines;
+    # whitespace inside a line is collapsed.
+    lines = [" ".join(line.split()) for line in text.splitlines()]
+    return [line for line in lines if line] or [""]
+
+
+def _fail(lines: list[str], code: int, as_json: bool) -> None:
+    if as_json:
+        typer.echo(json_text({"error": "\n".join(lines)}))
+    typer.echo(f"error: {lines[0]}", err=True)
+    for line in lines[1:]:
+        typer.echo(f"  {line}", err=True)
+    raise typer.Exit(code)
+
+
 @contextmanager
 def _guard(as_json: bool = False) -> Iterator[None]:
-    """Exit codes: 2 for bad input (one-line error naming the problem), 130 for Ctrl-C."""
+    """The command line's error policy. Exit 2: bad input or an environment fault (a path,
+    a permission, disk space), one line naming the file, entry or option. Exit 1: an internal
+    error, a short message (the traceback with --debug). Exit 130: Ctrl-C."""
+    import click
+
     try:
         yield
+    except (typer.Exit, click.exceptions.Exit, click.ClickException, SystemExit):
+        raise
     except ValueError as e:
-        # A message of several lines (e.g. one per rejected image pair) keeps its lines;
-        # whitespace inside a line is collapsed.
-        lines = [" ".join(line.split()) for line in str(e).splitlines()]
-        lines = [line for line in lines if line] or [""]
-        if as_json:
-            typer.echo(json.dumps({"error": "\n".join(lines)}))
-        typer.echo(f"error: {lines[0]}", err=True)
-        for line in lines[1:]:
-            typer.echo(f"  {line}", err=True)
-        raise typer.Exit(2) from None
+        _fail(_error_lines(str(e)), 2, as_json)
+    except OSError as e:
+        _fail([_fault(e)], 2, as_json)
     except KeyboardInterrupt:
         typer.echo("interrupted", err=True)
         raise typer.Exit(130) from None
+    except Exception as e:
+        if _DEBUG:
+            raise
+        _fail([f"internal error ({type(e).__name__}: {' '.join(str(e).split())}); this is a "
+               "bug in hmlvs: run again with --debug for the traceback and report it"], 1,
+              as_json)
 
 
 # The simulated true sensor of `demo` and `simulate`: the paper's nominal values (Table 2)
@@ -173,12 +216,16 @@ def _version_callback(value: bool) -> None:
 def _main(
     version: bool = typer.Option(False, "--version", callback=_version_callback,
                                  is_eager=True, help="Print the version and exit."),
+    debug: bool = typer.Option(False, "--debug", help="Show the traceback of an internal "
+                               "error (a bug), instead of a one-line message."),
 ) -> None:
     """Calibrate and use a hand-mounted laser-vision sensor.
 
     Units: mm and pixels; angles on the command line are in degrees (design --theta),
     angles in results are in radians. Terms used in messages: docs/glossary.md.
     """
+    global _DEBUG
+    _DEBUG = debug
 
 
 def _is_manifest(path: Path) -> bool:
@@ -220,7 +267,8 @@ def _bar(description: str, quiet: bool):
 
 
 def _echo_json(obj: object) -> None:
-    typer.echo(json.dumps(obj, indent=2, default=float))
+    """Valid JSON on stdout: a figure that is not available (NaN, inf) is ``null``."""
+    typer.echo(json_text(obj))
 
 
 @app.command()
@@ -700,7 +748,7 @@ def design(
         summary = report.to_dict()
         summary["errors"] = [e.to_dict() for e in errors]
         summary["files"] = [str(p) for p in files]
-        typer.echo(json.dumps(summary, indent=2))
+        _echo_json(summary)
     else:
         typer.echo(str(report))
         for e in errors:
@@ -877,7 +925,7 @@ def study(
         typer.echo("interrupted: no results written", err=True)
         raise typer.Exit(130) from None
     if as_json:
-        typer.echo(json.dumps(result.to_dict(), indent=2))
+        _echo_json(result.to_dict())
     else:
         typer.echo(result.table())
         if result.files:
@@ -974,4 +1022,16 @@ def _command():
 
 
 def main(argv: Optional[list[str]] = None) -> None:
-    _command().main(args=argv, prog_name="hmlvs")
+    """Run the command line; errors outside a command's own guard follow the same policy."""
+    import sys
+
+    try:
+        _command().main(args=argv, prog_name="hmlvs")
+    except SystemExit:
+        raise
+    except Exception as e:  # reached only outside _guard, e.g. while printing results
+        try:
+            with _guard():
+                raise e
+        except typer.Exit as exit_:
+            sys.exit(exit_.exit_code)

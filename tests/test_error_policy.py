@@ -1,0 +1,150 @@
+"""The command line's error policy: bad input and environment faults exit 2 with one line
+naming the problem, internal errors exit 1 without a traceback (unless --debug), JSON output is
+always valid JSON, and a failed write leaves nothing behind."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from hmlvs import _io
+from hmlvs.cli import main
+import pytest
+
+
+def _run(argv, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    out = capsys.readouterr()
+    return e.value.code, out.out, out.err
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    d = tmp_path_factory.mktemp("policy")
+    path = d / "sim.npz"
+    with pytest.raises(SystemExit):
+        main(["simulate", str(path), "--poses", "8", "--seed", "1"])
+    return path
+
+
+def test_output_path_that_is_a_folder_exits_2_naming_it(data, tmp_path, capsys):
+    target = tmp_path / "existing_dir.yaml"
+    target.mkdir()
+    code, _, err = _run(["calibrate", str(data), "--method", "lm", "-o", str(target)], capsys)
+    assert code == 2
+    assert err.strip().splitlines() == [f"error: {target}: is a folder: give a file name"]
+
+
+def test_output_under_a_file_exits_2(data, tmp_path, capsys):
+    parent = tmp_path / "afile"
+    parent.write_text("x")
+    code, _, err = _run(["calibrate", str(data), "--method", "lm", "-o",
+                         str(parent / "cal.yaml")], capsys)
+    assert code == 2 and "a part of this path is a file, not a folder" in err
+    assert len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes through read-only permissions")
+def test_read_only_location_exits_2(data, tmp_path, capsys):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        code, _, err = _run(["calibrate", str(data), "--method", "lm", "-o",
+                             str(ro / "cal.yaml")], capsys)
+    finally:
+        ro.chmod(0o700)
+    assert code == 2 and "permission denied" in err
+    assert list(ro.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", ["calibrate", "simulate", "measure", "export"])
+def test_every_command_on_a_read_only_file_system_exits_2(data, tmp_path, capsys, monkeypatch,
+                                                          command):
+    import errno
+    import tempfile
+
+    cal = tmp_path / "cal.yaml"
+    assert _run(["calibrate", str(data), "--method", "lm", "-o", str(cal)], capsys)[0] == 0
+    out = tmp_path / "out"
+    out.mkdir()
+
+    def read_only(*a, **k):
+        raise OSError(errno.EROFS, "Read-only file system", str(out))
+
+    monkeypatch.setattr(tempfile, "mkstemp", read_only)
+    argv = {"calibrate": ["calibrate", str(data), "--method", "lm", "-o", str(out / "c.yaml")],
+            "simulate": ["simulate", str(out / "s.npz"), "--poses", "4"],
+            "measure": ["measure", str(cal), str(data), "-o", str(out / "cloud.ply")],
+            "export": ["export", str(cal), "--format", "json", "--out", str(out / "e.json")]}
+    code, _, err = _run(argv[command], capsys)
+    assert code == 2, err
+    assert err.strip().splitlines() == [
+        f"error: {out}: the file system is read-only: choose another location"]
+    assert list(out.iterdir()) == []
+
+
+def test_disk_full_exits_2_and_leaves_nothing(data, tmp_path, capsys, monkeypatch):
+    import errno
+
+    real_fsync = os.fsync
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full)
+    code, _, err = _run(["calibrate", str(data), "--method", "lm", "-o",
+                         str(tmp_path / "cal.yaml")], capsys)
+    monkeypatch.setattr(os, "fsync", real_fsync)
+    assert code == 2 and "the disk is full" in err
+    assert list(tmp_path.iterdir()) == []  # no target, no temporary file
+
+
+def test_a_long_legal_file_name_works(tmp_path):
+    name = "c" * 240 + ".yaml"  # 245 characters: legal on Linux (255), temp name must fit
+    with _io.atomic_write(tmp_path / name) as fh:
+        fh.write("x: 1\n")
+    assert (tmp_path / name).read_text() == "x: 1\n"
+
+
+def test_stale_temporary_files_of_killed_writes_are_cleaned(tmp_path):
+    stale = tmp_path / ".hmlvs-abc123.tmp"
+    stale.write_text("half")
+    os.utime(stale, (1, 1))  # as if left by a write killed long ago
+    fresh = tmp_path / ".hmlvs-def456.tmp"
+    fresh.write_text("in progress")  # another write under way: kept
+    with _io.atomic_write(tmp_path / "out.txt") as fh:
+        fh.write("ok")
+    assert not stale.exists() and fresh.exists()
+
+
+def test_internal_error_exits_1_with_one_line_and_debug_shows_it(data, tmp_path, capsys,
+                                                                  monkeypatch):
+    import hmlvs.calibration.solvers as solvers
+
+    def broken(*a, **k):
+        raise KeyError("boom")
+
+    monkeypatch.setattr(solvers, "calibrate", broken)
+    code, _, err = _run(["calibrate", str(data), "-o", str(tmp_path / "c.yaml")], capsys)
+    assert code == 1
+    assert err.strip().splitlines() == [
+        "error: internal error (KeyError: 'boom'); this is a bug in hmlvs: run again with "
+        "--debug for the traceback and report it"]
+    with pytest.raises(KeyError):
+        main(["--debug", "calibrate", str(data), "-o", str(tmp_path / "c.yaml")])
+
+
+def test_json_output_is_valid_json_with_null_for_missing_figures():
+    text = _io.json_text({"rms": float("nan"), "x": [1.0, float("inf")], "ok": 2})
+    assert json.loads(text) == {"rms": None, "x": [1.0, None], "ok": 2}
+    assert "NaN" not in text and "Infinity" not in text
+
+
+def test_json_error_output_is_valid_json(tmp_path, capsys):
+    code, out, err = _run(["calibrate", str(tmp_path / "missing.npz"), "--json"], capsys)
+    assert code == 2
+    assert "error" in json.loads(out)
+    assert Path(tmp_path / "missing.npz").exists() is False
