@@ -43,11 +43,39 @@ from ..geometry.robot import Robot
 from ..models.opencv import OpenCvSensor
 from ..models.paper import hand_from_camera
 from ..models.params import NAMES, UNITS, Parameters
+from . import schema
 from .dataset import Dataset, check_format
 
 FORMAT = "hmlvs-calibration"
 FORMAT_VERSION = 1
 MODELS = ("paper", "opencv")
+
+
+def _schema() -> "schema.Field":
+    """The calibration file's shape (see the module doc); unknown keys are kept for newer
+    writers' sake, known ones must have their type."""
+    from . import schema as sc
+
+    names = sc.Field("list", "a list of parameter names",
+                     items=sc.text("a parameter name", choices=NAMES))
+    return sc.Field("struct", "a calibration file", required=("format",), keys={
+        **sc.header(FORMAT, FORMAT_VERSION),
+        "model": sc.text("the sensor model", choices=MODELS),
+        "units": sc.Field("map", "a mapping like {length: mm, angle: rad}",
+                          items=sc.text("a unit")),
+        "parameters": sc.Field("map", "a mapping of parameter names to numbers",
+                               items=sc.number()),
+        "std": sc.Field("map", "a mapping of names to standard deviations",
+                        items=sc.number(nullable=True), nullable=True),
+        "fixed": sc.Field("list", "a list of parameter names", items=names.items,
+                          nullable=True),
+        "fit_rms_mm": sc.number(nullable=True), "test_rms_mm": sc.number(nullable=True),
+        "num_points": sc.integer(nullable=True, minimum=0),
+        "method": sc.text(nullable=True), "data_sha256": sc.text(nullable=True),
+        "created": sc.text(nullable=True), "hmlvs_version": sc.text(nullable=True),
+        "hand_from_camera": sc.matrix(4, 4, "a 4x4 transform", nullable=True),
+        "robot": sc.Field("any"), "sensor": sc.Field("map", "the opencv sensor", nullable=True),
+    })
 
 
 def dataset_hash(ds: Dataset) -> str:
@@ -163,7 +191,10 @@ class Calibration:
 
     @classmethod
     def from_dict(cls, d: Any, source: str = "calibration") -> "Calibration":
+        from .schema import validate
+
         check_format(d, FORMAT, FORMAT_VERSION, source, "calibration file")
+        validate(d, _schema(), str(source))
         units = d.get("units", {})
         if units and (units.get("length", "mm") != "mm" or units.get("angle", "rad") != "rad"):
             raise ValueError(f"{source}: units must be mm and rad, got {units}")
@@ -188,6 +219,16 @@ class Calibration:
                                  "block (camera_matrix, dist_coeffs, image_size, laser_plane, "
                                  "hand_from_camera)")
             sensor = OpenCvSensor.from_dict(d["sensor"], source=f"{source}: sensor")
+        stored = d.get("hand_from_camera")
+        derived = (hand_from_camera(params) if params is not None
+                   else None if sensor is None else sensor.hand_from_camera)
+        if stored is not None and derived is not None:
+            diff = float(np.abs(np.asarray(stored, float) - derived).max())
+            if not diff <= 1e-6 * max(1.0, float(np.abs(derived).max())):
+                raise ValueError(f"{source}: hand_from_camera contradicts the calibration's "
+                                 f"{'parameters' if params is not None else 'sensor'} (they "
+                                 f"differ by up to {diff:.3g}); it is derived from them: "
+                                 "remove it or correct it")
         robot = None
         if d.get("robot"):
             from .robot_file import robot_from_dict

@@ -289,9 +289,12 @@ def check_format(d: Any, fmt: str, version: int, source: Any, what: str) -> None
     if not isinstance(d, dict) or d.get("format") != fmt:
         raise ValueError(f"{source}: not an hmlvs {what} (format field is "
                          f"{d.get('format') if isinstance(d, dict) else None!r})")
-    if int(d.get("version", 0)) > version:
-        raise ValueError(f"{source}: {what} format version {d.get('version')} is newer than "
-                         f"this hmlvs understands ({version})")
+    v = d.get("version", 1)
+    if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+        raise ValueError(f"{source}: version must be a whole number >= 1, got {v!r}")
+    if v > version:
+        raise ValueError(f"{source}: {what} format version {v} is newer than this hmlvs "
+                         f"understands ({version})")
 
 
 def _check_header(d: dict[str, Any], source: Any) -> None:
