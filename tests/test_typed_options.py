@@ -191,3 +191,23 @@ def test_stripe_options_object_gives_the_keyword_result():
     assert (a.status == 0).all()
     np.testing.assert_allclose(a.centre, 20.0, atol=1e-6)
     assert b.method == "gaussian" and b.threshold == 10
+
+
+def test_threads_beyond_the_cores_are_capped_with_a_note():
+    import os
+    import warnings
+
+    import hmlvs
+    from hmlvs import cli
+
+    sim = hmlvs.simulate.session(cli._truth(cli.MOUNTING_DEG), num_poses=6, seed=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        many = hmlvs.calibrate(sim.dataset, method="pso", iterations=20, threads=20000,
+                               analyze=False)
+        one = hmlvs.calibrate(sim.dataset, method="pso", iterations=20, threads=1,
+                              analyze=False)
+    cores = os.cpu_count() or 1
+    assert many.threads == cores
+    assert any(f"threads capped at {cores}" in n for n in many.notes)
+    assert many.params.to_dict() == one.params.to_dict()  # deterministic whatever the threads

@@ -13,7 +13,7 @@ from numbers import Integral, Real
 from typing import Any
 
 INT32_MAX = 2**31 - 1
-MAX_THREADS = 1024
+MAX_THREADS = 2**31 - 1  # any count is accepted; calibrate caps it at the cores
 
 
 def _count(prefix: str, name: str, value: Any, *, minimum: int = 1,

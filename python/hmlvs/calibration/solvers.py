@@ -388,7 +388,10 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
                          f"parameters (need at least {n_free}; many more are better)")
     runs = check_runs(runs)
     seed = check_seed(seed)
-    threads_n = min(os.cpu_count() or 1, 1024) if threads is None else check_threads(threads)
+    cores = min(os.cpu_count() or 1, 1024)
+    threads_n = cores if threads is None else check_threads(threads)
+    capped = threads_n > cores
+    threads_n = min(threads_n, cores)  # more threads than cores only slow the solve down
     if initial is None:
         q0 = Parameters.nominal().to_array()
         if not bounds.contains(q0):
@@ -414,6 +417,9 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
     notes: list[str] = []
     if "Su" in fixed:
         notes.append(_GAUGE_NOTE.format(value=q0[param_index("Su")]))
+    if capped:
+        notes.append(f"threads capped at {cores}, the machine's cores (asked: {threads}); the "
+                     "result is the same for any thread count")
     others = [n for n in fixed if n != "Su"]
     if others:
         notes.append("held fixed at their initial values: " + ", ".join(others))
