@@ -32,7 +32,19 @@ class PyProgress {
   explicit PyProgress(py::object fn) : fn_(std::move(fn)) {}
 
   ProgressCallback callback() {
-    if (fn_.is_none()) return {};
+    if (fn_.is_none()) {
+      // No callable: still check for Ctrl-C at every progress point, so that a long solve
+      // started from Python stops promptly (KeyboardInterrupt is raised after it stops).
+      return [this](const Progress&) {
+        py::gil_scoped_acquire gil;
+        if (error_) return false;
+        if (PyErr_CheckSignals() != 0) {
+          error_ = std::make_unique<py::error_already_set>();
+          return false;
+        }
+        return true;
+      };
+    }
     return [this](const Progress& p) {
       py::gil_scoped_acquire gil;
       if (error_) return false;
