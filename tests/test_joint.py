@@ -250,3 +250,24 @@ def test_joint_report_shows_views_residuals_and_figures(tmp_path):
     assert text.count("data:image/png;base64,") == 3
     with pytest.raises(ValueError, match="is an .html file"):
         write_joint_report(r, tmp_path / "report.txt")
+
+
+def test_pixels_outside_the_image_and_grazing_rays_have_no_measurement():
+    t = default_truth()
+    s = OpenCvSensor(t.camera_matrix, t.dist, (1024, 768), t.plane, t.hand_from_camera)
+    px = np.array([[500.0, 600.0], [-100.0, -100.0], [500.0, 2000.0]])
+    pts, ok = s.points_in_camera(px, on_invalid="mask")
+    assert ok.tolist() == [True, False, False] and np.isnan(pts[1:]).all()
+    with pytest.raises(ValueError, match=r"pixel 1 \(u=-100, v=-100\) lies outside the 1024 x "
+                                         "768 image"):
+        s.points_in_camera(px)
+    # A plane almost containing the pixel's ray: the point would be metres away.
+    x, y = s.undistort(np.array([[500.0, 600.0]]))[0][0]
+    ray = np.array([x, y, 1.0]) / np.linalg.norm([x, y, 1.0])
+    n = np.cross(ray, [1.0, 0, 0])
+    n = n / np.linalg.norm(n) + 0.002 * ray  # 0.1 deg from the ray
+    n /= np.linalg.norm(n)
+    grazing = OpenCvSensor(t.camera_matrix, t.dist, (1024, 768), np.r_[n, -100.0],
+                           t.hand_from_camera)
+    with pytest.raises(ValueError, match="grazing angle"):
+        grazing.points_in_camera(np.array([[500.0, 600.0]]))

@@ -125,3 +125,17 @@ def test_rays_pass_through_the_triangulated_points(rng):
     back, valid = hmlvs.models.paper.pixels_from_points(q, pts[ok],
                                                  np.tile(camera_as_base, (ok.sum(), 1, 1)))
     assert np.abs(back - pixels[ok]).max() < 1e-7
+
+
+def test_a_ray_at_a_grazing_angle_to_the_laser_plane_has_no_measurement():
+    import hmlvs
+
+    p = hmlvs.Parameters.nominal()
+    # Rays just below the row where Yu + f tan(theta) = 0 meet the plane, but at a grazing
+    # angle and thousands of mm away: invalid, with a reason.
+    v0 = p.Cv - p.f * np.tan(p.theta) / p.Sv
+    px = np.array([[320.0, v0 + 0.5], [320.0, 400.0]])
+    pts, ok = hmlvs.points_in_camera(p, px, on_invalid="mask")
+    assert ok.tolist() == [False, True]
+    with pytest.raises(ValueError, match="grazing angle"):
+        hmlvs.points_in_camera(p, px[:1])

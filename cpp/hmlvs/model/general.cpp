@@ -145,6 +145,14 @@ bool LaserPoint(const Vector9d& in, const Eigen::Vector4d& plane, double u, doub
     *why = "has a ray that misses the laser plane (it meets it behind the camera or not at all)";
     return false;
   }
+  const double sine = std::abs(normal[0] * x + normal[1] * y + normal[2]) /
+                      std::sqrt(x * x + y * y + 1.0);  // |normal| = 1 (UnitPlane)
+  if (sine < kMinRaySine) {
+    *why =
+        "has a ray that meets the laser plane at a grazing angle (< 0.5 deg), too far away "
+        "to be measured";
+    return false;
+  }
   return true;
 }
 

@@ -47,6 +47,16 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
   throw std::invalid_argument(msg.str());
 }
 
+[[noreturn]] void ThrowGrazing(Eigen::Index i, double u, double v, double sine) {
+  std::ostringstream msg;
+  msg << "pixel " << i << " (u=" << u << ", v=" << v
+      << ") has a ray that meets the laser plane at a grazing angle of "
+      << std::asin(std::min(1.0, sine)) * 180.0 / M_PI << " deg (< "
+      << std::asin(kMinRaySine) * 180.0 / M_PI
+      << " deg), too far away to be measured; it has no measurement";
+  throw std::invalid_argument(msg.str());
+}
+
 }  // namespace
 
 const std::array<std::string, kNumParams>& ParamNames() {
@@ -120,14 +130,23 @@ PointsResult MapPixels(const Vector14d& q, PixelsRef pixels, bool throw_on_inval
   PointsResult out;
   out.points.resize(m, 3);
   out.valid.resize(m);
+  const double cos_theta = std::cos(q[kTheta]), sin_theta = std::sin(q[kTheta]);
   for (Eigen::Index i = 0; i < m; ++i) {
     double point[3];
     const double u = pixels(i, 0), v = pixels(i, 1);
     const double plane = point_of(i, u, v, point);
-    if (plane > 0.0) {
+    // The sine of the angle between the pixel's ray (Xu, Yu, f) and the laser plane, whose
+    // normal is (0, cos theta, sin theta).
+    double xd, yd;
+    const double s = DistortedSensorPoint(q.data(), u, v, &xd, &yd);
+    const double xu = xd / s, yu = yd / s;
+    const double grazing =
+        std::abs(yu * cos_theta + q[kF] * sin_theta) / std::sqrt(xu * xu + yu * yu + q[kF] * q[kF]);
+    if (plane > 0.0 && grazing >= kMinRaySine) {
       out.points.row(i) << point[0], point[1], point[2];
       out.valid[i] = 1;
     } else {
+      if (throw_on_invalid && plane > 0.0) ThrowGrazing(i, u, v, grazing);
       if (throw_on_invalid) ThrowMissedPlane(q, i, u, v, plane);
       out.points.row(i).setConstant(kNaN);
       out.valid[i] = 0;

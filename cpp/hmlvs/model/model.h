@@ -18,6 +18,11 @@ namespace hmlvs {
 
 constexpr int kNumParams = 14;
 
+/// Measurement refuses pixels whose ray meets the laser plane at less than 0.5 degrees (the sine
+/// below): such points lie hundreds of baselines away, where a tenth of a pixel moves them by
+/// metres. (The objective and the solvers do not apply it.)
+constexpr double kMinRaySine = 0.0087265354983739347;  // sin(0.5 deg)
+
 enum Param : int {
   kF = 0,
   kSu = 1,

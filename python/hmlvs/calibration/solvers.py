@@ -159,7 +159,29 @@ class CalibrationResult:
 
 
 def _rms(errors: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(errors**2))) if errors.size else float("nan")
+    """RMS over the points that have an error (a ray that misses the laser plane has none);
+    NaN when none has: callers report that as not available, with the reason."""
+    e = errors[np.isfinite(errors)]
+    return float(np.sqrt(np.mean(e**2))) if e.size else float("nan")
+
+
+def _test_rms(test_errors: np.ndarray | None, notes: list[str]) -> float | None:
+    """The held-out RMS, or None with a note saying why it is not available; a note also
+    counts held-out points left out because their rays miss the laser plane."""
+    if test_errors is None:
+        return None
+    if test_errors.size == 0:
+        notes.append("held-out RMS not available: the held-out set is empty")
+        return None
+    missing = int((~np.isfinite(test_errors)).sum())
+    if missing == test_errors.size:
+        notes.append("held-out RMS not available: every held-out point's ray misses the laser "
+                     "plane at these parameters")
+        return None
+    if missing:
+        notes.append(f"{missing} of {test_errors.size} held-out points have rays that miss the "
+                     "laser plane at these parameters; the held-out RMS is over the others")
+    return _rms(test_errors)
 
 
 def _fitness_data(ds: Dataset) -> Any:
@@ -292,9 +314,11 @@ def evaluate(params: Any, dataset: Dataset, test: Dataset | None = None,
     q = _as_vector(params, "params")
     fit_errors = np.array(_fitness_data(dataset).point_errors(q))
     test_errors = None if test is None else np.array(_fitness_data(test).point_errors(q))
+    notes: list[str] = []
+    test_rms = _test_rms(test_errors, notes)
     return CalibrationResult(
-        params=Parameters.from_array(q), method=method, fixed=tuple(fixed),
-        fit_rms=_rms(fit_errors), test_rms=None if test_errors is None else _rms(test_errors),
+        params=Parameters.from_array(q), method=method, fixed=tuple(fixed), notes=notes,
+        fit_rms=_rms(fit_errors), test_rms=test_rms,
         fit_errors=fit_errors, test_errors=test_errors,
         cost=float(0.5 * np.nansum(fit_errors**2)), history=np.empty(0),
         run_fitness=np.empty(0), iterations=0, termination=Termination.NOT_SOLVED,
@@ -518,9 +542,10 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
     test_errors = None
     if test is not None:
         test_errors = np.array(_fitness_data(test).point_errors(q))
+    test_rms = _test_rms(test_errors, notes)
     result = CalibrationResult(
         params=Parameters.from_array(q), method=method, fixed=fixed,
-        fit_rms=_rms(fit_errors), test_rms=None if test_errors is None else _rms(test_errors),
+        fit_rms=_rms(fit_errors), test_rms=test_rms,
         fit_errors=fit_errors, test_errors=test_errors, cost=float(data.evaluate(q)),
         history=history, run_fitness=run_fitness, iterations=iterations,
         termination=termination, seconds=time.perf_counter() - start, seed=int(seed),

@@ -126,13 +126,30 @@ class OpenCvSensor:
         r = _core._general_undistort(self.intrinsics_vector(), as_matrix(pixels, 2, "pixels"))
         return np.array(r.pixels), np.asarray(r.valid, dtype=bool)
 
+    def _outside(self, px: np.ndarray, throw: bool) -> np.ndarray:
+        """Pixels outside the image (they have no measurement): a mask, or a ValueError
+        naming the first one."""
+        w, h = self.image_size
+        out = ~((px[:, 0] >= -0.5) & (px[:, 0] <= w - 0.5) & (px[:, 1] >= -0.5)
+                & (px[:, 1] <= h - 0.5))
+        if throw and out.any():
+            i = int(np.argmax(out))
+            raise ValueError(f"pixel {i} (u={px[i, 0]:g}, v={px[i, 1]:g}) lies outside the "
+                             f"{w} x {h} image, so it has no measurement")
+        return out
+
     def points_in_camera(self, pixels: Any, on_invalid: OnInvalid = "raise"
                          ) -> tuple[np.ndarray, np.ndarray]:
-        """Stripe pixels -> camera-frame points on the laser plane (mm)."""
+        """Stripe pixels -> camera-frame points on the laser plane (mm). Pixels outside the
+        image, whose ray misses the plane or meets it at a grazing angle (< 0.5 deg) have no
+        measurement (see ``on_invalid``)."""
         throw = check_on_invalid(on_invalid)
-        r = _core._general_laser_camera(self.intrinsics_vector(), self.laser_plane,
-                                        as_matrix(pixels, 2, "pixels"), throw)
-        return np.array(r.points), np.asarray(r.valid, dtype=bool)
+        px = as_matrix(pixels, 2, "pixels")
+        outside = self._outside(px, throw)
+        r = _core._general_laser_camera(self.intrinsics_vector(), self.laser_plane, px, throw)
+        pts, valid = np.array(r.points), np.asarray(r.valid, dtype=bool) & ~outside
+        pts[~valid] = np.nan
+        return pts, valid
 
     def points_in_base(self, pixels: Any, poses: Any, on_invalid: OnInvalid = "raise"
                        ) -> tuple[np.ndarray, np.ndarray]:
@@ -142,9 +159,12 @@ class OpenCvSensor:
         px = as_matrix(pixels, 2, "pixels")
         ps = as_poses(poses)
         same_rows(pixels=px, poses=ps)
+        outside = self._outside(px, throw)
         r = _core._general_laser_base(self.intrinsics_vector(), self.laser_plane,
                                       self.hand_from_camera, px, ps, throw)
-        return np.array(r.points), np.asarray(r.valid, dtype=bool)
+        pts, valid = np.array(r.points), np.asarray(r.valid, dtype=bool) & ~outside
+        pts[~valid] = np.nan
+        return pts, valid
 
     def hand_from_camera_matrix(self) -> np.ndarray:
         return self.hand_from_camera.copy()
