@@ -148,3 +148,29 @@ def test_json_error_output_is_valid_json(tmp_path, capsys):
     assert code == 2
     assert "error" in json.loads(out)
     assert Path(tmp_path / "missing.npz").exists() is False
+
+
+def test_simulate_with_images_is_all_or_nothing(tmp_path, capsys, monkeypatch):
+    import hmlvs.data.manifest as manifest
+
+    real = manifest._write_png
+    calls = {"n": 0}
+
+    def fail_on_third(path, image):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise OSError(28, "No space left on device", str(path))
+        real(path, image)
+
+    monkeypatch.setattr(manifest, "_write_png", fail_on_third)
+    code, _, err = _run(["simulate", str(tmp_path / "s.npz"), "--poses", "4", "--images",
+                         str(tmp_path / "imgs")], capsys)
+    assert code == 2 and "the disk is full" in err
+    assert list(tmp_path.iterdir()) == []  # no data set, no image folder, no temporary folder
+    monkeypatch.setattr(manifest, "_write_png", real)
+    code, _, _ = _run(["simulate", str(tmp_path / "s.npz"), "--poses", "4", "--images",
+                       str(tmp_path / "imgs")], capsys)
+    assert code == 0
+    assert {p.name for p in tmp_path.iterdir()} == {"s.npz", "imgs"}
+    assert (tmp_path / "imgs" / "manifest.json").is_file()
+    assert (tmp_path / "imgs" / "truth.npz").is_file()

@@ -129,3 +129,53 @@ def write_document(path: str | os.PathLike, d: object, what: str) -> Path:
     with atomic_write(path) as fh:
         fh.write(text)
     return path
+
+
+@contextmanager
+def atomic_folder(path: str | os.PathLike, last: tuple[str, ...] = ("manifest.json",)
+                  ) -> Iterator[Path]:
+    """Write several files as one: yields a temporary folder beside ``path``; on success its
+    files take their places in ``path``: a new folder appears whole (one rename); into an
+    existing folder (whose other files are kept) the files move one by one, those named in
+    ``last`` (the manifest) last. If the block raises, the temporary folder is removed and
+    ``path`` is left as it was."""
+    import errno
+    import shutil
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "Not a directory", str(path))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise NotADirectoryError(errno.ENOTDIR, "Not a directory", str(path.parent)) from None
+    _remove_stale_folders(path.parent)
+    tmp = Path(tempfile.mkdtemp(prefix=_TMP_PREFIX, suffix=".tmp", dir=path.parent))
+    try:
+        yield tmp
+        if not path.exists():
+            os.replace(tmp, path)
+            return
+        for f in sorted(tmp.iterdir(), key=lambda f: (f.name in last, f.name)):
+            os.replace(f, path / f.name)
+        tmp.rmdir()
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _remove_stale_folders(folder: Path) -> None:
+    """Temporary folders of killed multi-file writes (older than an hour)."""
+    import shutil
+    import time
+
+    now = time.time()
+    try:
+        for p in folder.glob(f"{_TMP_PREFIX}*.tmp"):
+            try:
+                if p.is_dir() and now - p.stat().st_mtime > _STALE_SECONDS:
+                    shutil.rmtree(p, ignore_errors=True)
+            except OSError:
+                pass
+    except OSError:
+        pass

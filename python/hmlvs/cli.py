@@ -304,12 +304,20 @@ def simulate(
     with _guard(as_json), _collect_warnings() as caught:
         s = sim.session(_truth(mounting), num_poses=poses, pixel_noise=pixel_noise,
                         point_noise=point_noise, seed=seed)
-        s.dataset.save(out)
         manifest = None
-        if images is not None:
+        new_folder = images is not None and not images.exists()
+        if images is not None:  # the images first: an interrupted run leaves neither output
             manifest = sim.render_session(
                 s, images, options=RenderOptions(noise=image_noise), seed=seed,
                 progress=_bar(f"rendering {poses} image pairs", as_json or quiet)).manifest
+        try:
+            s.dataset.save(out)
+        except BaseException:
+            if new_folder and images is not None:
+                import shutil
+
+                shutil.rmtree(images, ignore_errors=True)
+            raise
     warns = _gather(caught)
     if as_json:
         _echo_json({"file": str(out), "points": len(s.dataset), "poses": s.dataset.num_poses,

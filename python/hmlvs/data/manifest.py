@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .._io import atomic_write
+from .._io import atomic_folder, atomic_write
 from .dataset import check_format
 from .poses import PoseFormat, pose_from_entry, read_poses
 
@@ -195,23 +195,27 @@ def _write_png(path: Path, image: np.ndarray) -> None:
 def write_image_manifest(out_dir: str | os.PathLike, ids: list[str], on: list[np.ndarray],
                          off: list[np.ndarray], joints: np.ndarray,
                          image_size: tuple[int, int], robot_name: str,
-                         **extra: Any) -> Path:
+                         files: dict[str, Any] | None = None, **extra: Any) -> Path:
     """Write ``<id>_on.png``, ``<id>_off.png`` per pose and ``manifest.json`` (format
-    ``hmlvs-images``: pose ids, image files, joint readings in rad) into ``out_dir``, every
-    file atomically, the manifest last. ``extra`` entries (JSON-able) go into the manifest's
-    top level. Returns the manifest's path."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    ``hmlvs-images``: pose ids, image files, joint readings in rad) into ``out_dir``, all of them or
+    none (:func:`hmlvs._io.atomic_folder`). ``extra`` entries (JSON-able) go into the manifest's
+    top level; ``files`` maps further file names to functions writing them
+    (given a binary file). Returns the manifest's path."""
     entries = []
-    for i, pid in enumerate(ids):
-        names = {"on": f"{pid}_on.png", "off": f"{pid}_off.png"}
-        _write_png(out / names["on"], on[i])
-        _write_png(out / names["off"], off[i])
-        entries.append({"id": pid, **names, "joints": np.asarray(joints[i], float).tolist()})
-    doc = {"format": FORMAT, "version": VERSION,
-           "image_size": list(image_size), "joint_unit": "rad", "robot": robot_name,
-           **extra, "poses": entries}
-    manifest = out / NAME
-    with atomic_write(manifest, "w") as fh:
-        json.dump(doc, fh, indent=1)
+    with atomic_folder(out_dir) as tmp:  # all files or none
+        for name, write in (files or {}).items():  # e.g. truth.npz: write(binary file)
+            with atomic_write(tmp / name, "wb") as fh:
+                write(fh)
+        for i, pid in enumerate(ids):
+            names = {"on": f"{pid}_on.png", "off": f"{pid}_off.png"}
+            _write_png(tmp / names["on"], on[i])
+            _write_png(tmp / names["off"], off[i])
+            entries.append({"id": pid, **names,
+                            "joints": np.asarray(joints[i], float).tolist()})
+        doc = {"format": FORMAT, "version": VERSION,
+               "image_size": list(image_size), "joint_unit": "rad", "robot": robot_name,
+               **extra, "poses": entries}
+        with atomic_write(tmp / NAME, "w") as fh:
+            json.dump(doc, fh, indent=1)
+    manifest = Path(out_dir) / NAME
     return manifest

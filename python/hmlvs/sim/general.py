@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from .._io import atomic_write
+from .._io import atomic_folder, atomic_write
 from ..data.manifest import FORMAT, NAME, VERSION, _write_png
 from ..geometry.board import Checkerboard
 from ..models.opencv import OpenCvSensor
@@ -409,7 +409,13 @@ def render_general_session(session: GeneralSession, out_dir: str | os.PathLike |
 
 def _write_general(out: Path, session: GeneralSession, ids: list[str], on: list[np.ndarray],
                    off: list[np.ndarray], o: RenderOptions) -> Path:
-    out.mkdir(parents=True, exist_ok=True)
+    with atomic_folder(out) as tmp:  # all files or none
+        _write_general_files(tmp, session, ids, on, off, o)
+    return out / NAME
+
+
+def _write_general_files(out: Path, session: GeneralSession, ids: list[str],
+                         on: list[np.ndarray], off: list[np.ndarray], o: RenderOptions) -> Path:
     b = session.board
     truth = {"sensor": session.sensor.to_dict(), "seed": session.seed,
              "board": {"rows": b.rows, "cols": b.cols, "square": b.square},

@@ -29,7 +29,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._arrays import as_params
-from .._io import atomic_write
 from ..data.manifest import write_image_manifest
 from ..geometry.board import Checkerboard
 from ..models.paper import hand_from_camera, rays_in_camera
@@ -421,12 +420,15 @@ def render_session(session: "Session | None" = None, out_dir: str | os.PathLike 
     files: dict[str, Any] = {}
     if out_dir is not None:
         out = Path(out_dir)
-        with atomic_write(out / "truth.npz", "wb") as fh:
+
+        def truth(fh: Any) -> None:
             np.savez_compressed(fh, params=session.truth.to_array(), stripe_v=stripe_v,
                                 joints=session.joints, ids=np.array(ids))
+
         manifest = write_image_manifest(
             out, ids, on, off, session.joints, session.image_size, session.robot.name,
-            board=session.board.to_dict(), render_options=asdict(o))
+            files={"truth.npz": truth}, board=session.board.to_dict(),
+            render_options=asdict(o))
         files = {"manifest": manifest, "truth": out / "truth.npz"}
     return RenderedSession(session, o, ids, on, off, stripe_v, manifest, files)
 
