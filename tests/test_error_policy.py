@@ -174,3 +174,17 @@ def test_simulate_with_images_is_all_or_nothing(tmp_path, capsys, monkeypatch):
     assert {p.name for p in tmp_path.iterdir()} == {"s.npz", "imgs"}
     assert (tmp_path / "imgs" / "manifest.json").is_file()
     assert (tmp_path / "imgs" / "truth.npz").is_file()
+
+
+def test_calibration_is_not_left_without_its_report(data, tmp_path, capsys, monkeypatch):
+    import hmlvs.report.html as html
+
+    def full(*a, **k):
+        raise OSError(28, "No space left on device", str(tmp_path / "r.html"))
+
+    monkeypatch.setattr(html, "write_report", full)
+    code, _, err = _run(["calibrate", str(data), "--method", "lm", "-o",
+                         str(tmp_path / "cal.yaml"), "--report", str(tmp_path / "r.html")],
+                        capsys)
+    assert code == 2 and "the disk is full" in err
+    assert list(tmp_path.iterdir()) == []

@@ -460,6 +460,22 @@ def demo(
     typer.echo(f"\ncalibration written to {path}")
 
 
+@contextmanager
+def _outputs(*targets: Path) -> Iterator[list]:
+    """Several output files as one: the block appends each file it writes; if it fails, the
+    files it wrote that did not exist before are removed (a calibration is not left without
+    the report asked for, nor a report without its calibration)."""
+    existed = {Path(t) for t in targets if Path(t).exists()}
+    made: list = []
+    try:
+        yield made
+    except BaseException:
+        for p in made:
+            if Path(p) not in existed:
+                Path(p).unlink(missing_ok=True)
+        raise
+
+
 def _resolve_model(model: str, data: Path) -> str:
     """The sensor model to calibrate: as asked, or (auto) opencv for an image manifest without
     a measured board pose, paper otherwise."""
@@ -512,12 +528,14 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
             views = [v for i, v in enumerate(views) if i not in pick]
         result = calibrate_joint(views, board, size, distortion=terms,
                                  base_from_board=board_pose, test=test_views or None)
-        path = Calibration.from_joint(result, robot=arm).save(out)
         report_path = None
-        if report is not None:
-            from .report.joint import write_joint_report
+        with _outputs(out) as made:
+            path = Calibration.from_joint(result, robot=arm).save(out)
+            made.append(path)
+            if report is not None:
+                from .report.joint import write_joint_report
 
-            report_path = write_joint_report(result, report, image_reports=reports)
+                report_path = write_joint_report(result, report, image_reports=reports)
     warns = _gather(caught, result.warnings)
     if as_json:
         s = result.sensor
@@ -661,13 +679,15 @@ def calibrate(
                                  iterations=iterations, loss=loss, loss_scale=loss_scale,
                                  seed=seed, threads=threads,
                                  progress=_solve_progress(as_json or quiet))
-        path = Calibration.from_result(result, ds, robot=arm).save(out)
         report_path = None
-        if report is not None:
-            from .report.html import write_report
+        with _outputs(out) as made:
+            path = Calibration.from_result(result, ds, robot=arm).save(out)
+            made.append(path)
+            if report is not None:
+                from .report.html import write_report
 
-            report_path = write_report(result, ds, report, test=test_ds,
-                                       image_reports=image_reports)
+                report_path = write_report(result, ds, report, test=test_ds,
+                                           image_reports=image_reports)
     summary = result.summary()
     warns = _gather(caught, result.warnings, summary)
     det, undet = _determined(result)
