@@ -188,3 +188,36 @@ def test_calibration_is_not_left_without_its_report(data, tmp_path, capsys, monk
                         capsys)
     assert code == 2 and "the disk is full" in err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--holdout", "-0.5"], r"--holdout must be a fraction in \[0, 1\), got -0.5"),
+    (["--holdout", "nan"], r"--holdout must be a fraction in \[0, 1\), got nan"),
+    (["--mode", "bogus"], "--mode must be corners or homography, got 'bogus'"),
+])
+def test_options_are_checked_whatever_the_input(data, tmp_path, capsys, args, message):
+    import re
+
+    code, _, err = _run(["calibrate", str(data), "-o", str(tmp_path / "c.yaml"), *args], capsys)
+    assert code == 2 and re.search(message, err), err
+    assert not (tmp_path / "c.yaml").exists()
+
+
+def test_measuring_with_a_calibration_whose_plane_no_ray_meets(data, tmp_path, capsys):
+    from hmlvs import Calibration, Parameters
+
+    cal = Calibration(params=Parameters.nominal().replace(theta=-0.5)).save(tmp_path / "c.yaml")
+    code, _, err = _run(["measure", str(cal), str(data), "-o", str(tmp_path / "cloud.ply")],
+                        capsys)
+    assert code == 2 and "none of the" in err and "meets the laser plane" in err
+    assert not (tmp_path / "cloud.ply").exists()
+
+
+def test_empty_or_fractional_subsets_are_refused(data):
+    from hmlvs import Dataset
+
+    ds = Dataset.load(data)
+    with pytest.raises(ValueError, match="the subset is empty"):
+        ds.subset([])
+    with pytest.raises(ValueError, match="whole numbers"):
+        ds.subset([0.5])

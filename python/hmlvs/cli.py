@@ -643,6 +643,12 @@ def calibrate(
 
     image_reports = []
     with _guard(as_json):
+        import math
+
+        if not (math.isfinite(holdout) and 0 <= holdout < 1):
+            raise ValueError(f"--holdout must be a fraction in [0, 1), got {holdout}")
+        if mode not in ("corners", "homography"):
+            raise ValueError(f"--mode must be corners or homography, got {mode!r}")
         chosen = _resolve_model(model, data)
     if chosen == "opencv":
         _calibrate_opencv(data, out, holdout, seed, robot, distortion, report, quiet, as_json)
@@ -864,14 +870,21 @@ def measure(
             cloud = measure_points(cal, [ds.pixels[i:i + 1] for i in range(len(ds))], ds.poses)
             err = np.linalg.norm(cloud.points - ds.points, axis=1)[cloud.valid]
             info = {"rms_mm": float(np.sqrt(np.mean(err**2))) if err.size else None}
+        if cloud.num_valid == 0:
+            raise ValueError(f"none of the {len(cloud)} stripe pixels' rays meets the laser "
+                             f"plane of {calibration}: nothing to write (is this calibration "
+                             "of the sensor that took these data?)")
         path = cloud.save(out)
     summary = {"cloud": str(path), "points": cloud.num_valid,
                "invalid": len(cloud) - cloud.num_valid, **info}
     if as_json:
         _echo_json(summary)
         return
-    typer.echo(f"{cloud.num_valid} points measured ({len(cloud) - cloud.num_valid} rays missed "
-               "the laser plane)")
+    typer.echo(f"{cloud.num_valid} points measured ({len(cloud) - cloud.num_valid} stripe "
+               "pixels without a measurement: their rays miss the laser plane, meet it at a "
+               "grazing angle or lie outside the image)")
+    for pid, why in (info.get("rejected") or {}).items():
+        typer.echo(f"{pid}: rejected: {why}")
     if info.get("rms_mm") is not None:
         typer.echo(f"RMS distance to the reference points: {info['rms_mm']:.4g} mm")
     typer.echo(f"point cloud written to {path}")

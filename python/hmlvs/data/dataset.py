@@ -119,7 +119,14 @@ class Dataset:
     def subset(self, indices: Sequence[int] | np.ndarray) -> "Dataset":
         idx = np.asarray(indices)
         if idx.dtype == bool:
+            if idx.shape != (len(self),):
+                raise ValueError(f"a boolean subset mask needs {len(self)} entries, got "
+                                 f"{idx.size}")
             idx = np.nonzero(idx)[0]
+        if idx.size == 0:
+            raise ValueError("the subset is empty: a data set needs at least one point")
+        if not np.issubdtype(idx.dtype, np.integer):
+            raise ValueError(f"subset indices must be whole numbers, got {idx.dtype}")
         if idx.size and (idx.min() < -len(self) or idx.max() >= len(self)):
             raise ValueError(f"subset index out of range for a data set of {len(self)} points")
         return Dataset(
