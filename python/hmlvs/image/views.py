@@ -25,9 +25,22 @@ from .session import (
 )
 
 
+def _board_schema() -> Any:
+    from ..data import schema as sc
+
+    vec3 = sc.Field("list", "3 numbers", length=3, items=sc.number())
+    return sc.Field("struct", "a board: rows, cols (inner corners), square (mm)",
+                    required=("rows", "cols", "square"), extra="error", keys={
+                        "rows": sc.integer("a whole number of inner corners", minimum=2),
+                        "cols": sc.integer("a whole number of inner corners", minimum=2),
+                        "square": sc.number("a size in mm", positive=True),
+                        "origin": vec3, "row_direction": vec3, "col_direction": vec3})
+
+
 def board_of(doc: dict[str, Any], board: Any, source: Any) -> tuple[BoardSpec, np.ndarray | None]:
     """The board (rows, cols, square) of a manifest or the caller, and its measured pose in
     the base when the manifest gives one (``origin``), else None."""
+    from ..data.schema import validate
     from ..geometry.board import Checkerboard
 
     spec = board if board is not None else doc.get("board")
@@ -35,15 +48,13 @@ def board_of(doc: dict[str, Any], board: Any, source: Any) -> tuple[BoardSpec, n
         raise ValueError(f"{source}: the manifest has no 'board' (rows, cols, square) and no "
                          "board was given")
     pose = None
-    if isinstance(spec, dict):
-        missing = [k for k in ("rows", "cols", "square") if k not in spec]
-        if missing:
-            raise ValueError(f"{source}: the board lacks {', '.join(missing)}")
-        if "origin" in spec:
-            pose = Checkerboard(**{k: (tuple(v) if isinstance(v, list) else v)
-                                   for k, v in spec.items()}).base_from_board()
-    elif isinstance(spec, Checkerboard):
-        pose = spec.base_from_board()
+    if isinstance(spec, (BoardSpec, Checkerboard)):
+        return BoardSpec.of(spec), (spec.base_from_board() if isinstance(spec, Checkerboard)
+                                    else None)
+    validate(spec, _board_schema(), str(source), "board")
+    if "origin" in spec:
+        pose = Checkerboard(**{k: (tuple(v) if isinstance(v, list) else v)
+                               for k, v in spec.items()}).base_from_board()
     return BoardSpec.of(spec), pose
 
 
