@@ -258,6 +258,7 @@ RandomSearchResult RunRandomSearch(const FitnessData& data, const RandomSearchOp
 
   RunTeam(threads, [&](int member, SpinBarrier&) {
     Vector14d q;
+    long long own_blocks = 0;  // member 0 reports after its 1st, 9th, 17th, ... block
     for (;;) {
       const long long b = next_block.fetch_add(1);
       if (b >= blocks || cancel.load(std::memory_order_relaxed)) break;
@@ -274,7 +275,7 @@ RandomSearchResult RunRandomSearch(const FitnessData& data, const RandomSearchOp
         }
       }
       done.fetch_add(end - b * kBlock, std::memory_order_relaxed);
-      if (member == 0 && progress && (b % 16 == 0)) {
+      if (member == 0 && progress && (own_blocks++ % 8 == 0)) {
         Progress p;
         p.done = done.load();
         p.total = o.evaluations;
@@ -297,6 +298,13 @@ RandomSearchResult RunRandomSearch(const FitnessData& data, const RandomSearchOp
   }
   result.evaluations = done.load();
   result.cancelled = cancel.load();
+  if (progress && !result.cancelled) {  // the last count, whichever member did the work
+    Progress p;
+    p.done = result.evaluations;
+    p.total = o.evaluations;
+    p.best_fitness = result.best_fitness;
+    progress(p);
+  }
   result.seconds = Seconds(start);
   return result;
 }
