@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 
 import cv2
+from hmlvs.calibration.joint import calibrate_joint
 from hmlvs.geometry.board import BoardSpec, CharucoSpec
 from hmlvs.image.corners import BoardNotFoundError, detect_charuco
 from hmlvs.image.views import views_from_images
@@ -76,8 +77,9 @@ def test_charuco_corners_are_found_and_numbered_by_their_ids(name):
         assert n_inside == 48 and len(c) == 48
     # each corner at its id's true pixel: a wrong id would be a square (>= 50 px) away
     err = np.linalg.norm(c.pixels - truth[c.index], axis=1)
-    assert err.max() < 0.25, (name, err.max())
-    assert np.sqrt(np.mean(err**2)) < 0.1, name
+    # measured: at most 0.07 px, RMS <= 0.05 px
+    assert err.max() < 0.15, (name, err.max())
+    assert np.sqrt(np.mean(err**2)) < 0.08, name
     assert np.all(np.diff(c.index) > 0)
 
 
@@ -157,7 +159,7 @@ def test_a_charuco_session_gives_views_numbered_by_ids(tmp_path):
     assert [v.id for v in views] == list(VIEWS)
     for v in views:
         err = np.linalg.norm(v.corner_pixels - truths[v.id][v.corner_index], axis=1)
-        assert err.max() < 0.25, v.id
+        assert err.max() < 0.15, v.id
         assert len(v.laser_pixels) > 500
     assert len(views[0].corner_index) == 48
     bad = [r for r in reports if not r.ok]
@@ -171,3 +173,91 @@ def test_an_unknown_board_type_in_a_manifest_is_named(tmp_path):
         "poses": [{"id": "a", "on": "a.png", "off": "b.png", "pose": np.eye(4).tolist()}]}))
     with pytest.raises(ValueError, match="unknown board type 'circles'"):
         views_from_images(tmp_path)
+
+
+def _rt(rvec, t) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3] = cv2.Rodrigues(np.asarray(rvec, float))[0]
+    m[:3, 3] = t
+    return m
+
+
+def _camera_session(n_views: int, seed: int):
+    """A physically consistent session: a pinhole camera (fx = fy = 900 px, no distortion) on
+    a robot hand looks at the ChArUco board (every third view with the board partly out of
+    the image); the laser plane's line is drawn on the board. The board image is mapped by
+    K [r1 r2 t] (our board frame, mm) composed with board mm -> generated-image pixels.
+    Returns the images, poses and the truth."""
+    s, m = 60, 30
+    src = BOARD.cv_board().generateImage((BOARD.squares_x * s + 2 * m,
+                                          BOARD.squares_y * s + 2 * m), marginSize=m)
+    src = cv2.GaussianBlur(src, (0, 0), 1.0)
+    k_mm = s / BOARD.square  # ours (x, y) is OpenCV's (y + square, x + square)
+    a = np.array([[0, k_mm, m + s - 0.5], [k_mm, 0, m + s - 0.5], [0, 0, 1.0]])
+    k = np.array([[900.0, 0, 512], [0, 900.0, 384], [0, 0, 1]])
+    hand_from_camera = _rt([0.02, -0.03, 1.6], [55.0, -5.0, -40.0])
+    base_from_board = _rt([np.pi, 0, 0.3], [650.0, 50.0, 0.0])
+    n = np.array([0.0, 0.94, 0.34]) / np.linalg.norm([0.0, 0.94, 0.34])
+    plane = np.r_[n, -n @ np.array([0, 0, 380.0])]
+    rng = np.random.default_rng(seed)
+    centre = np.array([(BOARD.rows - 1) * BOARD.square / 2, (BOARD.cols - 1) * BOARD.square / 2,
+                       0.0])
+    vv, uu = np.mgrid[0:SIZE[1], 0:SIZE[0]].astype(float)
+    out = []
+    for i in range(n_views):
+        # our board frame's z points to the printed side, towards the camera
+        r = cv2.Rodrigues(rng.uniform(-0.35, 0.35, 3) + [0, 0, rng.uniform(-np.pi, np.pi)])[0] \
+            @ np.diag([1.0, -1.0, -1.0])
+        t = np.array([rng.normal(0, 15), rng.normal(0, 15), rng.uniform(330, 420)])
+        if i % 3 == 1:
+            t[0] += rng.choice([-1, 1]) * 150
+        cam = np.eye(4)
+        cam[:3, :3], cam[:3, 3] = r, t - r @ centre  # camera_from_board
+        h = k @ np.c_[cam[:3, 0], cam[:3, 1], cam[:3, 3]] @ np.linalg.inv(a)
+        off = 0.6 * cv2.warpPerspective(src, h, SIZE, borderValue=90) + 15 + \
+            rng.normal(0, 1.5, SIZE[::-1])
+        nb, tb = cam[:3, 2], cam[:3, 3]
+        direction = np.cross(n, nb)
+        p0 = np.linalg.solve(np.array([n, nb, direction]), [-plane[3], nb @ tb, 0])
+        q = np.array([p0 - 400 * direction, p0 + 400 * direction]) @ k.T
+        q = q[:, :2] / q[:, 2:]
+        d = q[1] - q[0]
+        dist = ((uu - q[0, 0]) * -d[1] + (vv - q[0, 1]) * d[0]) / np.linalg.norm(d)
+        on = off + np.exp(-0.5 * (dist / 1.3) ** 2) * (0.5 * (off - 15) + 30)
+        out.append({"on": np.clip(on, 0, 255).astype(np.uint8),
+                    "off": np.clip(off, 0, 255).astype(np.uint8),
+                    "pose": base_from_board @ np.linalg.inv(cam)
+                    @ np.linalg.inv(hand_from_camera)})
+    return out, k, hand_from_camera, plane
+
+
+def test_a_rendered_charuco_session_calibrates_through_the_manifest(tmp_path):
+    """Images -> views_from_images (ids as corner_index, partly visible boards kept) ->
+    calibrate_joint: nothing flipped or rejected, the camera, the hand-eye transform and the
+    laser plane recovered."""
+    views, k, hand_from_camera, plane = _camera_session(9, seed=0)
+    entries = []
+    for i, v in enumerate(views):
+        cv2.imwrite(str(tmp_path / f"v{i}_on.png"), v["on"])
+        cv2.imwrite(str(tmp_path / f"v{i}_off.png"), v["off"])
+        entries.append({"id": f"v{i}", "on": f"v{i}_on.png", "off": f"v{i}_off.png",
+                        "pose": v["pose"].tolist()})
+    (tmp_path / "manifest.json").write_text(json.dumps({
+        "format": "hmlvs-images", "version": 1, "board": BOARD.to_dict(), "poses": entries}))
+    got, board, size, _, reports = views_from_images(tmp_path)
+    assert all(r.ok for r in reports) and len(got) == 9
+    partial = [v.id for v in got if len(v.corner_index) < 48]
+    assert len(partial) >= 2  # some views show only part of the board
+    r = calibrate_joint(got, board, size, distortion=())
+    assert r.flipped == [] and r.rejected == {}
+    # measured: corners 0.04 px RMS, fx, fy, cx, cy within 0.05 px, hand-eye translation
+    # within 0.02 mm, plane distance within 0.001 mm
+    assert r.corner_rms_px < 0.1
+    s = r.sensor
+    assert abs(s.fx - 900) < 0.5 and abs(s.fy - 900) < 0.5
+    assert abs(s.cx - 512) < 0.5 and abs(s.cy - 384) < 0.5
+    assert np.abs(s.hand_from_camera[:3, 3] - hand_from_camera[:3, 3]).max() < 0.2
+    rot = s.hand_from_camera[:3, :3].T @ hand_from_camera[:3, :3]
+    assert np.degrees(np.arccos(np.clip((np.trace(rot) - 1) / 2, -1, 1))) < 0.2
+    assert np.abs(s.laser_plane[:3] - plane[:3]).max() < 2e-3
+    assert abs(s.laser_plane[3] - plane[3]) < 0.1
