@@ -11,6 +11,7 @@ from hmlvs.calibration.joint import calibrate_joint
 from hmlvs.geometry.board import BoardSpec, CharucoSpec
 from hmlvs.image.corners import BoardNotFoundError, detect_charuco
 from hmlvs.image.views import views_from_images
+from hmlvs.report.inspect import inspect_session
 import numpy as np
 import pytest
 
@@ -248,6 +249,10 @@ def test_a_rendered_charuco_session_calibrates_through_the_manifest(tmp_path):
     assert all(r.ok for r in reports) and len(got) == 9
     partial = [v.id for v in got if len(v.corner_index) < 48]
     assert len(partial) >= 2  # some views show only part of the board
+    # hmlvs inspect draws the same corners (numbered by id) on the partly visible boards
+    seen = inspect_session(tmp_path, tmp_path / "pics")
+    assert [(v.used, v.corners) for v in seen] == [(True, len(v.corner_index)) for v in got]
+    assert all(v.image is not None and v.image.is_file() for v in seen)
     r = calibrate_joint(got, board, size, distortion=())
     assert r.flipped == [] and r.rejected == {}
     # measured: corners 0.04 px RMS, fx, fy, cx, cy within 0.05 px, hand-eye translation
