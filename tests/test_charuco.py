@@ -123,6 +123,10 @@ def test_no_charuco_board_says_so():
      "unknown ChArUco board field"),
 ])
 def test_charuco_board_description_is_checked(values, message):
+    """A wrong description is refused with a sentence; a right one round-trips through its
+    manifest form (also via BoardSpec.of, as calibrate_joint takes a board)."""
+    assert CharucoSpec.from_dict(BOARD.to_dict()) == BOARD
+    assert BoardSpec.of(BOARD.to_dict()) == BOARD and BoardSpec.of(BOARD) is BOARD
     with pytest.raises(ValueError, match=message):
         CharucoSpec.from_dict({"type": "charuco", **values})
 

@@ -92,6 +92,8 @@ class BoardSpec:
     def of(cls, board: Any) -> "BoardSpec":
         if isinstance(board, BoardSpec):
             return board
+        if isinstance(board, dict) and board.get("type") == "charuco":
+            return CharucoSpec.from_dict(board)
         if isinstance(board, dict):
             return cls(int(board["rows"]), int(board["cols"]), float(board["square"]))
         return cls(int(board.rows), int(board.cols), float(board.square))
