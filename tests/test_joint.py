@@ -271,3 +271,53 @@ def test_pixels_outside_the_image_and_grazing_rays_have_no_measurement():
                            t.hand_from_camera)
     with pytest.raises(ValueError, match="grazing angle"):
         grazing.points_in_camera(np.array([[500.0, 600.0]]))
+
+
+def test_a_view_whose_numbering_cannot_be_decided_is_rejected_not_mislabelled():
+    """A view whose robot pose is off by 15 degrees (a wrong reading): neither its numbering
+    nor the turned one agrees with the other views' motion, so it is left out with the
+    reason; the other views calibrate as before."""
+    views, board, t, _ = make_views(8, n_views=10, flip_every=3)
+    cams = [np.linalg.inv(t.hand_from_camera) @ np.linalg.inv(v.base_from_hand)
+            @ t.base_from_board for v in views]
+    bad = views[5]
+    bad.base_from_hand = bad.base_from_hand @ transform([0.0, math.radians(15.0), 0.0],
+                                                        [0, 0, 0])
+    flips = consistent_numbering([v.base_from_hand for v in views], cams, board)
+    assert flips[5] is None
+    assert flips[:5] + flips[6:] == [False] * 9
+    r = calibrate_joint(views, board, (1024, 768))
+    assert list(r.rejected) == [bad.id]
+    assert "numbering cannot be decided" in r.rejected[bad.id]
+    assert bad.id not in r.per_view and len(r.per_view) == 9
+    assert any(bad.id in w for w in r.warnings)
+    # the turned views among the rest are renumbered, the calibration is the clean one's
+    turned = {v.id for i, v in enumerate(views) if i % 3 == 1}
+    assert set(r.flipped) in (turned, {v.id for v in views} - turned - {bad.id})
+    assert r.corner_rms_px < 0.2
+    assert abs(r.sensor.fx - t.camera_matrix[0, 0]) < 5 * r.std["fx"]
+
+
+def test_a_charuco_board_is_never_flipped_and_partial_views_calibrate():
+    """ChArUco ids number the corners: consistent_numbering turns nothing, and views that
+    show only part of the board (as the ids allow) calibrate."""
+    from hmlvs.geometry.board import CharucoSpec
+
+    board = CharucoSpec(10, 7, 25.0, 18.0)
+    assert (board.rows, board.cols) == (6, 9) and board.unambiguous
+    with pytest.raises(ValueError, match="never turned"):
+        board.flip()
+    views, _, t, _ = make_views(9, n_views=12, board=board)
+    rng = np.random.default_rng(9)
+    for v in views[::2]:  # every other view shows a random part of the board (>= 30 corners)
+        keep = np.sort(rng.choice(len(v.corner_index), 30, replace=False))
+        v.corner_pixels, v.corner_index = v.corner_pixels[keep], v.corner_index[keep]
+    cams = [np.linalg.inv(t.hand_from_camera) @ np.linalg.inv(v.base_from_hand)
+            @ t.base_from_board for v in views]
+    assert consistent_numbering([v.base_from_hand for v in views], cams, board) == \
+        [False] * len(views)
+    r = calibrate_joint(views, board, (1024, 768))
+    assert r.flipped == [] and r.rejected == {}
+    assert r.corner_rms_px < 0.2
+    for i, name in enumerate(("fx", "fy", "cx", "cy")):
+        assert abs(_intrinsics(t)[i] - r.sensor.intrinsics()[name]) < 5 * r.std[name]

@@ -152,3 +152,64 @@ def test_find_corners_takes_options_or_the_old_keywords(detected):
     np.testing.assert_array_equal(new.pixels, detected["left03.jpg"].pixels)
     with pytest.raises(ValueError, match="options must be a CornerOptions"):
         find_corners(gray, BOARD, options={"extend": False})
+
+
+def _classic(gray: np.ndarray, window: int | None) -> tuple[np.ndarray, np.ndarray, int]:
+    """OpenCV's classic detector: findChessboardCorners, then cornerSubPix with a half-window
+    of ``window`` px, or (None) one that fits inside a square: round(0.2 x the median
+    distance between neighbouring corners), 2..9 px. Returns (refined corners, the corners
+    refined with the in-square window, the window used)."""
+    ok, c = cv2.findChessboardCorners(gray, (9, 6))
+    assert ok
+    raw = c.reshape(-1, 2)
+    d = np.linalg.norm(raw[:, None] - raw[None], axis=2)
+    np.fill_diagonal(d, np.inf)
+    inside = int(np.clip(round(0.2 * np.median(d.min(axis=1))), 2, 9))
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.001)
+    small = cv2.cornerSubPix(gray, c.copy(), (inside, inside), (-1, -1), crit).reshape(-1, 2)
+    if window is None:
+        return small, small, inside
+    big = cv2.cornerSubPix(gray, c.copy(), (window, window), (-1, -1), crit).reshape(-1, 2)
+    return big, small, window
+
+
+def _nearest(ours: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Per corner of ``ref``, the distance to the nearest of ``ours`` (numberings may differ)."""
+    return np.linalg.norm(ref[:, None] - ours[None], axis=2).min(axis=1)
+
+
+def test_every_corner_agrees_with_the_classic_detector_with_an_in_square_window(detected):
+    """findChessboardCorners + cornerSubPix with a window inside the squares finds the same
+    54 corners in every view as detect_board, to 0.1 px (measured: under 0.001 px; both
+    refinements converge to the same points from different starts), one to one."""
+    for name, c in detected.items():
+        ref, _, win = _classic(_gray(name), None)
+        assert 6 <= win <= 8, name
+        d = _nearest(c.pixels, ref)
+        assert d.max() < 0.1, (name, d.max())
+        # one to one: every classic corner's nearest detected corner is a different one
+        j = np.linalg.norm(ref[:, None] - c.pixels[None], axis=2).argmin(axis=1)
+        assert len(set(j.tolist())) == 54, name
+
+
+def test_corners_agree_with_the_classic_11x11_pipeline_where_it_is_stable(detected):
+    """With OpenCV's customary 11 x 11 half-window (23 x 23 px, about a whole square on the
+    small boards) cornerSubPix misplaces some corners. Rule: a classic corner counts as
+    misplaced when its 11 x 11 refinement lies more than 0.5 px from its refinement with
+    the in-square window (the result depends on the window). Measured: 15 of the 648
+    corners (left02: 6, left07: 1, left09: 3, left13: 5), each 0.9-6.4 px off ours; every
+    other corner within 0.43 px of ours (the larger window averages over more of the blur
+    and JPEG noise), median 0.05 px."""
+    misplaced, dist = {}, []
+    for name, c in detected.items():
+        big, small, _ = _classic(_gray(name), 11)
+        unstable = np.linalg.norm(big - small, axis=1) > 0.5
+        d = _nearest(c.pixels, big)
+        misplaced[name] = int(unstable.sum())
+        assert np.all(d[unstable] > 0.5), name  # the rule picks corners that are really off
+        dist.append(d[~unstable])
+    d = np.concatenate(dist)
+    assert sum(misplaced.values()) <= 20 and len(d) >= 628, misplaced
+    assert {k for k, v in misplaced.items() if v} <= {"left02.jpg", "left07.jpg", "left09.jpg",
+                                                       "left13.jpg"}
+    assert d.max() < 0.5 and np.median(d) < 0.1

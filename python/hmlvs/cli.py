@@ -890,6 +890,38 @@ def measure(
     typer.echo(f"point cloud written to {path}")
 
 
+# -- hmlvs inspect ---------------------------------------------------------------------------
+@app.command("inspect")
+def inspect_images(
+    data: Path = typer.Argument(..., help="An image session: a folder with manifest.json (or "
+                                "the manifest), with a board."),
+    out: Path = typer.Option(Path("inspect"), "--out", "-o",
+                             help="Folder for one PNG per view (<id>.png)."),
+    robot: Optional[Path] = _ROBOT_OPTION,
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+) -> None:
+    """Draw what the image pipeline found in each view: the numbered board corners, the
+    stripe centres and the rejected scan lines coloured by status; print one line per view
+    (used or rejected and why, corners, scan lines per stripe status).
+
+    Example: hmlvs inspect session/ --out inspect/
+    """
+    from .report.inspect import inspect_session
+
+    with _guard(as_json):
+        views = inspect_session(data, out, robot=_load_robot(robot))
+    if as_json:
+        _echo_json([{"id": v.id, "used": v.used, "reason": v.reason, "corners": v.corners,
+                     "stripe": v.stripe, "image": None if v.image is None else str(v.image)}
+                    for v in views])
+        return
+    for v in views:
+        typer.echo(v.line())
+    used = sum(v.used for v in views)
+    typer.echo(f"{used} of {len(views)} views used; pictures in {out}")
+# -- end hmlvs inspect -----------------------------------------------------------------------
+
+
 @app.command("export")
 def export_calibration(
     calibration: Path = typer.Argument(..., help="Calibration file (.yaml or .json)."),

@@ -54,6 +54,7 @@ class JointCalibration:
         (column-scaled); every quantity is determined when rank == num_unknowns
     termination, iterations, seconds : of the final Levenberg-Marquardt solve
     flipped : ids of views whose corner numbering was turned by 180 degrees
+    rejected : ids of views left out, with the reason (a numbering that cannot be decided)
     residuals : per view id: ``corner_pixels`` (k, 2) and ``corner_residuals`` (k, 2, px,
         projected - detected), ``laser_pixels`` (m, 2) and ``laser_residuals`` (m, mm from
         the laser plane), of the points used
@@ -83,6 +84,7 @@ class JointCalibration:
     test_rms_mm: float | None = None
     test_views: int = 0
     residuals: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    rejected: dict[str, str] = field(default_factory=dict)
 
     @property
     def determined(self) -> bool:
@@ -202,16 +204,24 @@ def initial_intrinsics(views: Sequence[ViewData], board: BoardSpec, image_size: 
 
 
 def consistent_numbering(base_from_hand: Sequence[np.ndarray],
-                         camera_from_board: Sequence[np.ndarray], board: BoardSpec
-                         ) -> list[bool]:
+                         camera_from_board: Sequence[np.ndarray], board: BoardSpec,
+                         margin: float = math.radians(2.0)) -> list[bool | None]:
     """Which views' corner numbering to turn by 180 degrees so that all views agree.
 
     A turned numbering turns the view's board pose by 180 degrees about the board's normal.
     Hand-eye calibration needs one board frame in every view. The test needs no hand-eye
     estimate: for any two views the robot's relative rotation and the camera's relative
     rotation have the same angle (A X = X B), so each view takes the numbering under which
-    these angles agree best with the other views (repeated until no view changes)."""
+    these angles agree best with the other views (repeated until no view changes).
+
+    Returns per view True (turn it), False (keep it) or None: the numbering cannot be decided,
+    because neither numbering agrees with the other views within ``margin`` (rad, median
+    angle disagreement; e.g. a wrong robot pose) or both do (a motion that cannot tell them
+    apart). Such a view must be left out, never guessed. A board whose ids number it
+    (``board.unambiguous``, ChArUco) is never turned: all False."""
     n = len(camera_from_board)
+    if board.unambiguous:
+        return [False] * n
     f = board.flip()
     a_angle = np.array([[_rotation_angle((_inv(base_from_hand[i]) @ base_from_hand[j])[:3, :3])
                          for j in range(n)] for i in range(n)])
@@ -238,7 +248,8 @@ def consistent_numbering(base_from_hand: Sequence[np.ndarray],
     # Both labellings are valid board frames; keep the majority's.
     if sum(flips) > n / 2:
         flips = [not x for x in flips]
-    return flips
+    agree = [(score(j, flips[j]) <= margin, score(j, not flips[j]) <= margin) for j in range(n)]
+    return [fl if ok and not other else None for fl, (ok, other) in zip(flips, agree)]
 
 
 def _board_plane_points(intr: np.ndarray, camera_from_board: np.ndarray, pixels: np.ndarray
@@ -330,9 +341,27 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
     corner_index = [np.asarray(v.corner_index, int) for v in views]
     flipped: list[str] = []
     warnings_out: list[str] = []
+    rejected: dict[str, str] = {}
     if chain:
         bfh = [check_transform(v.base_from_hand, f"view {v.id} base_from_hand") for v in views]
         flips = consistent_numbering(bfh, cam_poses, board)
+        undecided = [i for i, fl in enumerate(flips) if fl is None]
+        if undecided:
+            for i in undecided:
+                rejected[views[i].id] = ("its corner numbering cannot be decided: neither the "
+                                         "board's numbering nor its 180-degree turn agrees with "
+                                         "the other views' robot motion (or both do)")
+            keep = [i for i in range(len(views)) if flips[i] is not None]
+            if len(keep) < 3:
+                raise ValueError("the corner numbering agrees with the robot poses in only "
+                                 f"{len(keep)} views; rejected: " + "; ".join(
+                                     f"{k}: {r}" for k, r in rejected.items()))
+            warnings_out.append("views left out, their corner numbering undecided: "
+                                + ", ".join(rejected))
+            views, bfh, flips = [views[i] for i in keep], [bfh[i] for i in keep], \
+                [flips[i] for i in keep]
+            cam_poses, corner_index = [cam_poses[i] for i in keep], \
+                [corner_index[i] for i in keep]
         n_corners = board.rows * board.cols
         for i, fl in enumerate(flips):
             if fl:
@@ -478,7 +507,7 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
                           "corner_residuals": np.asarray(corners_r[i]),
                           "laser_pixels": laser_px[i][keep_l[i]],
                           "laser_residuals": np.asarray(laser_r[i])}
-                   for i, v in enumerate(views)})
+                   for i, v in enumerate(views)}, rejected=rejected)
 
 
 def _covariance(jac: np.ndarray) -> tuple[np.ndarray, int, float]:

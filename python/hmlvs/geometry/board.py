@@ -92,6 +92,8 @@ class BoardSpec:
     def of(cls, board: Any) -> "BoardSpec":
         if isinstance(board, BoardSpec):
             return board
+        if isinstance(board, dict) and board.get("type") == "charuco":
+            return CharucoSpec.from_dict(board)
         if isinstance(board, dict):
             return cls(int(board["rows"]), int(board["cols"]), float(board["square"]))
         return cls(int(board.rows), int(board.cols), float(board.square))
@@ -109,3 +111,104 @@ class BoardSpec:
         f[0, 3] = (self.rows - 1) * self.square
         f[1, 3] = (self.cols - 1) * self.square
         return f
+
+    @property
+    def unambiguous(self) -> bool:
+        """True when the board's own markings number every corner it shows (a ChArUco board's
+        marker ids), so no view's numbering is ever turned; False for a plain checkerboard,
+        which looks the same turned by 180 degrees (see :meth:`flip`)."""
+        return False
+
+
+@dataclass(frozen=True, init=False)
+class CharucoSpec(BoardSpec):
+    """A ChArUco board (OpenCV's ``cv2.aruco.CharucoBoard``): ``squares_x`` x ``squares_y``
+    squares of ``square`` mm, ArUco markers of ``marker`` mm from the dictionary named
+    ``dictionary`` (``"DICT_4X4_50"``, ... as ``cv2.aruco`` spells it) in the white squares.
+
+    Its chessboard corners are the (squares_y - 1) x (squares_x - 1) inner corners: ``rows =
+    squares_y - 1``, ``cols = squares_x - 1``. ChArUco corner id k is board corner index k:
+    corner (r, c) = (k // cols, k % cols) lies at (r * square, c * square, 0) as for any
+    :class:`BoardSpec`. (OpenCV puts the same corner at ((c + 1) * square, (r + 1) * square,
+    0); the two frames differ by a swap of x and y and a shift, and every corner keeps its id.)
+    The ids tell every corner from its 180-degree twin, so the board is ``unambiguous``, is
+    numbered in any view, also when only part of it is visible, and is never flipped.
+    """
+
+    marker: float
+    dictionary: str
+
+    def __init__(self, squares_x: int, squares_y: int, square: float, marker: float,
+                 dictionary: str = "DICT_4X4_50") -> None:
+        for name, v in (("squares_x", squares_x), ("squares_y", squares_y)):
+            if isinstance(v, bool) or int(v) != v or int(v) < 3:
+                raise ValueError(f"a ChArUco board needs {name} >= 3 squares, got {v!r}")
+        object.__setattr__(self, "rows", int(squares_y) - 1)
+        object.__setattr__(self, "cols", int(squares_x) - 1)
+        object.__setattr__(self, "square", float(square))
+        object.__setattr__(self, "marker", float(marker))
+        object.__setattr__(self, "dictionary", str(dictionary))
+        self.__post_init__()
+        if not 0 < self.marker < self.square:
+            raise ValueError(f"the ChArUco marker length must be > 0 and smaller than the square "
+                             f"({self.square} mm), got {marker}")
+        import cv2
+
+        if not self.dictionary.startswith("DICT_") or \
+                not hasattr(cv2.aruco, self.dictionary):
+            names = sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_") and
+                           n == n.upper())
+            raise ValueError(f"unknown ArUco dictionary {dictionary!r}; choose one of "
+                             f"{', '.join(names)}")
+        if self.rows * self.cols // 2 + 1 > self.dictionary_size():
+            raise ValueError(f"a {squares_x} x {squares_y} ChArUco board needs more markers "
+                             f"than {self.dictionary} holds ({self.dictionary_size()})")
+
+    @property
+    def squares_x(self) -> int:
+        return self.cols + 1
+
+    @property
+    def squares_y(self) -> int:
+        return self.rows + 1
+
+    @property
+    def unambiguous(self) -> bool:
+        return True
+
+    def dictionary_size(self) -> int:
+        import cv2
+
+        return int(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
+                   .bytesList.shape[0])
+
+    def flip(self) -> np.ndarray:
+        raise ValueError("a ChArUco board is numbered by its marker ids and is never turned")
+
+    def cv_board(self) -> Any:
+        """The ``cv2.aruco.CharucoBoard`` (lengths in mm)."""
+        import cv2
+
+        d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
+        return cv2.aruco.CharucoBoard((self.squares_x, self.squares_y), self.square,
+                                      self.marker, d)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The manifest's ``board:`` form."""
+        return {"type": "charuco", "squares_x": self.squares_x, "squares_y": self.squares_y,
+                "square": self.square, "marker": self.marker, "dictionary": self.dictionary}
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> "CharucoSpec":
+        """From the manifest's ``board: {type: charuco, squares_x, squares_y, square, marker,
+        dictionary}`` (``dictionary`` defaults to DICT_4X4_50)."""
+        need = ("squares_x", "squares_y", "square", "marker")
+        missing = [k for k in need if k not in values]
+        if missing:
+            raise ValueError(f"the ChArUco board lacks {', '.join(missing)}")
+        unknown = sorted(str(k) for k in values if k not in (*need, "dictionary", "type"))
+        if unknown:
+            raise ValueError(f"unknown ChArUco board field(s) {', '.join(unknown)}; valid: "
+                             f"type, {', '.join(need)}, dictionary")
+        return cls(values["squares_x"], values["squares_y"], values["square"],
+                   values["marker"], values.get("dictionary", "DICT_4X4_50"))

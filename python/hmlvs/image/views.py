@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 
 from ..data.views import ViewData
-from ..geometry.board import BoardSpec
-from .corners import detect_board
+from ..geometry.board import BoardSpec, CharucoSpec
+from .corners import detect_board, detect_charuco
 from .session import (
     ImageReport,
     _read_manifest,
@@ -23,6 +23,8 @@ from .session import (
     _record_names,
     _Reject,
 )
+
+MIN_CORNERS = 6  # a view needs this many numbered corners (calibrate_joint's minimum)
 
 
 def _board_schema() -> Any:
@@ -38,8 +40,9 @@ def _board_schema() -> Any:
 
 
 def board_of(doc: dict[str, Any], board: Any, source: Any) -> tuple[BoardSpec, np.ndarray | None]:
-    """The board (rows, cols, square) of a manifest or the caller, and its measured pose in
-    the base when the manifest gives one (``origin``), else None."""
+    """The board (rows, cols, square; or a ChArUco board, ``type: charuco``) of a manifest or
+    the caller, and its measured pose in the base when the manifest gives one (``origin``),
+    else None."""
     from ..data.schema import validate
     from ..geometry.board import Checkerboard
 
@@ -48,9 +51,21 @@ def board_of(doc: dict[str, Any], board: Any, source: Any) -> tuple[BoardSpec, n
         raise ValueError(f"{source}: the manifest has no 'board' (rows, cols, square) and no "
                          "board was given")
     pose = None
+    if isinstance(spec, CharucoSpec):
+        return spec, None
     if isinstance(spec, (BoardSpec, Checkerboard)):
         return BoardSpec.of(spec), (spec.base_from_board() if isinstance(spec, Checkerboard)
                                     else None)
+    if isinstance(spec, dict) and spec.get("type", "checkerboard") != "checkerboard":
+        if spec["type"] != "charuco":
+            raise ValueError(f"{source}: unknown board type {spec['type']!r}; choose "
+                             "checkerboard or charuco")
+        try:
+            return CharucoSpec.from_dict(spec), None
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"{source}: {e}") from None
+    if isinstance(spec, dict):
+        spec = {k: v for k, v in spec.items() if k != "type"}
     validate(spec, _board_schema(), str(source), "board")
     if "origin" in spec:
         pose = Checkerboard(**{k: (tuple(v) if isinstance(v, list) else v)
@@ -66,8 +81,11 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     """An image session (a manifest, see docs/file-formats.md) -> joint-calibration views.
 
     Returns (views, board, image size (w, h), the board's measured base_from_board or None,
-    one :class:`ImageReport` per pair). A pair without a stripe or without the whole board
-    is reported and skipped; the rest of the session goes through.
+    one :class:`ImageReport` per pair). A checkerboard must be fully visible (its numbering
+    is then fixed across views by :func:`hmlvs.calibration.joint.calibrate_joint`); a
+    ChArUco board may be partly visible, its corners numbered by the marker ids. A pair
+    without a stripe, without the board or with fewer than 6 numbered corners is reported
+    and skipped; the rest of the session goes through.
     """
     from ..geometry.robot import Robot
 
@@ -83,8 +101,8 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         robot = Robot.scorbot_er7()
     from ..geometry.board import Checkerboard
 
-    detector_board = Checkerboard(rows=board_spec.rows, cols=board_spec.cols,
-                                  square=board_spec.square)
+    detector_board = board_spec if board_spec.unambiguous else Checkerboard(
+        rows=board_spec.rows, cols=board_spec.cols, square=board_spec.square)
     views: list[ViewData] = []
     reports: list[ImageReport] = []
     size = None
@@ -96,9 +114,12 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
                               stripe_options, min_stripe)
             size = pair.size
             try:
-                corners = detect_board(pair.off, detector_board)
+                corners = detect_corners(pair.off, detector_board)
             except ValueError as e:
                 raise _Reject(str(e)) from None
+            if len(corners) < MIN_CORNERS:
+                raise _Reject(f"only {len(corners)} board corners found and numbered; a view "
+                              f"needs at least {MIN_CORNERS}")
         except _Reject as e:
             reports.append(ImageReport(pid, index, on_name, off_name, False, str(e)))
             continue
@@ -111,3 +132,12 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         raise ValueError("no image pair could be read: " +
                          "; ".join(f"{r.id}: {r.reason}" for r in reports))
     return views, board_spec, size, board_pose, reports
+
+
+def detect_corners(image: np.ndarray, board: Any) -> Any:
+    """The numbered corners of one laser-off image: :func:`detect_charuco` for a ChArUco
+    board (``board.unambiguous``), else :func:`detect_board` (a whole checkerboard, numbered
+    by the top-left rule)."""
+    if getattr(board, "unambiguous", False):
+        return detect_charuco(image, board)
+    return detect_board(image, board)

@@ -1,0 +1,172 @@
+"""What the image pipeline saw in each view of a session, drawn on the image (``hmlvs inspect``).
+
+Per view one PNG: the laser-on frame (gray) with the numbered board corners, the stripe
+centres and the scan lines whose stripe was rejected, coloured by
+:class:`~hmlvs.image.stripe.StripeStatus`; and one line of text: used or rejected (and why),
+corners found, scan lines per stripe status. Used / rejected and the reason are those of the
+general model's pipeline (:func:`hmlvs.image.views.views_from_images`); the drawing repeats its
+stripe extraction and corner detection on each readable pair, also on the pairs it rejected,
+so a view without a board still shows its stripe and a view without a stripe its corners.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..image.stripe import StripeResult, StripeStatus, _as_gray
+
+#: BGR colour of each stripe status (NONE is not drawn: most scan lines miss the stripe)
+STATUS_COLOURS: dict[StripeStatus, tuple[int, int, int]] = {
+    StripeStatus.FOUND: (0, 200, 0),         # green: a centre
+    StripeStatus.MULTIPLE: (0, 0, 255),      # red: two or more peaks (reflections)
+    StripeStatus.TOO_NARROW: (255, 160, 0),  # blue: noise, hot pixels
+    StripeStatus.TOO_WIDE: (0, 165, 255),    # orange: glare
+    StripeStatus.FIT_FAILED: (255, 0, 255),  # magenta: e.g. a saturated flat top
+}
+CORNER_COLOUR = (0, 255, 255)  # yellow
+FIRST_CORNER_COLOUR = (255, 0, 255)  # magenta: corner 0, so the numbering's origin shows
+TICK = 10  # px: length of a rejected scan line's mark at the image border
+
+
+@dataclass
+class ViewInspection:
+    """One view of :func:`inspect_session`.
+
+    id : the pose id; used : whether the view enters the calibration; reason : why not ("")
+    corners : corners found and numbered (also for a rejected view, when its image was read)
+    stripe : scan lines per stripe status name (empty when the stripe could not be extracted)
+    image : the PNG written, or None (the images could not be read)
+    """
+
+    id: str
+    used: bool
+    reason: str = ""
+    corners: int = 0
+    stripe: dict[str, int] = field(default_factory=dict)
+    image: Path | None = None
+
+    def line(self) -> str:
+        """The terminal line: ``v001: used, 63 corners, stripe FOUND 812, MULTIPLE 2``."""
+        state = "used" if self.used else f"rejected ({self.reason})"
+        stripe = ", ".join(f"{k} {v}" for k, v in self.stripe.items() if v) or "none"
+        png = f" -> {self.image.name}" if self.image is not None else ""
+        return f"{self.id}: {state}, {self.corners} corners, stripe {stripe}{png}"
+
+
+def draw_view(image: np.ndarray, corners: Any = None, stripe: StripeResult | None = None,
+              title: str = "") -> np.ndarray:
+    """A BGR picture of one view: ``image`` (gray or colour, 8 or 16 bit) with ``corners``
+    (a :class:`~hmlvs.image.corners.Corners`: a circle and the board index at each, corner
+    0 in magenta), the stripe's found centres (green dots) and its rejected scan lines (a
+    mark of the status colour at the image border: the bottom for columns, the right side
+    for rows), and ``title`` at the top left."""
+    import cv2
+
+    gray = _as_gray(image, "the image", None)
+    if gray.dtype == np.uint16:
+        gray = (gray >> 8).astype(np.uint8)
+    out = cv2.cvtColor(np.ascontiguousarray(gray), cv2.COLOR_GRAY2BGR)
+    h, w = gray.shape
+    if stripe is not None:
+        columns = stripe.direction == "columns"
+        status = np.asarray(stripe.status)
+        for s, colour in STATUS_COLOURS.items():
+            lines = np.asarray(stripe.position)[status == s]
+            if s == StripeStatus.FOUND:
+                for px in stripe.pixels:
+                    cv2.circle(out, (int(round(px[0])), int(round(px[1]))), 1, colour, -1)
+                continue
+            for p in lines.astype(int):
+                a, b = ((p, h - TICK), (p, h - 1)) if columns else ((w - TICK, p), (w - 1, p))
+                cv2.line(out, a, b, colour, 1)
+    if corners is not None and len(corners):
+        radius = 4 if len(corners) < 200 else 2
+        for px, k in zip(np.asarray(corners.pixels), np.asarray(corners.index)):
+            c = (int(round(px[0])), int(round(px[1])))
+            colour = FIRST_CORNER_COLOUR if k == 0 else CORNER_COLOUR
+            cv2.circle(out, c, radius, colour, 1)
+            cv2.putText(out, str(int(k)), (c[0] + 4, c[1] - 4), cv2.FONT_HERSHEY_SIMPLEX,
+                        0.35, colour, 1, cv2.LINE_AA)
+    if title:
+        (tw, th), _ = cv2.getTextSize(title, cv2.FONT_HERSHEY_SIMPLEX, 0.55, 1)
+        cv2.rectangle(out, (0, 0), (tw + 16, th + 16), (0, 0, 0), -1)
+        cv2.putText(out, title, (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 1,
+                    cv2.LINE_AA)
+    return out
+
+
+def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = None,
+                    board: Any = None, channel: int | None = None, normalize: bool = True,
+                    **stripe_options: Any) -> list[ViewInspection]:
+    """Draw every view of an image session (a manifest, see docs/file-formats.md) into
+    ``out_dir`` (``<id>.png``) and say per view whether the general model's pipeline uses it.
+
+    Returns one :class:`ViewInspection` per manifest entry, in order. Raises ``ValueError``
+    for a malformed manifest or one without a board (as :func:`views_from_images`).
+    """
+    import cv2
+
+    from ..data.manifest import _write_png, read_manifest
+    from ..image.session import stripe_from_pair
+    from ..image.views import detect_corners, views_from_images
+
+    _, spec, _, _, reports = views_from_images(source, robot=robot, board=board,
+                                               channel=channel, normalize=normalize,
+                                               **stripe_options)
+    entries, _, folder = read_manifest(source)
+    from ..geometry.board import Checkerboard
+
+    detector_board = spec if spec.unambiguous else Checkerboard(rows=spec.rows, cols=spec.cols,
+                                                                square=spec.square)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    result = []
+    for entry, rep in zip(entries, reports):
+        view = ViewInspection(rep.id, rep.ok, rep.reason, rep.corners, dict(rep.stripe))
+        result.append(view)
+        if "on" not in entry or "off" not in entry:
+            continue
+        frames = []
+        for key in ("on", "off"):
+            path = Path(entry[key])
+            img = cv2.imread(str(path if path.is_absolute() else folder / path),
+                             cv2.IMREAD_UNCHANGED)
+            frames.append(img)
+        on, off = frames
+        if on is None or off is None:
+            continue
+        try:
+            on_g = _as_gray(on, "the laser-on image", channel)
+            off_g = _as_gray(off, "the laser-off image", channel)
+        except ValueError:
+            continue
+        stripe = None
+        if on_g.shape == off_g.shape and on_g.dtype == off_g.dtype:
+            try:
+                stripe = stripe_from_pair(on_g, off_g, normalize=normalize, **stripe_options)
+            except ValueError:
+                stripe = None
+        try:
+            corners = detect_corners(off_g, detector_board)
+        except ValueError:
+            corners = None
+        if not rep.ok:  # the pipeline stopped early: report what the images show
+            view.corners = 0 if corners is None else len(corners)
+            view.stripe = {} if stripe is None else stripe.counts()
+        state = "used" if rep.ok else "rejected"
+        picture = draw_view(on_g, corners, stripe,
+                            f"{rep.id}: {state}, {view.corners} corners")
+        view.image = out / f"{_safe(rep.id)}.png"
+        _write_png(view.image, picture)
+    return result
+
+
+def _safe(name: str) -> str:
+    """A file name for a pose id (path separators and the like replaced)."""
+    return "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in name) or "view"
+
