@@ -4,7 +4,9 @@ Compares, on the same data and machine in the same run:
   * hmlvs' C++ PSO (via the Python binding) against the same PSO vectorised with NumPy,
   * hmlvs' modern LM (Ceres) against scipy.optimize.least_squares (method="lm"),
   * model evaluation of 1e6 points from Python,
-and runs the C++ benchmark executable (kernel rate, PSO on 1 and all threads, LM solves).
+and runs the C++ benchmark executable (kernel rate, PSO on 1 and all threads, LM solves), the
+stripe extraction benchmark (bench_stripe.py) and the joint calibration of the general sensor
+against vision-calibration (bench_joint.py; that library is optional).
 """
 
 from __future__ import annotations
@@ -71,6 +73,8 @@ def main() -> None:
     ap.add_argument("--numpy-iterations", type=int, default=5000,
                     help="iterations of the NumPy PSO (5000 = the paper's workload)")
     ap.add_argument("--out", type=Path, default=HERE / "RESULTS.md")
+    ap.add_argument("--no-joint", dest="joint", action="store_false",
+                    help="skip the joint calibration against vision-calibration (minutes)")
     args = ap.parse_args()
     rows: list[tuple[str, str, str]] = []
     ratios: list[str] = []
@@ -180,6 +184,14 @@ def main() -> None:
                              capture_output=True, text=True).stdout
         stripe_lines = [out.strip()]
 
+    joint = HERE / "bench_joint.py"
+    joint_lines: list[str] = []
+    if joint.exists() and args.joint:
+        print("joint calibration against vision-calibration ...", flush=True)
+        out = subprocess.run([sys.executable, str(joint), "--reps", str(min(args.reps, 3))],
+                             check=True, stdout=subprocess.PIPE, text=True).stdout
+        joint_lines = [out.strip()]
+
     text = [
         "# hmlvs benchmark results",
         "",
@@ -203,6 +215,8 @@ def main() -> None:
         *[f"| {a} | {b_} | {c} |" for a, b_, c in rows],
         "",
         *stripe_lines,
+        "",
+        *joint_lines,
         "",
     ]
     with atomic_write(args.out) as fh:

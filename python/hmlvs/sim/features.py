@@ -58,10 +58,16 @@ def project(truth: Truth, camera_points: np.ndarray) -> np.ndarray:
 
 def synthetic_views(seed: int, n_views: int = 20, corner_noise: float = 0.1,
                laser_noise: float = 0.1, truth: Truth | None = None,
-               board: BoardSpec | None = None, flip_every: int = 0
+               board: BoardSpec | None = None, flip_every: int = 0,
+               stripe_samples: int = 400
                ) -> tuple[list[ViewData], BoardSpec, Truth, list[np.ndarray]]:
     """Views of the board from varied poses; returns views, board, truth, and each view's
-    exact stripe points in the base frame (for map-error checks)."""
+    exact stripe points in the base frame (for map-error checks).
+
+    stripe_samples : points sampled along the stripe across the board's width; those on the
+        board (all of them in most views, at least 15 %) become the view's stripe pixels, so
+        the default 400 gives ~200-400 a view and 800 about twice as many. The stripe noise
+        draws from the same generator, so another value also changes the later views."""
     truth = truth or default_truth()
     board = board or BoardSpec(6, 9, 25.0)
     rng = np.random.default_rng(seed)
@@ -77,11 +83,12 @@ def synthetic_views(seed: int, n_views: int = 20, corner_noise: float = 0.1,
         corners = project(truth, pts @ cb[:3, :3].T + cb[:3, 3])
         # The stripe: board points (x, y, 0) on the laser plane, x across the board.
         n, d = truth.plane[:3], truth.plane[3]
-        xs = np.linspace(-0.4 * board.square, size[0] + 0.4 * board.square, 400)
+        xs = np.linspace(-0.4 * board.square, size[0] + 0.4 * board.square,
+                         stripe_samples)
         a = n @ cb[:3, 1]
         ys = -(n @ (np.outer(cb[:3, 0], xs) + cb[:3, 3:4]) + d) / a
         ok = (ys > -0.4 * board.square) & (ys < size[1] + 0.4 * board.square)
-        if ok.sum() < 60:
+        if ok.sum() < 0.15 * stripe_samples:  # 60 of the default 400
             continue
         cam = (np.outer(xs[ok], cb[:3, 0]) + np.outer(ys[ok], cb[:3, 1]) + cb[:3, 3])
         stripe = project(truth, cam)
