@@ -213,3 +213,20 @@ def test_corners_agree_with_the_classic_11x11_pipeline_where_it_is_stable(detect
     assert {k for k, v in misplaced.items() if v} <= {"left02.jpg", "left07.jpg", "left09.jpg",
                                                        "left13.jpg"}
     assert d.max() < 0.5 and np.median(d) < 0.1
+
+
+@pytest.mark.parametrize("bits", [8, 10, 12, 16])
+def test_boards_are_found_at_every_bit_depth(bits):
+    """A 10- or 12-bit camera stores values up to 1023 / 4095 in a 16-bit file: the board is
+    found as in the 8-bit original (scaled by the image's range, not by 1/256)."""
+    import cv2
+    from hmlvs.geometry.board import Checkerboard
+    from hmlvs.image.corners import detect_board
+
+    img8 = cv2.imread(str(DATA / "left01.jpg"), cv2.IMREAD_GRAYSCALE)
+    img = img8 if bits == 8 else (img8.astype(np.uint16) << (bits - 8))
+    board = Checkerboard(rows=6, cols=9, square=25.0)
+    ref = detect_board(img8, board)
+    got = detect_board(img, board)
+    assert len(got.index) == 54
+    assert np.abs(got.pixels - ref.pixels).max() < 0.05

@@ -113,6 +113,17 @@ class Corners:
         return self.board.corners()[self.index]
 
 
+def _to_8bit(gray: np.ndarray) -> np.ndarray:
+    """An 8-bit copy for OpenCV's board detectors. A 16-bit image is scaled by its actual
+    range (its 99.9th percentile), not by 1/256: 10- and 12-bit cameras store values up to
+    1023 or 4095 in 16-bit files, which ``>> 8`` would squeeze into 0-3 or 0-15."""
+    if gray.dtype == np.uint8:
+        return np.ascontiguousarray(gray)
+    top = float(np.percentile(gray, 99.9)) if gray.size else 0.0
+    top = top if top > 0 else float(gray.max()) or 1.0
+    return np.clip(gray.astype(np.float32) * (255.0 / top), 0, 255).astype(np.uint8)
+
+
 def _handedness(board: Any) -> float:
     """Sign of the image cross product (row step x column step) of a board seen from the
     side its ``normal`` points to: the camera's z axis looks into the scene, so a board frame
@@ -198,10 +209,7 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
         raise ValueError(f"options must be a CornerOptions, got {options!r}")
     extend, max_error = options.extend, options.max_error
     board = Checkerboard() if board is None else board
-    gray = _as_gray(image, "the image", None)
-    if gray.dtype == np.uint16:
-        gray = (gray >> 8).astype(np.uint8)
-    gray = np.ascontiguousarray(gray)
+    gray = _to_8bit(_as_gray(image, "the image", None))
     h, w = gray.shape
     n_board = board.rows * board.cols
     bxy = board.board_coordinates()
@@ -376,10 +384,7 @@ def detect_charuco(image: np.ndarray, board: Any, min_corners: int = 4) -> Corne
 
     if not getattr(board, "unambiguous", False) or not hasattr(board, "cv_board"):
         raise ValueError(f"detect_charuco needs a CharucoSpec board, got {board!r}")
-    gray = _as_gray(image, "the image", None)
-    if gray.dtype == np.uint16:
-        gray = (gray >> 8).astype(np.uint8)
-    gray = np.ascontiguousarray(gray)
+    gray = _to_8bit(_as_gray(image, "the image", None))
     h, w = gray.shape
     found, ids, markers, _ = cv2.aruco.CharucoDetector(board.cv_board()).detectBoard(gray)
     n = 0 if ids is None else len(ids)
