@@ -135,7 +135,15 @@ def test_a_ray_at_a_grazing_angle_to_the_laser_plane_has_no_measurement():
     # angle and thousands of mm away: invalid, with a reason.
     v0 = p.Cv - p.f * np.tan(p.theta) / p.Sv
     px = np.array([[320.0, v0 + 0.5], [320.0, 400.0]])
-    pts, ok = hmlvs.points_in_camera(p, px, on_invalid="mask")
+    # the model itself keeps them (the design analysis and the solvers need the raw model) ...
+    _, ok = hmlvs.points_in_camera(p, px, on_invalid="mask")
+    assert ok.tolist() == [True, True]
+    # ... measurement refuses them
+    from hmlvs.models.paper import PaperSensor
+
+    pts, ok = PaperSensor(p).points_in_camera(px, on_invalid="mask")
     assert ok.tolist() == [False, True]
     with pytest.raises(ValueError, match="grazing angle"):
-        hmlvs.points_in_camera(p, px[:1])
+        PaperSensor(p).points_in_camera(px[:1])
+    cloud = hmlvs.measure(p, [px], np.eye(4))
+    assert cloud.valid.tolist() == [False, True]

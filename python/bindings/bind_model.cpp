@@ -27,10 +27,11 @@ void BindModel(py::module_& m) {
   const auto release = py::call_guard<py::gil_scoped_release>();
   m.def("_validate_params", &ValidateParams, py::arg("params"));
   m.def("_validate_poses", &ValidatePoses, py::arg("poses"), release);
+  m.attr("MIN_RAY_SINE") = kMinRaySine;
   m.def("_camera_points", &CameraPointsFromPixels, py::arg("params"), py::arg("pixels"),
-        py::arg("throw_on_invalid"), release);
+        py::arg("throw_on_invalid"), py::arg("min_ray_sine") = 0.0, release);
   m.def("_base_points", &BasePointsFromPixels, py::arg("params"), py::arg("pixels"),
-        py::arg("poses"), py::arg("throw_on_invalid"), release);
+        py::arg("poses"), py::arg("throw_on_invalid"), py::arg("min_ray_sine") = 0.0, release);
   m.def("_residuals", &Residuals, py::arg("params"), py::arg("pixels"), py::arg("poses"),
         py::arg("references"), release);
   m.def("_objective", &Objective, py::arg("params"), py::arg("pixels"), py::arg("poses"),

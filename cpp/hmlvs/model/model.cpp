@@ -47,12 +47,12 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
   throw std::invalid_argument(msg.str());
 }
 
-[[noreturn]] void ThrowGrazing(Eigen::Index i, double u, double v, double sine) {
+[[noreturn]] void ThrowGrazing(Eigen::Index i, double u, double v, double sine, double min_sine) {
   std::ostringstream msg;
   msg << "pixel " << i << " (u=" << u << ", v=" << v
       << ") has a ray that meets the laser plane at a grazing angle of "
       << std::asin(std::min(1.0, sine)) * 180.0 / M_PI << " deg (< "
-      << std::asin(kMinRaySine) * 180.0 / M_PI
+      << std::asin(min_sine) * 180.0 / M_PI
       << " deg), too far away to be measured; it has no measurement";
   throw std::invalid_argument(msg.str());
 }
@@ -125,7 +125,7 @@ namespace {
 // returns the laser-plane test (> 0 where the ray meets the plane in front of the camera).
 template <typename PointOf>
 PointsResult MapPixels(const Vector14d& q, PixelsRef pixels, bool throw_on_invalid,
-                       PointOf point_of) {
+                       double min_ray_sine, PointOf point_of) {
   const Eigen::Index m = pixels.rows();
   PointsResult out;
   out.points.resize(m, 3);
@@ -142,11 +142,11 @@ PointsResult MapPixels(const Vector14d& q, PixelsRef pixels, bool throw_on_inval
     const double xu = xd / s, yu = yd / s;
     const double grazing =
         std::abs(yu * cos_theta + q[kF] * sin_theta) / std::sqrt(xu * xu + yu * yu + q[kF] * q[kF]);
-    if (plane > 0.0 && grazing >= kMinRaySine) {
+    if (plane > 0.0 && grazing >= min_ray_sine) {
       out.points.row(i) << point[0], point[1], point[2];
       out.valid[i] = 1;
     } else {
-      if (throw_on_invalid && plane > 0.0) ThrowGrazing(i, u, v, grazing);
+      if (throw_on_invalid && plane > 0.0) ThrowGrazing(i, u, v, grazing, min_ray_sine);
       if (throw_on_invalid) ThrowMissedPlane(q, i, u, v, plane);
       out.points.row(i).setConstant(kNaN);
       out.valid[i] = 0;
@@ -158,25 +158,26 @@ PointsResult MapPixels(const Vector14d& q, PixelsRef pixels, bool throw_on_inval
 
 }  // namespace
 
-PointsResult CameraPointsFromPixels(const Vector14d& q, PixelsRef pixels, bool throw_on_invalid) {
+PointsResult CameraPointsFromPixels(const Vector14d& q, PixelsRef pixels, bool throw_on_invalid,
+                                    double min_ray_sine) {
   ValidateParams(q);
   RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
   const double tan_theta = std::tan(q[kTheta]);
-  return MapPixels(q, pixels, throw_on_invalid,
+  return MapPixels(q, pixels, throw_on_invalid, min_ray_sine,
                    [&](Eigen::Index, double u, double v, double* point) {
                      return PixelToCamera(q.data(), tan_theta, u, v, point);
                    });
 }
 
 PointsResult BasePointsFromPixels(const Vector14d& q, PixelsRef pixels, PosesRef poses,
-                                  bool throw_on_invalid) {
+                                  bool throw_on_invalid, double min_ray_sine) {
   RequireSameRows(pixels.rows(), "pixels", poses.rows(), "poses");
   ValidatePoses(poses);
   ValidateParams(q);
   RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
   const Eigen::Matrix3d hand_from_camera_rot = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
   const double tan_theta = std::tan(q[kTheta]);
-  return MapPixels(q, pixels, throw_on_invalid,
+  return MapPixels(q, pixels, throw_on_invalid, min_ray_sine,
                    [&](Eigen::Index i, double u, double v, double* point) {
                      return PixelToBase(q.data(), hand_from_camera_rot, tan_theta, u, v,
                                         PoseRotation(poses, i), PosePosition(poses, i), point);

@@ -18,9 +18,10 @@ namespace hmlvs {
 
 constexpr int kNumParams = 14;
 
-/// Measurement refuses pixels whose ray meets the laser plane at less than 0.5 degrees (the sine
-/// below): such points lie hundreds of baselines away, where a tenth of a pixel moves them by
-/// metres. (The objective and the solvers do not apply it.)
+/// Measurement (hmlvs.measure) refuses pixels whose ray meets the laser plane at less than 0.5
+/// degrees (the sine below): such points lie hundreds of baselines away, where a tenth of a
+/// pixel moves them by metres. The batch functions apply it when asked (`min_ray_sine`); the
+/// objective and the solvers do not.
 constexpr double kMinRaySine = 0.0087265354983739347;  // sin(0.5 deg)
 
 enum Param : int {
@@ -217,11 +218,14 @@ void ValidatePoses(PosesRef base_from_hand);
 /// Stripe pixels -> camera-frame points (mm), MODEL.md steps 1-3. Pixels whose ray misses the
 /// laser plane are marked invalid; with `throw_on_invalid` the first one raises
 /// std::invalid_argument.
-PointsResult CameraPointsFromPixels(const Vector14d& q, PixelsRef pixels, bool throw_on_invalid);
+/// Pixels whose ray meets the plane at an angle whose sine is below `min_ray_sine` (e.g.
+/// kMinRaySine) are invalid too.
+PointsResult CameraPointsFromPixels(const Vector14d& q, PixelsRef pixels, bool throw_on_invalid,
+                                    double min_ray_sine = 0.0);
 
 /// Stripe pixels + base_from_hand poses -> base-frame points (mm), paper Eq. 9.
 PointsResult BasePointsFromPixels(const Vector14d& q, PixelsRef pixels, PosesRef base_from_hand,
-                                  bool throw_on_invalid);
+                                  bool throw_on_invalid, double min_ray_sine = 0.0);
 
 /// Residuals E_i = P_i - bP_i(q) (m x 3). Throws if a pixel's ray misses the laser plane.
 RowMatX3 Residuals(const Vector14d& q, PixelsRef pixels, PosesRef base_from_hand,

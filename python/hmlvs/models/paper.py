@@ -18,21 +18,23 @@ from .base import check_on_invalid as _check_on_invalid
 from .params import Parameters
 
 
-def points_in_camera(params: Any, pixels: Any, on_invalid: OnInvalid = "raise"
-                     ) -> tuple[np.ndarray, np.ndarray]:
+def points_in_camera(params: Any, pixels: Any, on_invalid: OnInvalid = "raise",
+                     min_angle: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Stripe pixels -> laser points in the camera frame (mm), paper Eq. 1-3.
 
     Returns ``(points (m, 3), valid (m,) bool)``. A pixel whose ray misses the laser plane
     (``Yu + f tan(theta) <= 0``) raises ``ValueError`` naming it, or with
-    ``on_invalid="mask"`` gets ``valid=False`` and a NaN row.
+    ``on_invalid="mask"`` gets ``valid=False`` and a NaN row. With ``min_angle`` (rad), so
+    does a ray that meets the plane at a smaller angle (measurement uses 0.5 degrees).
     """
     throw = _check_on_invalid(on_invalid)
-    r = _core._camera_points(as_params(params), as_matrix(pixels, 2, "pixels"), throw)
+    r = _core._camera_points(as_params(params), as_matrix(pixels, 2, "pixels"), throw,
+                             _min_sine(min_angle))
     return np.array(r.points), np.asarray(r.valid, dtype=bool)
 
 
-def points_in_base(params: Any, pixels: Any, poses: Any, on_invalid: OnInvalid = "raise"
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def points_in_base(params: Any, pixels: Any, poses: Any, on_invalid: OnInvalid = "raise",
+                   min_angle: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Stripe pixels seen at base_from_hand poses -> points in the robot base frame (Eq. 9).
 
     Returns ``(points (m, 3), valid (m,) bool)``; see :func:`points_in_camera` for
@@ -42,8 +44,16 @@ def points_in_base(params: Any, pixels: Any, poses: Any, on_invalid: OnInvalid =
     px = as_matrix(pixels, 2, "pixels")
     ps = as_poses(poses)
     same_rows(pixels=px, poses=ps)
-    r = _core._base_points(as_params(params), px, ps, throw)
+    r = _core._base_points(as_params(params), px, ps, throw, _min_sine(min_angle))
     return np.array(r.points), np.asarray(r.valid, dtype=bool)
+
+
+def _min_sine(min_angle: float) -> float:
+    import math
+
+    if not (math.isfinite(min_angle) and 0 <= min_angle < math.pi / 2):
+        raise ValueError(f"min_angle must be an angle in [0, pi/2) rad, got {min_angle}")
+    return math.sin(min_angle)
 
 
 def residuals(params: Any, pixels: Any, poses: Any, references: Any) -> np.ndarray:
@@ -134,6 +144,9 @@ def residual_jacobian(params: Any, pixels: Any, poses: Any, references: Any
     return np.asarray(r).reshape(m, 3), np.asarray(j).reshape(m, 3, -1)
 
 
+MIN_RAY_ANGLE = float(np.arcsin(_core.MIN_RAY_SINE))  # 0.5 deg: see PaperSensor
+
+
 @dataclass(frozen=True)
 class PaperSensor:
     """The paper's model as a :class:`hmlvs.models.base.SensorModel` (for measurement and
@@ -144,11 +157,13 @@ class PaperSensor:
 
     def points_in_camera(self, pixels: Any, on_invalid: OnInvalid = "raise"
                          ) -> tuple[np.ndarray, np.ndarray]:
-        return points_in_camera(self.params, pixels, on_invalid)
+        """As :func:`points_in_camera`, refusing grazing rays (< 0.5 deg) as measurement
+        does."""
+        return points_in_camera(self.params, pixels, on_invalid, min_angle=MIN_RAY_ANGLE)
 
     def points_in_base(self, pixels: Any, poses: Any, on_invalid: OnInvalid = "raise"
                        ) -> tuple[np.ndarray, np.ndarray]:
-        return points_in_base(self.params, pixels, poses, on_invalid)
+        return points_in_base(self.params, pixels, poses, on_invalid, min_angle=MIN_RAY_ANGLE)
 
     def hand_from_camera_matrix(self) -> np.ndarray:
         return hand_from_camera(self.params)
