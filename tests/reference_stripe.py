@@ -50,7 +50,7 @@ def kernels(sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def extract(image: np.ndarray, direction: str = "columns", method: str = "centroid",
-            threshold: float | None = None, min_width: float = 2.0, max_width: float = 20.0,
+            threshold: float | None = None, min_width: float = 2.0, max_width: float = 40.0,
             noise: float | None = None, steger_sigma: float = 1.5, dominance: float = 0.0
             ) -> dict[str, np.ndarray]:
     """Same contract as ``hmlvs.extract_stripe``; returns a dict of arrays."""
@@ -122,9 +122,20 @@ def extract(image: np.ndarray, direction: str = "columns", method: str = "centro
     width = right - left
     width[(m - i > limit) | (j - m > limit)] = np.inf
 
-    narrow = width < min_width
-    wide = width > max_width
-    valid = ~narrow & ~wide
+    # a run whose half-maximum span [i, j] holds a stronger run's peak (ties: the earlier
+    # run is stronger) in its column is a shoulder: no peak of its own
+    shoulder = np.zeros(nr, bool)
+    for off in range(1, MAX_RUNS):
+        a = np.arange(max(nr - off, 0))
+        b = a + off
+        same = col[a] == col[b]
+        a, b = a[same], b[same]
+        b_wins = pk[b] > pk[a]
+        shoulder[a[b_wins & (m[b] >= i[a]) & (m[b] <= j[a])]] = True
+        shoulder[b[~b_wins & (m[a] >= i[b]) & (m[a] <= j[b])]] = True
+    narrow = (width < min_width) & ~shoulder
+    wide = (width > max_width) & ~shoulder
+    valid = ~narrow & ~wide & ~shoulder
     n_valid = np.bincount(col, weights=valid, minlength=w).astype(int)
     n_wide = np.bincount(col, weights=wide, minlength=w).astype(int)
 
@@ -162,7 +173,7 @@ def extract(image: np.ndarray, direction: str = "columns", method: str = "centro
     intensity[cols] = pk[best]
     wid[cols] = width[best]
     # strongest competitor other than the chosen peak
-    comp = ~narrow
+    comp = (width >= min_width) & ~shoulder
     second = np.zeros(w)
     others = comp.copy()
     others[bv[bv >= 0]] = False

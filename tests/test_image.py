@@ -191,7 +191,9 @@ def test_stripe_statuses_on_synthetic_columns():
         np.zeros(n),                                                        # nothing
         gaussian_column(n, 15.0, 1.5, 200) + gaussian_column(n, 40.0, 1.5, 150),  # two peaks
         np.where(np.arange(n) == 30, 200.0, 0.0),                           # a hot pixel
-        gaussian_column(n, 30.0, 12.0, 200),                                # a wide blob
+        # a wide blob: FWHM 47 px, beyond the default max_width of 40 px (a FWHM of 28 px
+        # was "too wide" while the default was 20 px; defocused stripes are that wide)
+        gaussian_column(n, 30.0, 20.0, 200),
         np.minimum(gaussian_column(n, 25.0, 2.0, 600), 255),                # saturated top
         gaussian_column(n, 10.0, 1.5, 200) + gaussian_column(n, 45.0, 1.5, 60),  # weak echo
     ]

@@ -70,7 +70,9 @@ def _write(path, doc):
                                                 " or 'pose'"),
         (lambda d: d["poses"][0].update(stripe="x.csv"), r"entry 0 \(id p000\) must name either "
                                                          "an image pair"),
-        (lambda d: d["poses"][0].pop("off"), r"entry 0 \(id p000\) names only one of"),
+        # (an entry with 'on' and no 'off' is a laser-on image alone, issue 14: valid)
+        (lambda d: d["poses"][0].pop("on"), r"entry 0 \(id p000\) names a laser-off image but "
+                                            "no laser-on image"),
         (lambda d: d.update(format="other"), "not an hmlvs image manifest"),
         (lambda d: d["poses"][0].update(pose=[[1, 0], [0, 1]], joints=None) or
          d["poses"][0].pop("joints"), r"'pose' must be a finite 4x4"),

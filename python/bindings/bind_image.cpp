@@ -98,6 +98,7 @@ void BindImage(py::module_& m) {
       .def_readonly("sigma", &StripeResult::sigma)
       .def_readonly("status", &StripeResult::status)
       .def_readonly("num_peaks", &StripeResult::num_peaks)
+      .def_readonly("residual", &StripeResult::residual)
       .def_readonly("threshold", &StripeResult::threshold)
       .def_readonly("noise", &StripeResult::noise);
 
@@ -127,6 +128,48 @@ void BindImage(py::module_& m) {
                                                          : Extract<std::uint16_t>(image, options);
       },
       py::arg("image"), py::arg("options"));
+  py::class_<StripeQualityOptions>(m, "_StripeQualityOptions")
+      .def(py::init<>())
+      .def_readwrite("albedo_step", &StripeQualityOptions::albedo_step)
+      .def_readwrite("hump", &StripeQualityOptions::hump)
+      .def_readwrite("dip", &StripeQualityOptions::dip);
+  m.def(
+      "_assess_stripe",
+      [](const py::array& image, const py::object& on, const py::object& off,
+         StripeDirection direction, const StripeQualityOptions& options,
+         const Eigen::VectorXd& centre, const Eigen::VectorXd& width,
+         const Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1>& status, double threshold) {
+        StripeResult out;
+        out.centre = centre;
+        out.width = width;
+        out.status = status;
+        out.threshold = threshold;
+        const Depth d = DepthOf(image, "the image");
+        for (const py::object* o : {&on, &off}) {
+          if (!o->is_none() && DepthOf(o->cast<py::array>(), "a frame") != d) {
+            throw std::invalid_argument("the frames and the stripe's image differ in bit depth");
+          }
+        }
+        auto run = [&](auto tag) {
+          using T = decltype(tag);
+          const ImageView<T> v = ViewOf<T>(image, "the image");
+          const ImageView<T> a =
+              on.is_none() ? ImageView<T>() : ViewOf<T>(on.cast<py::array>(), "the laser-on image");
+          const ImageView<T> b = off.is_none()
+                                     ? ImageView<T>()
+                                     : ViewOf<T>(off.cast<py::array>(), "the laser-off image");
+          py::gil_scoped_release release;
+          AssessStripe(v, a, b, direction, options, &out);
+        };
+        if (d == Depth::kU8) {
+          run(std::uint8_t{});
+        } else {
+          run(std::uint16_t{});
+        }
+        return out.status;
+      },
+      py::arg("image"), py::arg("on"), py::arg("off"), py::arg("direction"), py::arg("options"),
+      py::arg("centre"), py::arg("width"), py::arg("status"), py::arg("threshold"));
   m.def(
       "_estimate_difference_noise",
       [](const py::array& image) {

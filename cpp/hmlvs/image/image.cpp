@@ -135,6 +135,7 @@ void DetectPerLine(const ScanView<T>& v, T thr, Runs* runs) {
 
 struct Peak {
   int b = 0, e = 0, m = 0;
+  int lo = 0, hi = 0;  // the half-maximum walk's last pixels either side of m
   double value = 0.0;
   double width = 0.0;
 };
@@ -161,6 +162,8 @@ Peak MeasurePeak(const ScanView<T>& v, int s, int b, int e, int limit) {
   while (i > 0 && v.at(s, i - 1) > half && pk.m - i <= limit) --i;
   int j = pk.m;
   while (j < v.n_prof - 1 && v.at(s, j + 1) > half && j - pk.m <= limit) ++j;
+  pk.lo = i;
+  pk.hi = j;
   if (pk.m - i > limit || j - pk.m > limit) {
     pk.width = std::numeric_limits<double>::infinity();
     return pk;
@@ -334,6 +337,30 @@ Centre StegerCentre(const ScanView<T>& v, int s, const Peak& pk, const Kernels& 
   return c;
 }
 
+// Linear interpolation of the profile of scan line s at p (clamped to the image).
+template <typename T>
+double Interpolate(const ScanView<T>& v, int s, double p) {
+  if (v.n_prof < 2) return v.at(s, 0);
+  p = std::clamp(p, 0.0, static_cast<double>(v.n_prof - 1));
+  const int i = std::min(static_cast<int>(p), v.n_prof - 2);
+  const double f = p - i;
+  return (1.0 - f) * v.at(s, i) + f * v.at(s, i + 1);
+}
+
+// Asymmetry of the profile about `centre`: RMS of I(c + x) - I(c - x) for x = 0.5, 1, ...
+// up to half the FWHM (at least one sample), over the peak value.
+template <typename T>
+double Asymmetry(const ScanView<T>& v, int s, double centre, double width, double peak) {
+  const int n = std::max(1, static_cast<int>(std::floor(width)));
+  double sum = 0.0;
+  for (int k = 1; k <= n; ++k) {
+    const double x = 0.5 * k;
+    const double d = Interpolate(v, s, centre + x) - Interpolate(v, s, centre - x);
+    sum += d * d;
+  }
+  return std::sqrt(sum / n) / std::max(peak, 1e-12);
+}
+
 template <typename T>
 void ValidateOptions(const StripeOptions& o) {
   std::ostringstream msg;
@@ -503,6 +530,7 @@ StripeResult ExtractStripe(const ImageView<T>& image, const StripeOptions& o) {
   res.intensity.setConstant(n, kNaN);
   res.width.setConstant(n, kNaN);
   res.sigma.setConstant(n, kNaN);
+  res.residual.setConstant(n, kNaN);
   res.status.setConstant(n, static_cast<std::uint8_t>(StripeStatus::kNone));
   res.num_peaks.setZero(n);
   const Kernels kernels =
@@ -525,8 +553,20 @@ StripeResult ExtractStripe(const ImageView<T>& image, const StripeOptions& o) {
       const size_t idx = static_cast<size_t>(s) * kMaxRuns + k;
       peaks[k] = MeasurePeak(v, s, runs.begin[idx], runs.end[idx], limit);
     }
+    // A run whose half-maximum span holds a stronger run's peak is that peak's shoulder
+    // (noise splitting a wide profile where it crosses the threshold), not a peak.
+    bool shoulder[kMaxRuns] = {};
+    for (int k = 0; k < count; ++k) {
+      for (int k2 = 0; k2 < count && !shoulder[k]; ++k2) {
+        const bool stronger =
+            peaks[k2].value > peaks[k].value || (peaks[k2].value == peaks[k].value && k2 < k);
+        shoulder[k] =
+            k2 != k && stronger && peaks[k2].m >= peaks[k].lo && peaks[k2].m <= peaks[k].hi;
+      }
+    }
     for (int k = 0; k < count; ++k) {
       const Peak& pk = peaks[k];
+      if (shoulder[k]) continue;
       if (pk.width < o.min_width) {
         if (n_narrow++ == 0 || pk.value > best_narrow.value) best_narrow = pk;
       } else if (pk.width > o.max_width) {
@@ -546,7 +586,7 @@ StripeResult ExtractStripe(const ImageView<T>& image, const StripeOptions& o) {
     }
     for (int k = 0; k < count; ++k) {
       const Peak& pk = peaks[k];
-      const bool competitor = pk.width >= o.min_width;
+      const bool competitor = pk.width >= o.min_width && !shoulder[k];
       const bool is_best = pk.b == best_valid.b;
       if (competitor && !is_best) second = std::max(second, pk.value);
     }
@@ -575,8 +615,110 @@ StripeResult ExtractStripe(const ImageView<T>& image, const StripeOptions& o) {
     res.status[s] = static_cast<std::uint8_t>(StripeStatus::kFound);
     res.centre[s] = c.centre;
     res.sigma[s] = c.sigma;
+    res.residual[s] = Asymmetry(v, s, c.centre, best_valid.width, best_valid.value);
   }
   return res;
+}
+
+template <typename T>
+void AssessStripe(const ImageView<T>& image, const ImageView<T>& on, const ImageView<T>& off,
+                  StripeDirection direction, const StripeQualityOptions& o, StripeResult* res) {
+  RequireImage(image, "the image");
+  for (const ImageView<T>* other : {&on, &off}) {
+    if (other->data != nullptr && (other->rows != image.rows || other->cols != image.cols)) {
+      std::ostringstream msg;
+      msg << "the laser-" << (other == &on ? "on" : "off") << " image is " << other->cols << " x "
+          << other->rows << " pixels but the stripe's image is " << image.cols << " x "
+          << image.rows;
+      throw std::invalid_argument(msg.str());
+    }
+  }
+  if (!std::isfinite(o.albedo_step) || !(o.hump >= 0.0 && o.hump <= 1.0) ||
+      !(o.dip > 0.0 && o.dip <= 1.0)) {
+    std::ostringstream msg;
+    msg << "quality options must satisfy albedo_step finite, 0 <= hump <= 1, 0 < dip <= 1; got "
+        << o.albedo_step << ", " << o.hump << ", " << o.dip;
+    throw std::invalid_argument(msg.str());
+  }
+  const ScanView<T> v = MakeScanView(image, direction);
+  const int n = v.n_scan;
+  if (res == nullptr || res->centre.size() != n || res->status.size() != n ||
+      res->width.size() != n) {
+    std::ostringstream msg;
+    msg << "the stripe result does not belong to this image: it has "
+        << (res == nullptr ? 0 : res->status.size()) << " scan lines, the image " << n;
+    throw std::invalid_argument(msg.str());
+  }
+  const ScanView<T> von = MakeScanView(on.data != nullptr ? on : image, direction);
+  const bool with_off = off.data != nullptr && o.albedo_step > 1.0;
+  const ScanView<T> voff = MakeScanView(with_off ? off : image, direction);
+  const double tmax = static_cast<double>(std::numeric_limits<T>::max());
+  const double thr = res->threshold;
+  std::vector<double> y;
+  for (int s = 0; s < n; ++s) {
+    if (res->status[s] != static_cast<std::uint8_t>(StripeStatus::kFound)) continue;
+    const double c = res->centre[s], w = res->width[s];
+    auto set = [&](StripeStatus st) { res->status[s] = static_cast<std::uint8_t>(st); };
+    if (c - w < -0.5 || c + w > v.n_prof - 0.5) {
+      set(StripeStatus::kClipped);
+      continue;
+    }
+    const int lo = std::max(0, static_cast<int>(std::ceil(c - 0.5 * w)));
+    const int hi = std::min(v.n_prof - 1, static_cast<int>(std::floor(c + 0.5 * w)));
+    bool saturated = false;
+    for (int p = lo; p <= hi && !saturated; ++p) saturated = von.at(s, p) >= tmax;
+    if (saturated) {
+      set(StripeStatus::kSaturated);
+      continue;
+    }
+    if (o.hump > 0.0) {
+      // the run above threshold around the centre, smoothed at FWHM / 6 (speckle)
+      const int m = std::clamp(static_cast<int>(std::lround(c)), 0, v.n_prof - 1);
+      int b = m, e = m;
+      while (b > 0 && v.at(s, b - 1) > thr) --b;
+      while (e < v.n_prof - 1 && v.at(s, e + 1) > thr) ++e;
+      const double sg = std::max(0.5, w / 6.0);
+      const int r = static_cast<int>(std::ceil(2.5 * sg));
+      y.assign(static_cast<size_t>(e - b + 1), 0.0);
+      for (int p = b; p <= e; ++p) {
+        double acc = 0.0, wsum = 0.0;
+        for (int k = -r; k <= r; ++k) {
+          const int q = std::clamp(p + k, b, e);
+          const double g = std::exp(-0.5 * k * k / (sg * sg));
+          acc += g * v.at(s, q);
+          wsum += g;
+        }
+        y[p - b] = acc / wsum;
+      }
+      int top = std::clamp(m, b, e) - b;
+      const int reach = std::max(1, static_cast<int>(std::ceil(0.5 * w)));
+      for (int q = std::max(0, top - reach); q <= std::min(e - b, top + reach); ++q) {
+        if (y[q] > y[top]) top = q;
+      }
+      bool twin = false;
+      for (int dir = -1; dir <= 1 && !twin; dir += 2) {
+        double dip = y[top];
+        for (int q = top + dir; q >= 0 && q <= e - b && !twin; q += dir) {
+          dip = std::min(dip, y[q]);
+          twin = y[q] >= o.hump * y[top] && dip < o.dip * y[q];
+        }
+      }
+      if (twin) {
+        set(StripeStatus::kDoublePeak);
+        continue;
+      }
+    }
+    if (with_off) {
+      const int a = std::max(0, static_cast<int>(std::floor(c - w)));
+      const int z = std::min(v.n_prof - 1, static_cast<int>(std::ceil(c + w)));
+      double mn = voff.at(s, a), mx = mn;
+      for (int p = a + 1; p <= z; ++p) {
+        mn = std::min(mn, voff.at(s, p));
+        mx = std::max(mx, voff.at(s, p));
+      }
+      if (mx > o.albedo_step * std::max(mn, 1.0)) set(StripeStatus::kAlbedoEdge);
+    }
+  }
 }
 
 template void DifferenceImage<std::uint8_t>(const ImageView<std::uint8_t>&,
@@ -589,6 +731,14 @@ template StripeResult ExtractStripe<std::uint8_t>(const ImageView<std::uint8_t>&
                                                   const StripeOptions&);
 template StripeResult ExtractStripe<std::uint16_t>(const ImageView<std::uint16_t>&,
                                                    const StripeOptions&);
+template void AssessStripe<std::uint8_t>(const ImageView<std::uint8_t>&,
+                                         const ImageView<std::uint8_t>&,
+                                         const ImageView<std::uint8_t>&, StripeDirection,
+                                         const StripeQualityOptions&, StripeResult*);
+template void AssessStripe<std::uint16_t>(const ImageView<std::uint16_t>&,
+                                          const ImageView<std::uint16_t>&,
+                                          const ImageView<std::uint16_t>&, StripeDirection,
+                                          const StripeQualityOptions&, StripeResult*);
 template double EstimateDifferenceNoise<std::uint8_t>(const ImageView<std::uint8_t>&, int);
 template double EstimateDifferenceNoise<std::uint16_t>(const ImageView<std::uint16_t>&, int);
 

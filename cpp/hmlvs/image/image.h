@@ -68,6 +68,11 @@ enum class StripeStatus : std::uint8_t {
   kTooWide = 4,    // only peaks wider than max_width (glare, out-of-focus blobs)
   kFitFailed = 5,  // a peak was found but the chosen method could not fit it (e.g. a
                    // saturated flat top for the Gaussian fit, or a Hessian that is not a line)
+  // Set only by AssessStripe, on scan lines ExtractStripe found (the centre is kept):
+  kSaturated = 6,   // the laser-on image reaches its pixel type's maximum under the peak
+  kClipped = 7,     // the profile (centre +- one FWHM) runs off the image border
+  kDoublePeak = 8,  // the peak has two humps (a reflection or a split line next to it)
+  kAlbedoEdge = 9,  // the laser-off image (the surface's albedo) steps under the profile
 };
 
 struct StripeOptions {
@@ -78,7 +83,7 @@ struct StripeOptions {
   double threshold = -1.0;
   /// Accepted full width at half maximum of a peak (px, along the scan line).
   double min_width = 2.0;
-  double max_width = 20.0;
+  double max_width = 40.0;
   /// Standard deviation of the per-pixel noise (intensity units), used for the uncertainty.
   /// Negative: estimated from the image as a zero-clipped difference of two noisy frames
   /// (see EstimateDifferenceNoise).
@@ -98,14 +103,41 @@ struct StripeResult {
   Eigen::VectorXd sigma;      // 1-sigma uncertainty of centre from pixel noise (px), NaN if none
   Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1> status;  // StripeStatus per scan line
   Eigen::VectorXi num_peaks;  // peaks of plausible (or too large) width on the scan line
-  double threshold = 0.0;     // the threshold used
-  double noise = 0.0;         // the noise level used
+  /// Asymmetry of the found profile about its centre: RMS over the FWHM of the difference
+  /// of mirrored samples I(c + x) - I(c - x), relative to the peak (0 for a symmetric
+  /// profile; NaN unless found). Large where the profile is skewed (albedo edges, humps).
+  Eigen::VectorXd residual;
+  double threshold = 0.0;  // the threshold used
+  double noise = 0.0;      // the noise level used
 };
 
 /// Sub-pixel stripe centres, one per scan line. Throws std::invalid_argument for an empty
 /// image or invalid options.
 template <typename T>
 StripeResult ExtractStripe(const ImageView<T>& image, const StripeOptions& options);
+
+/// Options of AssessStripe.
+struct StripeQualityOptions {
+  /// A found scan line whose laser-off image varies by more than this factor (max / min)
+  /// within the centre +- one FWHM is kAlbedoEdge; <= 1 turns the check off.
+  double albedo_step = 1.5;
+  /// A second hump of at least this fraction of the peak, separated from it by a dip below
+  /// dip x the hump, makes the scan line kDoublePeak; 0 turns the check off.
+  double hump = 0.3;
+  double dip = 0.7;
+};
+
+/// Quality checks of ExtractStripe's found scan lines, which keep their centre but change
+/// their status: kClipped (the profile runs off the image), kDoublePeak (two humps on the
+/// profile of `image`, smoothed at FWHM / 6 against speckle), kSaturated (the laser-on frame
+/// `on`, or `image` itself if `on` has no data, reaches the pixel type's maximum within the
+/// centre +- FWHM / 2) and kAlbedoEdge (the laser-off frame `off`, if it has data, steps).
+/// `image` is the image the stripe was extracted from; `on` and `off`, if given, have its
+/// size. Throws std::invalid_argument for mismatched sizes or results.
+template <typename T>
+void AssessStripe(const ImageView<T>& image, const ImageView<T>& on, const ImageView<T>& off,
+                  StripeDirection direction, const StripeQualityOptions& options,
+                  StripeResult* result);
 
 /// Noise standard deviation of a zero-clipped difference image D = max(0, X), X ~ N(0, s^2)
 /// in the background: s = sqrt(2 mean(D^2)) over pixels of every `row_step`-th row at or

@@ -14,7 +14,8 @@ Format ``hmlvs-images`` version 1, JSON (``manifest.json``) or YAML (``.yaml``/`
     poses:
       - id: p000                    # unique: pairs the files with the readings explicitly
         on: p000_on.png             # laser-on frame  } or  stripe: p000.csv  (u, v[, intensity])
-        off: p000_off.png           # laser-off frame }
+        off: p000_off.png           # laser-off frame } (optional: without it the background
+                                    #   is estimated from the laser-on frame)
         joints: [0.1, -0.8, ...]    # joint readings, or
         # pose: [[...4x4 base_from_hand...]], or {position: [x, y, z], quaternion: [4]}
         #       or {position: [x, y, z], rotation_vector: [rx, ry, rz]} (rad)
@@ -107,8 +108,8 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
         if has_images == ("stripe" in e):
             raise ValueError(f"{where} must name either an image pair ('on' and 'off') or a "
                              "stripe list ('stripe'), not both or neither")
-        if has_images and not ("on" in e and "off" in e):
-            raise ValueError(f"{where} names only one of 'on' and 'off'")
+        if has_images and "on" not in e:
+            raise ValueError(f"{where} names a laser-off image but no laser-on image ('on')")
         out.append(e)
     if file_poses is not None:
         _pair_poses(out, file_poses, doc["pose_file"], path)

@@ -14,7 +14,7 @@ Typical use::
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import enum
 from numbers import Integral, Real
 from typing import Any, Literal
@@ -36,6 +36,12 @@ class StripeStatus(enum.IntEnum):
     TOO_NARROW = 3  #: only peaks narrower than ``min_width`` (noise, hot pixels)
     TOO_WIDE = 4    #: only peaks wider than ``max_width`` (glare, blobs)
     FIT_FAILED = 5  #: a peak, but the method could not fit it (e.g. saturated flat top)
+    # Set by :func:`assess_stripe` (the session pipeline's :func:`stripe_from_pair` runs it)
+    # on scan lines that had a centre; ``centre`` keeps it, ``found`` no longer counts it.
+    SATURATED = 6    #: the laser-on image is saturated under the peak
+    CLIPPED = 7      #: the profile (centre +- one FWHM) runs off the image border
+    DOUBLE_PEAK = 8  #: the peak has two humps (a reflection or split line next to it)
+    ALBEDO_EDGE = 9  #: the laser-off image (the albedo) steps under the profile
 
 
 # ------------------------------------------------------------------------------------------
@@ -123,6 +129,9 @@ class StripeResult:
     num_peaks : (n,) number of peaks of plausible or too large width on the scan line
     direction, method : the options used
     threshold, noise : intensity threshold and per-pixel noise level used
+    residual : (n,) asymmetry of the profile about its centre (RMS over the FWHM of the
+        difference of mirrored samples, relative to the peak; 0 for a symmetric profile),
+        NaN where no centre was measured. A calibration may weight or drop columns by it.
     """
 
     position: np.ndarray
@@ -136,6 +145,7 @@ class StripeResult:
     method: str
     threshold: float
     noise: float
+    residual: np.ndarray | None = None
 
     @property
     def found(self) -> np.ndarray:
@@ -171,7 +181,7 @@ class StripeOptions:
     method: Method = "centroid"
     threshold: float | None = None
     min_width: float = 2.0
-    max_width: float = 20.0
+    max_width: float = 40.0
     noise: float | None = None
     steger_sigma: float = 1.5
     dominance: float = 0.0
@@ -207,7 +217,7 @@ class StripeOptions:
 
 def extract_stripe(image: np.ndarray, direction: Direction = "columns",
                    method: Method = "centroid", threshold: float | None = None,
-                   min_width: float = 2.0, max_width: float = 20.0,
+                   min_width: float = 2.0, max_width: float = 40.0,
                    noise: float | None = None, steger_sigma: float = 1.5,
                    dominance: float = 0.0, channel: int | None = None,
                    options: StripeOptions | None = None) -> StripeResult:
@@ -225,7 +235,8 @@ def extract_stripe(image: np.ndarray, direction: Direction = "columns",
     threshold : a pixel belongs to a peak when its value exceeds this. Default: automatic,
         ``max(5 * noise, 0.15 * image maximum)``.
     min_width, max_width : accepted full width at half maximum of a peak (px). Narrower
-        peaks are noise and ignored; wider ones (glare) compete with the stripe.
+        peaks are noise and ignored; wider ones (glare) compete with the stripe. The default
+        40 px admits the 20-30 px wide stripes of defocused high-resolution cameras.
     noise : per-pixel noise standard deviation (intensity units) for ``sigma``. Default:
         estimated from the image's background as a zero-clipped difference of two noisy
         frames, plus the quantisation noise of two rounded frames.
@@ -254,7 +265,47 @@ def extract_stripe(image: np.ndarray, direction: Direction = "columns",
         position=np.arange(n), centre=np.asarray(r.centre), intensity=np.asarray(r.intensity),
         width=np.asarray(r.width), sigma=np.asarray(r.sigma),
         status=np.asarray(r.status, dtype=np.uint8), num_peaks=np.asarray(r.num_peaks),
-        direction=direction, method=method, threshold=float(r.threshold), noise=float(r.noise))
+        direction=direction, method=method, threshold=float(r.threshold), noise=float(r.noise),
+        residual=np.asarray(r.residual))
+
+
+def assess_stripe(stripe: StripeResult, image: np.ndarray, on: np.ndarray | None = None,
+                  off: np.ndarray | None = None, *, albedo_step: float = 1.5,
+                  hump: float = 0.3, dip: float = 0.7) -> StripeResult:
+    """Quality checks of the centres of :func:`extract_stripe` (computed in C++).
+
+    Scan lines that had a centre keep it but change their status when it cannot be trusted:
+    ``CLIPPED`` (the profile, centre +- one FWHM, runs off the image), ``DOUBLE_PEAK`` (a
+    second hump of at least ``hump`` x the peak behind a dip below ``dip`` x the hump, on the
+    profile smoothed at FWHM / 6 against speckle), ``SATURATED`` (the laser-on frame ``on``,
+    or ``image`` itself if ``on`` is None, reaches the pixel type's maximum within the centre
+    +- FWHM / 2) and ``ALBEDO_EDGE`` (the laser-off frame ``off`` varies by more than
+    ``albedo_step`` (max / min) within the centre +- one FWHM: the stripe crosses a square's
+    edge there and its reflected profile is skewed; ``albedo_step <= 1``: no check).
+
+    Parameters
+    ----------
+    stripe : the result of :func:`extract_stripe` on ``image``
+    image : the (grayscale) image the stripe was extracted from
+    on, off : the laser-on and laser-off frames (grayscale, ``image``'s size and depth), or
+        None
+
+    Returns
+    -------
+    StripeResult : ``stripe`` with the new statuses
+    """
+    if not isinstance(stripe, StripeResult):
+        raise ValueError(f"stripe must be a StripeResult, got {type(stripe).__name__}")
+    img = _as_gray(image, "the image", None)
+    frames = [None if x is None else _as_gray(x, name, None)
+              for x, name in ((on, "the laser-on image"), (off, "the laser-off image"))]
+    o = _core._StripeQualityOptions()
+    o.albedo_step = _finite(albedo_step, "albedo_step")
+    o.hump, o.dip = _finite(hump, "hump"), _finite(dip, "dip")
+    status = _core._assess_stripe(img, frames[0], frames[1], _DIRECTIONS[stripe.direction], o,
+                                  np.asarray(stripe.centre, float), np.asarray(stripe.width, float),
+                                  np.asarray(stripe.status, np.uint8), float(stripe.threshold))
+    return replace(stripe, status=np.asarray(status, dtype=np.uint8))
 
 
 def _real(x: Any, name: str) -> float:

@@ -63,6 +63,9 @@ class RenderOptions:
     speckle : relative standard deviation of laser speckle, a multiplicative log-normal
         pattern (mean 1) of grains ``speckle_grain`` px (Gaussian sigma) on the laser light
         only; 0 for none
+    vignetting : relative loss of light at the image corners, both frames: the exposure is
+        multiplied by 1 - vignetting * (r / r_corner)^2, r the distance from the image
+        centre; 0 for none
     """
 
     supersample: int = 3
@@ -83,6 +86,7 @@ class RenderOptions:
     spurious_columns: tuple[float, float] = (0.6, 0.8)
     speckle: float = 0.0
     speckle_grain: float = 1.0
+    vignetting: float = 0.0
 
     def __post_init__(self) -> None:
         if not (isinstance(self.supersample, (int, np.integer)) and self.supersample >= 1
@@ -96,6 +100,8 @@ class RenderOptions:
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {v}")
+        if not 0 <= self.vignetting < 1:
+            raise ValueError(f"vignetting must lie in [0, 1), got {self.vignetting}")
         for name in ("white", "black", "table"):
             v = getattr(self, name)
             if not 0 <= v <= 1:
@@ -361,6 +367,13 @@ def _finish_frames(ambient: np.ndarray, laser: np.ndarray, o: RenderOptions,
                                      borderType=cv2.BORDER_REFLECT)
             grain /= max(float(grain.std()), 1e-12)
         laser = laser * np.exp(o.speckle * grain - 0.5 * o.speckle ** 2)
+    if o.vignetting > 0:
+        h, w = ambient.shape
+        vv, uu = np.mgrid[0:h, 0:w]
+        r2 = ((uu - 0.5 * (w - 1)) ** 2 + (vv - 0.5 * (h - 1)) ** 2) / (0.25 * ((w - 1) ** 2
+                                                                            + (h - 1) ** 2))
+        fall = 1.0 - o.vignetting * r2
+        ambient, laser = ambient * fall, laser * fall
     frames = []
     for img in (ambient + laser, ambient):
         if o.blur_sigma > 0:
