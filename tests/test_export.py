@@ -217,7 +217,8 @@ def test_paper_files_without_model_still_read(tmp_path):
 
 @pytest.mark.parametrize(
     "change, match",
-    [(lambda d: d.update(model="fisheye"), "unknown sensor model 'fisheye'"),
+    [(lambda d: d.update(model="fisheye"),
+      "model: must be one of paper, opencv, got 'fisheye'"),
      (lambda d: d.pop("sensor"), "a calibration of model opencv needs a 'sensor' block"),
      (lambda d: d["sensor"].pop("laser_plane"), r"c.json: sensor: the opencv sensor lacks "
       "laser_plane"),
