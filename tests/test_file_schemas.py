@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 from hmlvs import Calibration, Parameters
+import numpy as np
 import pytest
 
 
@@ -43,3 +44,38 @@ def test_a_valid_file_with_unknown_keys_still_loads(tmp_path, cal_doc):
     path = tmp_path / "cal.json"
     path.write_text(json.dumps(cal_doc))
     assert Calibration.load(path).fixed == ("Su",)
+
+
+@pytest.mark.parametrize("board, message", [
+    ({"rows": "six", "cols": 8, "square": 30}, r"board.rows: must be a whole number"),
+    ({"rows": 6, "cols": 8, "square": "30"}, r"board.square: must be a size in mm"),
+    ({"rows": 6, "cols": 8, "square": 30, "colour": "red"}, r"unknown key 'colour'"),
+    ({"rows": 6, "cols": 8, "square": 30, "origin": [1, 2]}, r"board.origin: must be 3 "
+     "numbers"),
+])
+def test_manifest_board_with_a_wrong_value_is_named(tmp_path, board, message):
+    from hmlvs.image.session import dataset_from_images
+
+    doc = {"format": "hmlvs-images", "version": 1, "board": board,
+           "poses": [{"id": "p0", "on": "a.png", "off": "b.png", "joints": [0, 0, 0, 0, 0]}]}
+    (tmp_path / "manifest.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=message):
+        dataset_from_images(tmp_path)
+
+
+def test_manifest_image_size_and_data_set_pose_index_are_checked(tmp_path):
+    from hmlvs.data.manifest import read_manifest
+
+    doc = {"format": "hmlvs-images", "version": 1, "image_size": [640, 480, 3],
+           "poses": [{"id": "p0", "on": "a.png", "off": "b.png", "joints": [0, 0, 0, 0, 0]}]}
+    (tmp_path / "manifest.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=r"image_size must be \[width, height\]"):
+        read_manifest(tmp_path)
+    from hmlvs import Dataset
+
+    d = {"format": "hmlvs-dataset", "version": 1, "points": [
+        {"id": "a", "pixel": [1, 2], "reference": [0, 0, 0],
+         "base_from_hand": np.eye(4).tolist(), "pose_index": 1.7}]}
+    (tmp_path / "d.json").write_text(json.dumps(d))
+    with pytest.raises(ValueError, match="pose_index must be a whole number, got 1.7"):
+        Dataset.load(tmp_path / "d.json")

@@ -264,7 +264,11 @@ class Dataset:
                 if "joints" in e:
                     joints.append(e["joints"])
                 if "pose_index" in e:
-                    pidx.append(int(e["pose_index"]))
+                    pi = e["pose_index"]
+                    if isinstance(pi, bool) or not isinstance(pi, int):
+                        raise ValueError(f"{source}: entry {i}: pose_index must be a whole "
+                                         f"number, got {pi!r}")
+                    pidx.append(pi)
             except (KeyError, TypeError) as err:
                 eid = e.get("id", "?") if isinstance(e, dict) else "?"
                 raise ValueError(f"entry {i} (id {eid}) lacks field {err}") from None

@@ -50,6 +50,37 @@ VERSION = 1
 NAME = "manifest.json"
 
 
+def _board_schema() -> Any:
+    from ..data import schema as sc
+
+    vec3 = sc.Field("list", "3 numbers", length=3, items=sc.number())
+    return sc.Field("struct", "a board: rows, cols (inner corners), square (mm)",
+                    required=("rows", "cols", "square"), extra="error", keys={
+                        "rows": sc.integer("a whole number of inner corners", minimum=2),
+                        "cols": sc.integer("a whole number of inner corners", minimum=2),
+                        "square": sc.number("a size in mm", positive=True),
+                        "origin": vec3, "row_direction": vec3, "col_direction": vec3})
+
+
+def checkerboard_of(spec: Any, source: Any) -> Any:
+    """A :class:`~hmlvs.Checkerboard` from a manifest's ``board`` block, validated (rows,
+    cols, square, optional origin and directions; any other key is refused by name)."""
+    from ..geometry.board import Checkerboard
+    from .schema import validate
+
+    if isinstance(spec, dict) and spec.get("type", "checkerboard") == "checkerboard":
+        spec = {k: v for k, v in spec.items() if k != "type"}
+    elif isinstance(spec, dict):
+        raise ValueError(f"{source}: board: this path needs a checkerboard, got type "
+                         f"{spec['type']!r} (ChArUco boards calibrate with --model opencv)")
+    validate(spec, _board_schema(), str(source), "board")
+    try:
+        return Checkerboard(**{k: (tuple(v) if isinstance(v, list) else v)
+                               for k, v in spec.items()})
+    except ValueError as e:
+        raise ValueError(f"{source}: board: {e}") from None
+
+
 def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Path]:
     """Read and validate a manifest (a folder holding manifest.json, or the file itself).
 
@@ -68,6 +99,10 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, yaml.YAMLError) as e:
         raise ValueError(f"{path}: unreadable manifest ({type(e).__name__}: {e})") from None
     check_format(doc, FORMAT, VERSION, path, "image manifest")
+    size = doc.get("image_size")
+    if size is not None and not (isinstance(size, list) and len(size) == 2 and all(
+            isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in size)):
+        raise ValueError(f"{path}: image_size must be [width, height] in pixels, got {size!r}")
     entries = doc.get("poses")
     if not isinstance(entries, list):
         raise ValueError(f"{path}: the manifest's 'poses' must be a list of entries")

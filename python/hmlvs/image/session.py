@@ -144,10 +144,10 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     else:
         records, doc, folder = _read_manifest(source)
         unit = doc.get("joint_unit", "rad") if unit is None else unit
-        if board is None and isinstance(doc.get("board"), dict):
-            b = doc["board"]
-            board = Checkerboard(**{k: tuple(v) if isinstance(v, list) else v
-                                    for k, v in b.items()})
+        if board is None and doc.get("board") is not None:
+            from ..data.manifest import checkerboard_of
+
+            board = checkerboard_of(doc["board"], source)
         robot = _manifest_robot(doc, robot, source)
         if isinstance(doc.get("image_size"), list) and len(doc["image_size"]) == 2:
             size = (int(doc["image_size"][0]), int(doc["image_size"][1]))

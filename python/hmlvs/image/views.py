@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from ..data.manifest import checkerboard_of
 from ..data.views import ViewData
 from ..geometry.board import BoardSpec, CharucoSpec
 from .corners import detect_board, detect_charuco
@@ -27,23 +28,10 @@ from .session import (
 MIN_CORNERS = 6  # a view needs this many numbered corners (calibrate_joint's minimum)
 
 
-def _board_schema() -> Any:
-    from ..data import schema as sc
-
-    vec3 = sc.Field("list", "3 numbers", length=3, items=sc.number())
-    return sc.Field("struct", "a board: rows, cols (inner corners), square (mm)",
-                    required=("rows", "cols", "square"), extra="error", keys={
-                        "rows": sc.integer("a whole number of inner corners", minimum=2),
-                        "cols": sc.integer("a whole number of inner corners", minimum=2),
-                        "square": sc.number("a size in mm", positive=True),
-                        "origin": vec3, "row_direction": vec3, "col_direction": vec3})
-
-
 def board_of(doc: dict[str, Any], board: Any, source: Any) -> tuple[BoardSpec, np.ndarray | None]:
     """The board (rows, cols, square; or a ChArUco board, ``type: charuco``) of a manifest or
     the caller, and its measured pose in the base when the manifest gives one (``origin``),
     else None."""
-    from ..data.schema import validate
     from ..geometry.board import Checkerboard
 
     spec = board if board is not None else doc.get("board")
@@ -66,10 +54,9 @@ def board_of(doc: dict[str, Any], board: Any, source: Any) -> tuple[BoardSpec, n
             raise ValueError(f"{source}: {e}") from None
     if isinstance(spec, dict):
         spec = {k: v for k, v in spec.items() if k != "type"}
-    validate(spec, _board_schema(), str(source), "board")
+    checked = checkerboard_of(spec, source)
     if "origin" in spec:
-        pose = Checkerboard(**{k: (tuple(v) if isinstance(v, list) else v)
-                               for k, v in spec.items()}).base_from_board()
+        pose = checked.base_from_board()
     return BoardSpec.of(spec), pose
 
 
