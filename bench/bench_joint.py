@@ -475,12 +475,12 @@ def report(seeds: Sequence[int], reps: int) -> str:
 SECTION = "## Joint calibration: hmlvs against vision-calibration"
 
 
-def replace_section(text: str, section: str) -> str:
-    """text with its joint-calibration section (up to the next "## " heading) replaced by
+def replace_section(text: str, section: str, heading: str = SECTION) -> str:
+    """text with its section under ``heading`` (up to the next "## " heading) replaced by
     section, or section appended."""
     lines = text.rstrip("\n").split("\n")
-    if SECTION in lines:
-        i = lines.index(SECTION)
+    if heading in lines:
+        i = lines.index(heading)
         j = next((k for k in range(i + 1, len(lines)) if lines[k].startswith("## ")), len(lines))
         lines[i:j] = section.rstrip("\n").split("\n") + ([""] if j < len(lines) else [])
     else:

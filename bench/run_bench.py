@@ -73,6 +73,8 @@ def main() -> None:
     ap.add_argument("--numpy-iterations", type=int, default=5000,
                     help="iterations of the NumPy PSO (5000 = the paper's workload)")
     ap.add_argument("--out", type=Path, default=HERE / "RESULTS.md")
+    ap.add_argument("--no-images", dest="images", action="store_false",
+                    help="skip the image-path benchmark (bench_images.py)")
     ap.add_argument("--no-joint", dest="joint", action="store_false",
                     help="skip the joint calibration against vision-calibration (minutes)")
     args = ap.parse_args()
@@ -192,6 +194,14 @@ def main() -> None:
                              check=True, stdout=subprocess.PIPE, text=True).stdout
         joint_lines = [out.strip()]
 
+    images = HERE / "bench_images.py"
+    image_lines: list[str] = []
+    if images.exists() and args.images:
+        print("image path: stripes, boards, a whole session ...", flush=True)
+        out = subprocess.run([sys.executable, str(images), "--reps", str(max(args.reps, 5))],
+                             check=True, stdout=subprocess.PIPE, text=True).stdout
+        image_lines = [out.strip()]
+
     text = [
         "# hmlvs benchmark results",
         "",
@@ -217,6 +227,8 @@ def main() -> None:
         *stripe_lines,
         "",
         *joint_lines,
+        "",
+        *image_lines,
         "",
     ]
     with atomic_write(args.out) as fh:

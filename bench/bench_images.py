@@ -1,0 +1,148 @@
+"""Image-path benchmark: stripe extraction with the quality checks (640 x 480, 1280 x 1024),
+board detection per view, and a whole 20-view session from images to a calibration file, with
+a per-stage breakdown. Each figure beside its anchor measured in the same run: NumPy's
+per-column argmax + centroid for stripes, OpenCV's findChessboardCornersSB for boards.
+
+Run by `make bench` (bench/run_bench.py); alone: python bench/bench_images.py [--write FILE].
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from bench_joint import replace_section  # noqa: E402
+
+SECTION = "## Image path: stripes, boards, a whole session"
+
+
+def _median_ms(fn, reps: int) -> float:
+    times = []
+    for _ in range(reps):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return 1000.0 * float(np.median(times))
+
+
+def _numpy_centres(on: np.ndarray, off: np.ndarray) -> np.ndarray:
+    """The anchor: difference image, per-column peak and a 5-pixel centroid, in NumPy."""
+    d = on.astype(np.float32) - off.astype(np.float32)
+    v = np.argmax(d, axis=0)
+    rows = np.clip(v[None, :] + np.arange(-2, 3)[:, None], 0, d.shape[0] - 1)
+    w = np.clip(np.take_along_axis(d, rows, axis=0), 0, None)
+    return (w * rows).sum(axis=0) / np.maximum(w.sum(axis=0), 1e-9)
+
+
+def _view(size: tuple[int, int], seed: int = 0):
+    from hmlvs.sim.general import example_sensor, general_session, render_general_view
+
+    sensor = example_sensor(size)
+    s = general_session(sensor=sensor, views=1, seed=seed)
+    return render_general_view(s, 0)
+
+
+def stripe_rows(reps: int) -> list[str]:
+    from hmlvs.image.session import stripe_from_pair
+
+    rows = []
+    for size in ((640, 480), (1280, 1024)):
+        on, off = _view(size)
+        ours = _median_ms(lambda on=on, off=off: stripe_from_pair(on, off), reps)
+        anchor = _median_ms(lambda on=on, off=off: _numpy_centres(on, off), reps)
+        rows.append(f"| stripe centres, {size[0]} x {size[1]} (difference image, Steger, quality "
+                    f"checks) | {ours:.1f} ms ({1000 / ours:.0f} fps) | NumPy argmax + centroid "
+                    f"{anchor:.1f} ms: {ours / anchor:.2f}x |")
+    return rows
+
+
+def board_rows(reps: int) -> list[str]:
+    import cv2
+    from hmlvs.geometry.board import Checkerboard
+    from hmlvs.image.corners import detect_board
+    from hmlvs.sim.general import general_session
+
+    _, off = _view((1024, 768))
+    b = general_session(views=1, seed=0).board
+    board = Checkerboard(rows=b.rows, cols=b.cols, square=b.square)
+    ours = _median_ms(lambda: detect_board(off, board), reps)
+    anchor = _median_ms(lambda: cv2.findChessboardCornersSB(off, (board.cols, board.rows)),
+                        reps)
+    return [f"| board detection, 1024 x 768 (detect_board: SB detector, sub-pixel refinement, "
+            f"numbering) | {ours:.1f} ms | cv2.findChessboardCornersSB alone {anchor:.1f} ms: "
+            f"{ours / anchor:.2f}x |"]
+
+
+def session_rows(views: int) -> list[str]:
+    from hmlvs.calibration.joint import calibrate_joint
+    from hmlvs.data.calibration_file import Calibration
+    import hmlvs.image.views as iv
+    from hmlvs.sim.general import general_session, render_general_session
+
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "session"
+        render_general_session(general_session(views=views, seed=3), folder)
+        stages = {"detect": 0.0}
+        real = iv.detect_corners if hasattr(iv, "detect_corners") else iv.detect_board
+        name = "detect_corners" if hasattr(iv, "detect_corners") else "detect_board"
+
+        def timed(*a, **k):
+            t = time.perf_counter()
+            try:
+                return real(*a, **k)
+            finally:
+                stages["detect"] += time.perf_counter() - t
+
+        setattr(iv, name, timed)
+        try:
+            t0 = time.perf_counter()
+            v, board, size, pose, _ = iv.views_from_images(folder)
+            t1 = time.perf_counter()
+        finally:
+            setattr(iv, name, real)
+        r = calibrate_joint(v, board, size, base_from_board=pose)
+        t2 = time.perf_counter()
+        Calibration.from_joint(r).save(Path(tmp) / "cal.yaml")
+        t3 = time.perf_counter()
+    load_stripe = (t1 - t0) - stages["detect"]
+    total = t3 - t0
+    return [f"| whole session, {views} views 1024 x 768, images -> calibration file | "
+            f"{total:.2f} s | reading + stripes {load_stripe:.2f} s, boards "
+            f"{stages['detect']:.2f} s, joint calibration {t2 - t1:.2f} s "
+            f"({r.iterations} LM iterations), file {1000 * (t3 - t2):.0f} ms |"]
+
+
+def report(reps: int, views: int) -> str:
+    rows = [*stripe_rows(reps), *board_rows(reps), *session_rows(views)]
+    return "\n".join([
+        SECTION, "",
+        f"Rendered by `hmlvs.sim.general` (general sensor); {os.cpu_count()} cores; medians of "
+        f"{reps} runs; rendering is not timed.", "",
+        "| what | time | anchor in the same run |", "|---|---|---|", *rows, ""])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--reps", type=int, default=7)
+    ap.add_argument("--views", type=int, default=20)
+    ap.add_argument("--write", type=Path, help="replace the section in this RESULTS.md")
+    args = ap.parse_args()
+    section = report(args.reps, args.views)
+    if args.write:
+        from hmlvs._io import atomic_write
+
+        old = args.write.read_text() if args.write.exists() else ""
+        with atomic_write(args.write) as fh:
+            fh.write(replace_section(old, section, SECTION))
+    print(section, end="")
+
+
+if __name__ == "__main__":
+    main()
