@@ -186,21 +186,20 @@ def main() -> None:
                              capture_output=True, text=True).stdout
         stripe_lines = [out.strip()]
 
-    joint = HERE / "bench_joint.py"
-    joint_lines: list[str] = []
-    if joint.exists() and args.joint:
-        print("joint calibration against vision-calibration ...", flush=True)
-        out = subprocess.run([sys.executable, str(joint), "--reps", str(min(args.reps, 3))],
-                             check=True, stdout=subprocess.PIPE, text=True).stdout
-        joint_lines = [out.strip()]
+    def section(script: str, wanted: bool, what: str, reps: int) -> list[str]:
+        """The markdown section a benchmark script prints (stderr goes to the terminal)."""
+        path = HERE / script
+        if not (path.exists() and wanted):
+            return []
+        print(f"{what} ...", flush=True)
+        out = subprocess.run([sys.executable, str(path), "--reps", str(reps)], check=True,
+                             stdout=subprocess.PIPE, text=True).stdout
+        return [out.strip()]
 
-    images = HERE / "bench_images.py"
-    image_lines: list[str] = []
-    if images.exists() and args.images:
-        print("image path: stripes, boards, a whole session ...", flush=True)
-        out = subprocess.run([sys.executable, str(images), "--reps", str(max(args.reps, 5))],
-                             check=True, stdout=subprocess.PIPE, text=True).stdout
-        image_lines = [out.strip()]
+    joint_lines = section("bench_joint.py", args.joint,
+                          "joint calibration against vision-calibration", min(args.reps, 3))
+    image_lines = section("bench_images.py", args.images,
+                          "image path: stripes, boards, a whole session", max(args.reps, 5))
 
     text = [
         "# hmlvs benchmark results",
