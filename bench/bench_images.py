@@ -19,17 +19,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_joint import replace_section  # noqa: E402
+from run_bench import median_time  # noqa: E402
 
 SECTION = "## Image path: stripes, boards, a whole session"
 
 
 def _median_ms(fn, reps: int) -> float:
-    times = []
-    for _ in range(reps):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return 1000.0 * float(np.median(times))
+    return 1000.0 * median_time(fn, reps)[0]
 
 
 def _numpy_centres(on: np.ndarray, off: np.ndarray) -> np.ndarray:

@@ -302,15 +302,6 @@ def vc_native_check(res: Any, payload: Any, p: Problem, n: int = 20) -> float:
 # ----------------------------------------------------------------------------- runs
 
 
-def median_time(fn, reps: int) -> tuple[float, Any]:
-    times, out = [], None
-    for _ in range(reps):
-        t = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times), out
-
-
 TIMED = ("hmlvs", "vc_joint", "vc_pipeline")
 
 

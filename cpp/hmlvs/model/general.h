@@ -25,13 +25,6 @@ enum Intrinsic : int { kFx = 0, kFy, kCx, kCy, kK1, kK2, kP1, kP2, kK3 };
 
 using Vector9d = Eigen::Matrix<double, kNumIntrinsics, 1>;
 
-/// The plain value of a scalar: itself for double, the value part for ceres::Jet.
-inline double ValueOf(double x) { return x; }
-template <typename Jet>
-double ValueOf(const Jet& x) {
-  return x.a;
-}
-
 /// Brown-Conrady distortion of a normalised image point (x, y) = (X/Z, Y/Z), as OpenCV:
 ///   r2 = x^2 + y^2, radial = 1 + k1 r2 + k2 r2^2 + k3 r2^3,
 ///   xd = x radial + 2 p1 x y + p2 (r2 + 2 x^2),  yd = y radial + p1 (r2 + 2 y^2) + 2 p2 x y.
@@ -63,25 +56,6 @@ bool ProjectPoint(const T* in, const T* camera_point, T* pixel) {
 /// receives d(xd, yd)/d(x, y) at the solution.
 bool UndistortNormalized(const double* in, double u, double v, double* x, double* y,
                          double* jacobian = nullptr);
-
-/// The undistorted normalised point (x, y) of pixel (u, v) as a function of the intrinsics,
-/// for any scalar type: one Newton step, in T, from the plain solution (x0, y0) with its
-/// Jacobian. At a converged (x0, y0) the value is unchanged and the derivatives with respect
-/// to the intrinsics are those of the implicit function, exactly.
-template <typename T>
-void UndistortAround(const T* in, double u, double v, double x0, double y0, const double* jacobian,
-                     T* x, T* y) {
-  const T mx = (T(u) - in[kCx]) / in[kFx];
-  const T my = (T(v) - in[kCy]) / in[kFy];
-  T xd, yd;
-  Distort(in, T(x0), T(y0), &xd, &yd);
-  const T ex = xd - mx, ey = yd - my;
-  const double det = jacobian[0] * jacobian[3] - jacobian[1] * jacobian[2];
-  const double i00 = jacobian[3] / det, i01 = -jacobian[1] / det;
-  const double i10 = -jacobian[2] / det, i11 = jacobian[0] / det;
-  *x = T(x0) - (i00 * ex + i01 * ey);
-  *y = T(y0) - (i10 * ex + i11 * ey);
-}
 
 /// The point where the ray through normalised image point (x, y) meets the plane
 /// n . X + d = 0 (camera frame). Returns the depth Z = -d / (n . (x, y, 1)); the ray meets the

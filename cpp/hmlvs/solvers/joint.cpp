@@ -40,37 +40,18 @@ bool CornerResiduals(const T* in, const Mat3<T>& r, const Vec3<T>& t, const Join
   return ok;
 }
 
-// The laser residuals of one view: the signed distance of the point where pixel i's ray meets
-// the board plane (pose (r, t)) from the laser plane n . X + d = 0, divided by sigma. Returns
-// false when a ray misses the board plane or cannot be undistorted.
-template <typename T>
-bool LaserResiduals(const T* in, const Mat3<T>& r, const Vec3<T>& t, const T* normal,
-                    const T* offset, const JointView& view, double inv_sigma, T* residuals) {
-  using std::sqrt;
-  double in0[kNumIntrinsics];
-  for (int k = 0; k < kNumIntrinsics; ++k) in0[k] = ValueOf(in[k]);
-  const Vec3<T> board_normal = r.col(2);
-  const T board_offset = -board_normal.dot(t);
-  const T n_norm = sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]);
-  bool ok = true;
-  for (Eigen::Index i = 0; i < view.laser_pixels.rows(); ++i) {
-    double x0, y0, jac[4];
-    if (!UndistortNormalized(in0, view.laser_pixels(i, 0), view.laser_pixels(i, 1), &x0, &y0,
-                             jac)) {
-      residuals[i] = T(0.0);
-      ok = false;
-      continue;
-    }
-    T x, y;
-    UndistortAround(in, view.laser_pixels(i, 0), view.laser_pixels(i, 1), x0, y0, jac, &x, &y);
-    T point[3];
-    const T depth = RayPlanePoint(x, y, board_normal.data(), board_offset, point);
-    if (!(depth > T(0.0))) ok = false;
-    residuals[i] =
-        (normal[0] * point[0] + normal[1] * point[1] + normal[2] * point[2]) / n_norm + *offset;
-    residuals[i] *= inv_sigma;
-  }
-  return ok;
+// One stripe pixel's laser residual: the signed distance (mm) of the point where its ray meets
+// the board plane nb . X + ob = 0 from the laser plane unit . X + d = 0 (unit normal). x, y
+// receive the undistorted normalised point and jd (row-major 2x2) the distortion's Jacobian
+// there, for the analytic derivatives of LaserCost. Returns false when the pixel cannot be
+// undistorted or its ray does not meet the board plane in front of the camera.
+bool LaserResidual(const double* in, const double* nb, double ob, const double* unit, double d,
+                   double u, double v, double* x, double* y, double* jd, double* residual) {
+  if (!UndistortNormalized(in, u, v, x, y, jd)) return false;
+  double point[3];
+  if (!(RayPlanePoint(*x, *y, nb, ob, point) > 0.0)) return false;
+  *residual = unit[0] * point[0] + unit[1] * point[1] + unit[2] * point[2] + d;
+  return true;
 }
 
 template <typename T>
@@ -106,7 +87,7 @@ struct FreeCorners {
 };
 
 // The laser residuals of one view with an analytic Jacobian (the autodiff version of
-// LaserResiduals costs ~10x more: a Jet of 27 numbers through every pixel's arithmetic).
+// the same residual costs ~10x more: a Jet of 27 numbers through every pixel's arithmetic).
 //
 // With ray = (x, y, 1) the undistorted pixel, the board plane nb . X + ob = 0 and the laser
 // plane n . X + d = 0 (n not necessarily unit), the residual is
@@ -117,7 +98,7 @@ struct FreeCorners {
 //   - the board pose blocks: through (nb, ob), whose derivatives come from one Jet evaluation
 //     of the view's camera_from_board (CameraFromBoard or QuaternionPose);
 //   - n and d directly.
-// The residual values are those of LaserResiduals (same formulas, RayPlanePoint).
+// The residual values are LaserResidual's.
 template <bool kChain>
 class LaserCost final : public ceres::CostFunction {
  public:
@@ -166,12 +147,9 @@ class LaserCost final : public ceres::CostFunction {
     const double unit[3] = {n[0] / nn, n[1] / nn, n[2] / nn};
     for (Eigen::Index i = 0; i < view_->laser_pixels.rows(); ++i) {
       const double u = view_->laser_pixels(i, 0), v = view_->laser_pixels(i, 1);
-      double x, y, jd[4];
-      if (!UndistortNormalized(in, u, v, &x, &y, jd)) return false;
-      double point[3];
-      const double depth = RayPlanePoint(x, y, nb, ob, point);
-      if (!(depth > 0.0)) return false;
-      residuals[i] = (unit[0] * point[0] + unit[1] * point[1] + unit[2] * point[2] + d) * w_;
+      double x, y, jd[4], res;
+      if (!LaserResidual(in, nb, ob, unit, d, u, v, &x, &y, jd, &res)) return false;
+      residuals[i] = res * w_;
       if (jacobians == nullptr) continue;
       const double ray[3] = {x, y, 1.0};
       const double a = n[0] * x + n[1] * y + n[2];
@@ -501,12 +479,13 @@ JointResiduals EvaluateJoint(const std::vector<JointView>& views, const JointSta
     RowMatX2 c(v.corner_pixels.rows(), 2);
     CornerResiduals(s.intrinsics.data(), r, t, v, 1.0, c.data());
     out.corners.push_back(c);
+    const Eigen::Vector3d nb = r.col(2);
+    const double ob = -nb.dot(t);
     Eigen::VectorXd l(v.laser_pixels.rows());
     for (Eigen::Index k = 0; k < v.laser_pixels.rows(); ++k) {
-      JointView one;
-      one.laser_pixels = v.laser_pixels.row(k);
-      double res = 0.0;
-      l[k] = LaserResiduals(s.intrinsics.data(), r, t, normal.data(), &offset, one, 1.0, &res)
+      double x, y, jd[4], res;
+      l[k] = LaserResidual(s.intrinsics.data(), nb.data(), ob, normal.data(), offset,
+                           v.laser_pixels(k, 0), v.laser_pixels(k, 1), &x, &y, jd, &res)
                  ? res
                  : kNaN;
     }
