@@ -14,6 +14,7 @@
 #include "hmlvs/model/model.h"
 #include "hmlvs/solvers/fitness.h"
 #include "hmlvs/solvers/lm.h"
+#include "hmlvs/solvers/parallel.h"
 #include "hmlvs/solvers/search.h"
 
 namespace {
@@ -97,29 +98,64 @@ int main(int argc, char** argv) {
     Emit("fitness_point_evaluations_per_second", Median(rates), "1/s", reps,
          sink == 42.0 ? ", \"sink\": 1" : "");
   }
-  // 2. One full PSO run (paper workload) on 1 thread and on all threads.
+  // 2. One full PSO run (paper workload) on 1 thread and on all threads, each beside the bare
+  // loop: the same number of fitness evaluations (swarm x (iterations + 1)) of in-bounds vectors
+  // on the same threads, split evenly, with no swarm update and no synchronisation (the compute
+  // floor). Interleaved, so that both see the same machine load.
+  std::vector<hmlvs::Vector14d> bare_qs(1024);
+  {
+    std::mt19937_64 rng(4);
+    for (auto& q : bare_qs)
+      for (int d = 0; d < hmlvs::kNumParams; ++d)
+        q[d] = lo[d] + std::uniform_real_distribution<double>(0, 1)(rng) * (hi[d] - lo[d]);
+  }
   for (int threads : {1, hw}) {
     hmlvs::PsoOptions o;
     o.lower = lo;
     o.upper = hi;
     o.threads = threads;
-    std::vector<double> times;
+    std::vector<double> times, bare_times;
     double best = 0;
+    const long long evaluations = static_cast<long long>(o.swarm_size) * (o.iterations + 1);
     for (int r = 0; r < reps; ++r) {
       o.seed = static_cast<std::uint64_t>(r);
       const auto res = hmlvs::RunPso(data, o);
       times.push_back(res.seconds);
       best = res.runs[0].best_fitness;
+      std::vector<double> sinks(threads, 0.0);
+      const auto t0 = Clock::now();
+      hmlvs::RunTeam(threads, [&](int member, hmlvs::SpinBarrier&) {
+        double sink = 0.0;
+        for (long long e = member; e < evaluations; e += threads)
+          sink += data.Evaluate(bare_qs[e % bare_qs.size()].data());
+        sinks[member] = sink;
+      });
+      bare_times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+      if (sinks[0] == 42.0) std::printf("#\n");  // keep the loop
     }
     Emit("pso_run_" + std::to_string(threads) + "_threads", Median(times) * 1e3, "ms", reps,
          ", \"threads\": " + std::to_string(threads) +
              ", \"last_best_fitness\": " + std::to_string(best));
+    Emit("bare_loop_" + std::to_string(threads) + "_threads", Median(bare_times) * 1e3, "ms", reps,
+         ", \"threads\": " + std::to_string(threads));
   }
-  // 3. LM solves from a perturbed start (s = 0.01 around the truth), modern and paper mode.
-  for (const auto mode : {hmlvs::LmMode::kModern, hmlvs::LmMode::kPaper}) {
-    const bool modern = mode == hmlvs::LmMode::kModern;
-    hmlvs::LmOptions o;
-    o.mode = mode;
+  // 3. LM solves from a perturbed start (s = 0.01 around the truth): modern mode, paper mode, and
+  // paper mode with Ceres' NumericDiffCostFunction (the reference its cost matches bit for bit),
+  // interleaved so that the three see the same machine load.
+  struct LmCase {
+    std::string name;
+    hmlvs::LmOptions options;
+    std::vector<double> times;
+    int iterations = 0;
+  };
+  std::vector<LmCase> cases(3);
+  for (int c = 0; c < 3; ++c) {
+    hmlvs::LmOptions& o = cases[c].options;
+    const bool modern = c == 0;
+    cases[c].name = modern   ? "lm_modern_solve"
+                    : c == 1 ? "lm_paper_solve"
+                             : "lm_paper_solve_numericdiff";
+    o.mode = modern ? hmlvs::LmMode::kModern : hmlvs::LmMode::kPaper;
     o.lower = lo;
     o.upper = hi;
     o.fixed[hmlvs::kSu] = modern;
@@ -127,24 +163,27 @@ int main(int argc, char** argv) {
       o.function_tolerance = o.parameter_tolerance = 1.49012e-8;
       o.gradient_tolerance = 0.0;
     }
-    std::vector<double> times;
-    std::mt19937_64 rng(3);
-    std::uniform_real_distribution<double> u(-0.005, 0.005);
-    int iterations = 0;
-    for (int r = 0; r < std::max(reps, 20); ++r) {
-      hmlvs::Vector14d q0 = Nominal();
-      for (int d = 0; d < hmlvs::kNumParams; ++d) q0[d] *= 1.0 + u(rng);
-      q0[hmlvs::kOmega] = 0.01 * u(rng);
-      q0[hmlvs::kPhi] = 0.01 * u(rng);
-      q0[hmlvs::kVarphi] = 0.01 * u(rng);
-      q0[hmlvs::kK] = 0.0;
-      q0[hmlvs::kTy] = u(rng);
-      const auto res = hmlvs::RunLm(data, q0, o);
-      times.push_back(res.seconds);
-      iterations = res.iterations;
+    o.paper_fast_cost = c != 2;
+  }
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(-0.005, 0.005);
+  for (int r = 0; r < std::max(reps, 20); ++r) {
+    hmlvs::Vector14d q0 = Nominal();
+    for (int d = 0; d < hmlvs::kNumParams; ++d) q0[d] *= 1.0 + u(rng);
+    q0[hmlvs::kOmega] = 0.01 * u(rng);
+    q0[hmlvs::kPhi] = 0.01 * u(rng);
+    q0[hmlvs::kVarphi] = 0.01 * u(rng);
+    q0[hmlvs::kK] = 0.0;
+    q0[hmlvs::kTy] = u(rng);
+    for (LmCase& c : cases) {
+      const auto res = hmlvs::RunLm(data, q0, c.options);
+      c.times.push_back(res.seconds);
+      c.iterations = res.iterations;
     }
-    Emit(modern ? "lm_modern_solve" : "lm_paper_solve", Median(times) * 1e3, "ms",
-         std::max(reps, 20), ", \"last_iterations\": " + std::to_string(iterations));
+  }
+  for (LmCase& c : cases) {
+    Emit(c.name, Median(c.times) * 1e3, "ms", std::max(reps, 20),
+         ", \"last_iterations\": " + std::to_string(c.iterations));
   }
   return 0;
 }

@@ -4,8 +4,11 @@
 #include <ceres/rotation.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <memory>
 #include <sstream>
 #include <stdexcept>
@@ -23,37 +26,9 @@ double WrapNear(double angle, double reference) {
   return angle + 2.0 * kPi * std::round((reference - angle) / (2.0 * kPi));
 }
 
-// The three residual functors below all evaluate the model's HandResidual (model/model.h):
-// E_h = h - (R_C cP + t) in the hand frame, which has the norm of the base-frame E.
-
-// Intrinsics and translation as 11 scalar blocks (f..theta, tx, ty, tz) and the rotation as an
-// Eigen quaternion [x, y, z, w].
-struct ModernResidual {
-  double u, v;
-  Eigen::Vector3d h;
-
-  template <typename T>
-  bool operator()(const T* f, const T* su, const T* sv, const T* cu, const T* cv, const T* k,
-                  const T* hh, const T* theta, const T* quat, const T* tx, const T* ty, const T* tz,
-                  T* residual) const {
-    using std::tan;
-    T q[kNumParams];  // the Euler angles are not read: the rotation is the quaternion
-    q[kF] = *f;
-    q[kSu] = *su;
-    q[kSv] = *sv;
-    q[kCu] = *cu;
-    q[kCv] = *cv;
-    q[kK] = *k;
-    q[kH] = *hh;
-    q[kTheta] = *theta;
-    q[kOmega] = q[kPhi] = q[kVarphi] = T(0.0);
-    q[kTx] = *tx;
-    q[kTy] = *ty;
-    q[kTz] = *tz;
-    const Eigen::Quaternion<T> rot(quat[3], quat[0], quat[1], quat[2]);
-    return HandResidual(q, rot, tan(q[kTheta]), u, v, h.data(), residual) > T(0.0);
-  }
-};
+// The residual functors below and the cost functions after them all evaluate the model's
+// HandResidual (model/model.h): E_h = h - (R_C cP + t) in the hand frame, which has the norm of the
+// base-frame E.
 
 // Euler-angle variant for when an Euler angle is held fixed (14 scalar blocks).
 struct EulerResidual {
@@ -102,15 +77,210 @@ ceres::LossFunction* MakeLoss(const LmOptions& o) {
 
 }  // namespace
 
-ceres::CostFunction* NewPaperCost(double u, double v, const Eigen::Vector3d& reference_in_hand) {
+double PaperDifferenceStep(double x) {
+  static const double kRelative = ceres::NumericDiffOptions().relative_step_size;
+  static const double kMin = std::sqrt(std::numeric_limits<double>::epsilon());
+  return std::max(kMin, std::abs(x) * kRelative);
+}
+
+const PaperTrigCache::Entry& PaperTrigCache::Get(const double* x, bool steps) {
+  const std::array<double, 4> key{x[kOmega], x[kPhi], x[kVarphi], x[kTheta]};
+  Entry* e = nullptr;
+  for (int n = 0; n < size_ && e == nullptr; ++n) {  // newest first
+    Entry& c = entries_[(newest_ - n + kSize) % kSize];
+    if (std::memcmp(c.key.data(), key.data(), sizeof(key)) == 0) e = &c;
+  }
+  if (e == nullptr) {
+    newest_ = (newest_ + 1) % kSize;
+    size_ = std::min(size_ + 1, kSize);
+    e = &entries_[newest_];
+    e->key = key;
+    e->rotation = RotationZYZ(x[kOmega], x[kPhi], x[kVarphi]);
+    e->tan_theta = std::tan(x[kTheta]);
+    e->has_steps = false;
+  }
+  if (steps && !e->has_steps) {
+    for (int a = 0; a < 3; ++a) {
+      double angle[3] = {x[kOmega], x[kPhi], x[kVarphi]};
+      angle[a] = angle[a] + PaperDifferenceStep(angle[a]);
+      e->rotation_step[a] = RotationZYZ(angle[0], angle[1], angle[2]);
+    }
+    e->tan_theta_step = std::tan(x[kTheta] + PaperDifferenceStep(x[kTheta]));
+    e->has_steps = true;
+  }
+  return *e;
+}
+
+namespace {
+
+// ||E_h|| of a camera point, as PaperResidual computes it from HandResidual.
+double HandErrorNorm(const double* q, const Eigen::Matrix3d& rot, const double* camera_point,
+                     const Eigen::Vector3d& h) {
+  const Eigen::Vector3d hand = CameraToHand(q, rot, camera_point);
+  const double e[3] = {h[0] - hand[0], h[1] - hand[1], h[2] - hand[2]};
+  return std::sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+}
+
+// PaperResidual with its forward differences computed from the parts that change: the camera
+// point depends on f..theta only, the rotation on omega, phi, varphi only.
+class PaperCost final : public ceres::SizedCostFunction<1, kNumParams> {
+ public:
+  PaperCost(double u, double v, const Eigen::Vector3d& h, PaperTrigCache* cache)
+      : u_(u), v_(v), h_(h), cache_(cache) {}
+
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
+    const double* x = parameters[0];
+    const bool jacobian = jacobians != nullptr && jacobians[0] != nullptr;
+    const PaperTrigCache::Entry& t = cache_->Get(x, jacobian);
+    double cp[3];
+    if (!(PixelToCamera(x, t.tan_theta, u_, v_, cp) > 0.0)) return false;
+    const double r0 = HandErrorNorm(x, t.rotation, cp, h_);
+    residuals[0] = r0;
+    if (!jacobian) return true;
+    double xp[kNumParams];
+    std::copy(x, x + kNumParams, xp);
+    for (int j = 0; j < kNumParams; ++j) {
+      const double delta = PaperDifferenceStep(x[j]);
+      xp[j] = x[j] + delta;
+      double r;
+      if (j <= kTheta) {  // the camera point moves
+        double cpj[3];
+        if (!(PixelToCamera(xp, j == kTheta ? t.tan_theta_step : t.tan_theta, u_, v_, cpj) > 0.0)) {
+          return false;
+        }
+        r = HandErrorNorm(xp, t.rotation, cpj, h_);
+      } else if (j <= kVarphi) {  // the rotation moves
+        r = HandErrorNorm(xp, t.rotation_step[j - kOmega], cp, h_);
+      } else {  // the translation moves
+        r = HandErrorNorm(xp, t.rotation, cp, h_);
+      }
+      xp[j] = x[j];
+      jacobians[0][j] = (r - r0) * (1.0 / delta);
+    }
+    return true;
+  }
+
+ private:
+  double u_, v_;
+  Eigen::Vector3d h_;
+  PaperTrigCache* cache_;
+};
+
+// Holds the parameters of a block [first, first + size) that are fixed (the whole block when all
+// are, else a SubsetManifold) and bounds the free ones.
+void HoldAndBound(ceres::Problem* problem, double* block, int first, int size, const LmOptions& o) {
+  std::vector<int> fixed;
+  for (int i = 0; i < size; ++i)
+    if (o.fixed[first + i]) fixed.push_back(i);
+  if (static_cast<int>(fixed.size()) == size) {
+    problem->SetParameterBlockConstant(block);
+    return;
+  }
+  if (!fixed.empty()) problem->SetManifold(block, new ceres::SubsetManifold(size, fixed));
+  if (!o.use_bounds) return;
+  for (int i = 0; i < size; ++i) {
+    if (o.fixed[first + i]) continue;
+    problem->SetParameterLowerBound(block, i, o.lower[first + i]);
+    problem->SetParameterUpperBound(block, i, o.upper[first + i]);
+  }
+}
+
+}  // namespace
+
+ceres::CostFunction* NewPaperCost(double u, double v, const Eigen::Vector3d& reference_in_hand,
+                                  PaperTrigCache* cache) {
+  if (cache != nullptr) return new PaperCost(u, v, reference_in_hand, cache);
   return new ceres::NumericDiffCostFunction<PaperResidual, ceres::FORWARD, 1, kNumParams>(
       new PaperResidual{u, v, reference_in_hand});
 }
 
+namespace {
+
+// ModernResidual with an analytic Jacobian: the residual is computed as HandResidual computes it
+// (the same value to the bit), the derivatives by the chain rule through the camera point
+// cP = (H / D) [Xd, Yd, f s] (model.h PixelToCamera) and Eigen's quaternion rotation
+// v' = p + w uv + qv x uv, uv = 2 qv x p, differentiated as written (the manifold projects out
+// the component off the unit sphere).
+class ModernCost final : public ceres::SizedCostFunction<3, 8, 4, 3> {
+ public:
+  ModernCost(double u, double v, const Eigen::Vector3d& h) : u_(u), v_(v), h_(h) {}
+
+  bool Evaluate(double const* const* p, double* residual, double** jac) const override {
+    double q[kNumParams];
+    for (int i = 0; i <= kTheta; ++i) q[i] = p[0][i];
+    q[kOmega] = q[kPhi] = q[kVarphi] = 0.0;
+    q[kTx] = p[2][0];
+    q[kTy] = p[2][1];
+    q[kTz] = p[2][2];
+    const double* quat = p[1];
+    const Eigen::Quaterniond rot(quat[3], quat[0], quat[1], quat[2]);
+    const double tan_theta = std::tan(q[kTheta]);
+    if (!(HandResidual(q, rot, tan_theta, u_, v_, h_.data(), residual) > 0.0)) return false;
+    if (jac == nullptr) return true;
+
+    double xd, yd;
+    const double s = DistortedSensorPoint(q, u_, v_, &xd, &yd);
+    const double f = q[kF], k = q[kK];
+    const double d = yd + f * tan_theta * s;
+    const double g = q[kH] / d;
+    const Eigen::Vector3d cp(g * xd, g * yd, g * f * s);
+    // d(rot * p)/dp: the rotation applied to the unit vectors.
+    Eigen::Matrix3d m;
+    for (int c = 0; c < 3; ++c) m.col(c) = rot * Eigen::Vector3d::Unit(c);
+    // dcP for a change (dxd, dyd, df, dk, dtan, dh) of the camera model's inputs.
+    auto camera_derivative = [&](double dxd, double dyd, double df, double dk, double dtan,
+                                 double dh) {
+      const double ds = 2.0 * k * (xd * dxd + yd * dyd) + dk * (xd * xd + yd * yd);
+      const double dd = dyd + df * tan_theta * s + f * dtan * s + f * tan_theta * ds;
+      const double dg = dh / d - g * dd / d;
+      return Eigen::Vector3d(dg * xd + g * dxd, dg * yd + g * dyd,
+                             dg * f * s + g * (df * s + f * ds));
+    };
+    const double dtan = 1.0 + tan_theta * tan_theta;
+    const Eigen::Vector3d dcp[8] = {camera_derivative(0, 0, 1, 0, 0, 0),            // f
+                                    camera_derivative(u_ - q[kCu], 0, 0, 0, 0, 0),  // Su
+                                    camera_derivative(0, v_ - q[kCv], 0, 0, 0, 0),  // Sv
+                                    camera_derivative(-q[kSu], 0, 0, 0, 0, 0),      // Cu
+                                    camera_derivative(0, -q[kSv], 0, 0, 0, 0),      // Cv
+                                    camera_derivative(0, 0, 0, 1, 0, 0),            // k
+                                    camera_derivative(0, 0, 0, 0, 0, 1),            // H
+                                    camera_derivative(0, 0, 0, 0, dtan, 0)};        // theta
+    if (jac[0] != nullptr) {  // 3 x 8, row-major
+      for (int i = 0; i < 8; ++i) {
+        const Eigen::Vector3d de = -(m * dcp[i]);
+        for (int r = 0; r < 3; ++r) jac[0][8 * r + i] = de[r];
+      }
+    }
+    if (jac[1] != nullptr) {  // 3 x 4, row-major, quaternion order x, y, z, w
+      const Eigen::Vector3d qv(quat[0], quat[1], quat[2]);
+      const double w = quat[3];
+      const Eigen::Vector3d uv = 2.0 * qv.cross(cp);
+      for (int c = 0; c < 3; ++c) {
+        const Eigen::Vector3d e = Eigen::Vector3d::Unit(c);
+        const Eigen::Vector3d duv = 2.0 * e.cross(cp);
+        const Eigen::Vector3d dv = w * duv + e.cross(uv) + qv.cross(duv);
+        for (int r = 0; r < 3; ++r) jac[1][4 * r + c] = -dv[r];
+      }
+      for (int r = 0; r < 3; ++r) jac[1][4 * r + 3] = -uv[r];
+    }
+    if (jac[2] != nullptr) {  // 3 x 3: -I
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) jac[2][3 * r + c] = r == c ? -1.0 : 0.0;
+    }
+    return true;
+  }
+
+ private:
+  double u_, v_;
+  Eigen::Vector3d h_;
+};
+
+}  // namespace
+
 ceres::CostFunction* NewModernQuaternionCost(double u, double v,
                                              const Eigen::Vector3d& reference_in_hand) {
-  return new ceres::AutoDiffCostFunction<ModernResidual, 3, 1, 1, 1, 1, 1, 1, 1, 1, 4, 1, 1, 1>(
-      new ModernResidual{u, v, reference_in_hand});
+  return new ModernCost(u, v, reference_in_hand);
 }
 
 ceres::CostFunction* NewModernEulerCost(double u, double v,
@@ -190,6 +360,7 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
   Vector14d q = initial;
   // One robust loss shared by all residual blocks, owned here.
   std::unique_ptr<ceres::LossFunction> loss(paper ? nullptr : MakeLoss(o));
+  PaperTrigCache trig;  // shared by the paper-mode costs; the solve runs on one thread
   ceres::Problem::Options popt;
   popt.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(popt);
@@ -198,8 +369,9 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
 
   if (paper) {
     for (Eigen::Index i = 0; i < data.size(); ++i) {
-      problem.AddResidualBlock(NewPaperCost(data.u(i), data.v(i), data.ReferenceInHand(i)), nullptr,
-                               q.data());
+      problem.AddResidualBlock(NewPaperCost(data.u(i), data.v(i), data.ReferenceInHand(i),
+                                            o.paper_fast_cost ? &trig : nullptr),
+                               nullptr, q.data());
     }
     std::vector<int> fixed_idx;
     for (int i = 0; i < kNumParams; ++i)
@@ -213,10 +385,11 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
     for (Eigen::Index i = 0; i < data.size(); ++i) {
       ceres::CostFunction* cost =
           NewModernQuaternionCost(data.u(i), data.v(i), data.ReferenceInHand(i));
-      problem.AddResidualBlock(cost, loss.get(), &q[kF], &q[kSu], &q[kSv], &q[kCu], &q[kCv], &q[kK],
-                               &q[kH], &q[kTheta], quat.data(), &q[kTx], &q[kTy], &q[kTz]);
+      problem.AddResidualBlock(cost, loss.get(), &q[kF], quat.data(), &q[kTx]);
     }
     problem.SetManifold(quat.data(), new ceres::EigenQuaternionManifold());
+    HoldAndBound(&problem, &q[kF], kF, kTheta + 1, o);
+    HoldAndBound(&problem, &q[kTx], kTx, 3, o);
   } else {
     for (Eigen::Index i = 0; i < data.size(); ++i) {
       std::vector<double*> blocks;
@@ -225,10 +398,8 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
                                loss.get(), blocks);
     }
   }
-  if (!paper) {
+  if (!paper && !use_quaternion) {
     for (int i = 0; i < kNumParams; ++i) {
-      const bool euler = i == kOmega || i == kPhi || i == kVarphi;
-      if (euler && use_quaternion) continue;
       double* block = &q[i];
       if (o.fixed[i]) {
         problem.SetParameterBlockConstant(block);

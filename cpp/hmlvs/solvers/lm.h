@@ -30,6 +30,10 @@ struct LmOptions {
   double function_tolerance = 1e-14;
   double parameter_tolerance = 1e-14;
   double gradient_tolerance = 1e-16;
+  /// Paper mode: the cost function that shares work between the points and the difference
+  /// steps (NewPaperCost with a PaperTrigCache). false: Ceres' NumericDiffCostFunction, the
+  /// reference it must match bit for bit (for the test that checks it does).
+  bool paper_fast_cost = true;
 };
 
 struct LmResult {

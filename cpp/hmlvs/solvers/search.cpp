@@ -1,6 +1,7 @@
 #include "hmlvs/solvers/search.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -33,6 +34,13 @@ void CheckBounds(const Vector14d& lower, const Vector14d& upper, const char* wha
   }
 }
 
+// The best personal best among one team member's particles after a generation.
+struct MemberBest {
+  double fit = std::numeric_limits<double>::infinity();
+  Vector14d best = Vector14d::Zero();
+  bool stop = false;  // member 0: cancellation requested before this generation
+};
+
 // One swarm: positions, velocities and personal bests of all particles.
 struct Swarm {
   int n;
@@ -41,6 +49,9 @@ struct Swarm {
   std::vector<Rng> rng;
   Vector14d gbest;
   double gbest_fit = std::numeric_limits<double>::infinity();
+  // Per team member, double-buffered by generation parity: a member may write generation
+  // t + 1's entry while the others still read generation t's.
+  std::array<std::vector<MemberBest>, 2> member_best;
   explicit Swarm(int size) : n(size), x(size), v(size), pbest(size), fit(size), pbest_fit(size) {}
 };
 
@@ -78,7 +89,7 @@ class PsoRunner {
     }
   }
 
-  void Step(Swarm& s, int t, int first, int last) const {
+  void Step(Swarm& s, int t, int first, int last, const Vector14d& gbest) const {
     const double w = o_.w_max - (o_.w_max - o_.w_min) * t / o_.iterations;  // Eq. 20
     for (int i = first; i < last; ++i) {
       Rng& r = s.rng[i];
@@ -87,7 +98,7 @@ class PsoRunner {
       for (int d = 0; d < kNumParams; ++d) {
         const double r1 = r.Uniform(), r2 = r.Uniform();
         double vd = w * v[d] + o_.c1 * r1 * (s.pbest[i][d] - x[d]) +
-                    o_.c2 * r2 * (s.gbest[d] - x[d]);  // Eq. 19
+                    o_.c2 * r2 * (gbest[d] - x[d]);  // Eq. 19
         vd = std::clamp(vd, -vmax_[d], vmax_[d]);
         double xd = x[d] + vd;  // Eq. 21
         if (xd < o_.lower[d]) {
@@ -118,39 +129,74 @@ class PsoRunner {
     }
   }
 
-  // Runs one swarm on `members` threads of a team (member ids [0, members)).
+  // Runs one swarm on `members` threads of a team (member ids [0, members)). With several
+  // members, one barrier per generation: each member finds the best personal best among its own
+  // particles, and after the barrier every member combines these in member order (particles in
+  // index order, ties to the lowest index, as UpdateGlobal does), so all hold the same global
+  // best without a second barrier. A cancellation seen by member 0 before a generation is
+  // passed with its result, so that all members stop after the same generation.
   void RunSwarm(int run, int member, int members, SpinBarrier* barrier, PsoRun* out,
                 std::atomic<bool>* cancel, const std::function<void(int)>& tick) const {
     Swarm& s = *swarms_[run];
     const int chunk = (s.n + members - 1) / members;
     const int first = std::min(s.n, member * chunk);
     const int last = std::min(s.n, first + chunk);
-    auto sync = [&] {
-      if (barrier) barrier->Wait();
-    };
     Init(s, run, first, last);
-    sync();
+    if (barrier) barrier->Wait();
     if (member == 0) UpdateGlobal(s);
-    sync();
+    if (barrier) barrier->Wait();
+    Vector14d gbest = s.gbest;  // this member's copy: the same on every member
+    double gbest_fit = s.gbest_fit;
     int t = 0;
     std::string termination = "max_iterations";
     for (; t < o_.iterations; ++t) {
-      if (s.gbest_fit <= o_.target_fitness) {
+      if (gbest_fit <= o_.target_fitness) {
         termination = "target_fitness";
         break;
       }
-      if (cancel->load(std::memory_order_relaxed)) {
-        termination = "cancelled";
-        break;
-      }
-      Step(s, t, first, last);
-      sync();
-      if (member == 0) {
+      if (barrier == nullptr) {
+        if (cancel->load(std::memory_order_relaxed)) {
+          termination = "cancelled";
+          break;
+        }
+        Step(s, t, first, last, s.gbest);
         UpdateGlobal(s);
+        gbest_fit = s.gbest_fit;
+      } else {
+        const bool stop = member == 0 && cancel->load(std::memory_order_relaxed);
+        Step(s, t, first, last, gbest);
+        MemberBest& mine = s.member_best[t & 1][member];
+        mine.fit = std::numeric_limits<double>::infinity();
+        int best = -1;
+        for (int i = first; i < last; ++i) {
+          if (s.pbest_fit[i] < mine.fit) {
+            mine.fit = s.pbest_fit[i];
+            best = i;
+          }
+        }
+        if (best >= 0) mine.best = s.pbest[best];
+        mine.stop = stop;
+        barrier->Wait();
+        const std::vector<MemberBest>& all = s.member_best[t & 1];
+        if (all[0].stop) {
+          termination = "cancelled";
+          break;
+        }
+        for (int m = 0; m < members; ++m) {
+          if (all[m].fit < gbest_fit) {
+            gbest_fit = all[m].fit;
+            gbest = all[m].best;
+          }
+        }
+        if (member == 0) {
+          s.gbest = gbest;
+          s.gbest_fit = gbest_fit;
+        }
+      }
+      if (member == 0) {
         out->history.push_back(s.gbest_fit);
         tick(t + 1);
       }
-      sync();
     }
     if (member == 0) {
       out->best = s.gbest;
@@ -186,6 +232,7 @@ PsoResult RunPso(const FitnessData& data, const PsoOptions& o, const ProgressCal
   for (int r = 0; r < o.runs; ++r) {
     runner.swarms_.push_back(std::make_unique<Swarm>(o.swarm_size));
     runner.swarms_.back()->rng.assign(o.swarm_size, Rng(0));
+    for (auto& buffer : runner.swarms_.back()->member_best) buffer.assign(threads, MemberBest());
     result.runs[r].history.reserve(o.iterations);
   }
   std::atomic<bool> cancel(false);
