@@ -10,6 +10,7 @@ import hmlvs
 from hmlvs.cli import main as cli_main
 import numpy as np
 import pytest
+import yaml
 
 pytestmark = pytest.mark.scene  # rendered images
 
@@ -107,3 +108,41 @@ def test_an_opencv_error_in_one_view_rejects_that_view(rendered, tmp_path, monke
     assert [r.id for r in reports] == ["p000", "p001", "p002", "p003"]
     assert not reports[0].ok and reports[0].reason.startswith("board: OpenCV failed (")
     assert size == (640, 480) and [v.id for v in found] == [r.id for r in reports if r.ok]
+
+
+def _manifest_forms(rendered, tmp_path):
+    """The same session as a folder, its manifest.yaml, and a JSON manifest with another
+    name whose format key comes after 4 kB of entries."""
+    folder, doc = _copy(rendered, tmp_path)
+    (folder / "manifest.json").rename(folder / "manifest.yaml")
+    (folder / "manifest.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    late = {"poses": [dict(p, note="x" * 1500) for p in doc["poses"]],
+            **{k: v for k, v in doc.items() if k not in ("poses", "format", "version")},
+            "format": doc["format"], "version": doc["version"]}
+    (folder / "session.json").write_text(json.dumps(late, indent=1))
+    assert (folder / "session.json").read_text().index('"format"') > 4096
+    return [folder, folder / "manifest.yaml", folder / "session.json"]
+
+
+def test_calibrate_and_measure_take_a_manifest_file_of_any_name(rendered, tmp_path, capsys):
+    forms = _manifest_forms(rendered, tmp_path)
+    calibrate = [_run(["calibrate", str(f), "--method", "lm", "--out",
+                       str(tmp_path / "c.yaml")], capsys) for f in forms]
+    # 8 points from 3 pairs, too few for 10 free parameters: the same refusal from the
+    # calibration stage for every form, after the same per-pair lines
+    for code, out, err in calibrate:
+        assert code == 2
+        assert err.startswith("error: too few points: 8 calibration points"), err
+        assert out.splitlines()[0].startswith("p000: 1 points"), out
+    assert calibrate[1:] == [calibrate[0]] * 2
+    assert not (tmp_path / "c.yaml").exists()
+
+    cal = hmlvs.Calibration(params=hmlvs.Parameters.nominal()).save(tmp_path / "cal.yaml")
+    measured = []
+    for f in forms:
+        code, out, err = _run(["measure", str(cal), str(f), "--out", str(tmp_path / "m.csv"),
+                               "--json"], capsys)
+        assert code == 0, err
+        measured.append((json.loads(out)["points"], (tmp_path / "m.csv").read_text()))
+    assert measured[0][0] > 1000
+    assert measured[1:] == [measured[0]] * 2
