@@ -77,5 +77,103 @@ def test_manifest_image_size_and_data_set_pose_index_are_checked(tmp_path):
         {"id": "a", "pixel": [1, 2], "reference": [0, 0, 0],
          "base_from_hand": np.eye(4).tolist(), "pose_index": 1.7}]}
     (tmp_path / "d.json").write_text(json.dumps(d))
-    with pytest.raises(ValueError, match="pose_index must be a whole number, got 1.7"):
+    with pytest.raises(ValueError, match=r"d.json: points\[0\]\.pose_index: must be a whole "
+                       "number, got 1.7"):
         Dataset.load(tmp_path / "d.json")
+
+
+# --- data sets (.json and .npz) -----------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def small_dataset():
+    import hmlvs
+
+    return hmlvs.simulate(seed=0).dataset.subset(np.arange(6))
+
+
+@pytest.mark.parametrize("change, message", [
+    # a text where a number belongs was read as that number
+    (lambda d: d["points"][3].update(pixel=[1, "2"]),
+     r"points\[3\]\.pixel\[1\]: must be a number, got '2'"),
+    (lambda d: d["points"][3].update(reference=[1, 2]),
+     r"points\[3\]\.reference: must be the reference point \[x, y, z\] of 3 items, got 2"),
+    (lambda d: d["points"][3].update(base_from_hand=[[1, 0, 0, 0]] * 3),
+     r"points\[3\]\.base_from_hand: must be the 4x4 base_from_hand pose of 4 items, got 3"),
+    (lambda d: d["points"][3].pop("reference"),
+     r"points\[3\]: lacks reference; it must be a calibration point \{id, pixel, reference"),
+    (lambda d: d["points"][0].update(id=None),
+     r"points\[0\]\.id: must be an id \(a text or a whole number\), got null"),
+    (lambda d: d["points"][2].update(joints=[0.1, "x"]),
+     r"points\[2\]\.joints\[1\]: must be a number, got 'x'"),
+    # a pose_index on some points only was dropped
+    (lambda d: d["points"][4].update(pose_index=2),
+     r"points\[4\] has pose_index but points\[0\] does not: give pose_index for every point"),
+    (lambda d: [e.update(joints=[0.0] * (4 if i == 5 else 5)) for i, e in
+                enumerate(d["points"])],
+     r"points\[5\]\.joints: has 4 readings, points\[0\] has 5"),
+    (lambda d: d.update(points={"a": 1}), r"points: must be a list of calibration points"),
+    (lambda d: d.update(joint_unit="grad"), r"joint_unit: must be one of rad, deg, got 'grad'"),
+    (lambda d: d.update(meta=[1]), r"meta: must be a mapping"),
+])
+def test_json_data_set_with_a_wrong_entry_names_the_entry(tmp_path, small_dataset, change,
+                                                          message):
+    from hmlvs import Dataset
+
+    doc = small_dataset.to_json_dict()
+    change(doc)
+    path = tmp_path / "d.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=message) as e:
+        Dataset.load(path)
+    assert str(e.value).startswith(f"{path}: ") and str(e.value).count(str(path)) == 1
+
+
+def _header(**change):
+    h = {"format": "hmlvs-dataset", "version": 1, "length_unit": "mm", "joint_unit": "rad",
+         "meta": {}}
+    h.update(change)
+    return np.array(json.dumps(h))
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"pixels": np.zeros((6, 3))},
+     r"pixels: must be the stripe pixels of shape \(m, 2\), got shape \(6, 3\)"),
+    # numbers stored as texts were converted silently
+    ({"pixels": np.full((6, 2), "300")},
+     r"pixels: must be the stripe pixels: numbers, got an array of <U3"),
+    ({"points": np.full((6, 3), np.inf)},
+     r"points: must be finite; the entry at \(0, 0\) is inf"),
+    ({"poses": np.zeros((6, 3, 4))}, r"poses: must be the base_from_hand poses of shape "
+     r"\(m, 4, 4\), got shape \(6, 3, 4\)"),
+    ({"pose_index": np.full(6, 0.5)}, r"pose_index: must be the pose index of each point: "
+     "whole numbers, got an array of float64"),
+    ({"header": None}, r"lacks header; it must be an hmlvs data set \(.npz: header, pixels"),
+    ({"ids": None}, r"lacks ids"),
+    ({"header": _header(joint_unit="grad")},
+     r"header\.joint_unit: must be one of rad, deg, got 'grad'"),
+    ({"header": _header(meta="none")}, r"header\.meta: must be a mapping"),
+    ({"header": _header(version=2)}, r"data set format version 2 is newer than this hmlvs"),
+    ({"poses": np.zeros((5, 4, 4))}, r"pixels has 6 rows but poses has 5"),
+])
+def test_npz_data_set_with_a_wrong_array_names_the_array(tmp_path, small_dataset, change,
+                                                         message):
+    from hmlvs import Dataset
+
+    with np.load(small_dataset.save(tmp_path / "ok.npz")) as z:
+        arrays = dict(z)
+    arrays.update(change)
+    path = tmp_path / "d.npz"
+    np.savez(path, **{k: v for k, v in arrays.items() if v is not None})
+    with pytest.raises(ValueError, match=message) as e:
+        Dataset.load(path)
+    assert str(e.value).startswith(f"{path}: ") and str(e.value).count(str(path)) == 1
+
+
+def test_a_valid_data_set_reads_back_in_both_forms(tmp_path, small_dataset):
+    from hmlvs import Dataset
+
+    for name in ("d.npz", "d.json"):
+        back = Dataset.load(small_dataset.save(tmp_path / name))
+        np.testing.assert_array_equal(back.pixels, small_dataset.pixels)
+        np.testing.assert_array_equal(back.poses, small_dataset.poses)
+        np.testing.assert_array_equal(back.ids, small_dataset.ids)
