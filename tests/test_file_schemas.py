@@ -177,3 +177,60 @@ def test_a_valid_data_set_reads_back_in_both_forms(tmp_path, small_dataset):
         np.testing.assert_array_equal(back.pixels, small_dataset.pixels)
         np.testing.assert_array_equal(back.poses, small_dataset.poses)
         np.testing.assert_array_equal(back.ids, small_dataset.ids)
+
+
+# --- pose files (YAML) and manifest poses -----------------------------------------------
+
+@pytest.mark.parametrize("text, message", [
+    # numbers given as texts or booleans were read as numbers
+    ("pose_format: {unit: m}\nposes:\n  - {id: a, position: ['0.5', 0, 0.3], "
+     "rotation_vector: [0, 0, 1]}\n", r"poses\[0\]\.position\[0\]: must be a number, got '0.5'"),
+    ("pose_format: {unit: m}\nposes:\n  - {id: a, position: [0.5, 0, 0.3], "
+     "rotation_vector: [0, 0, true]}\n",
+     r"poses\[0\]\.rotation_vector\[2\]: must be a number, got True"),
+    ("- [500, 0, '300', 0, 0, 1]\n", r"poses\[0\]\[2\]: must be a number, got '300'"),
+    # a misspelt key was ignored
+    ("pose_format: {unit: m, order: xyzw}\nposes:\n  - [0.5, 0, 0.3, 0, 0, 1]\n",
+     r"pose_format: unknown key 'order'; the keys are unit, quaternion_order"),
+    ("pose_format: {unit: m}\nposes:\n  - {id: a, position: [0.5, 0, 0.3], rotation: [0, 0, "
+     "1]}\n", r"poses\[0\]: unknown key 'rotation'; the keys are id, pose, position"),
+    ("pose_format: {unit: m}\nposes:\n  - [[1, 0, 0, 0.5], [0, 1, 0, 0], [0, 0, 1, 0.3]]\n",
+     r"poses\[0\]: must be a 4x4 base_from_hand matrix of 4 items, got 3"),
+    ("pose_format: {unit: m}\nposes:\n  - 5\n",
+     r"poses\[0\]: must be a pose: a row of 16, 7 or 6 numbers, a 4x4 matrix, or a mapping"),
+    ("pose_format: {unit: m}\nposes: []\n", r"poses: must hold at least one pose, got \[\]"),
+    ("pose_format: {unit: m}\n", r"lacks poses; it must be a pose file"),
+    ("pose_format: {unit: m}\nposes:\n  - {id: [1], position: [0.5, 0, 0.3], "
+     "rotation_vector: [0, 0, 1]}\n", r"poses\[0\]\.id: must be an id"),
+])
+def test_yaml_pose_file_with_a_wrong_value_names_the_pose(tmp_path, text, message):
+    from hmlvs.data.poses import read_poses
+
+    path = tmp_path / "p.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=message) as e:
+        read_poses(path, unit="m" if text.startswith("-") else None)
+    assert str(e.value).startswith(f"{path}: ")
+
+
+def test_manifest_pose_with_a_text_for_a_number_names_the_entry(tmp_path):
+    from hmlvs.data.manifest import read_manifest
+
+    doc = {"format": "hmlvs-images", "version": 1, "poses": [
+        {"id": "p0", "stripe": "s.csv",
+         "pose": {"position": [500, "0", 300], "rotation_vector": [0, 0, 1]}}]}
+    (tmp_path / "manifest.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=r"manifest.json: entry 0 \(id p0\): pose\.position\[1\]: "
+                       "must be a number, got '0'"):
+        read_manifest(tmp_path)
+
+
+def test_poses_given_in_code_as_arrays_still_read():
+    from hmlvs.data.poses import PoseFormat, pose_from_entry
+
+    m = np.eye(4)
+    m[:3, 3] = [500.0, 0.0, 300.0]
+    np.testing.assert_array_equal(pose_from_entry(m, PoseFormat()), m)
+    got = pose_from_entry({"position": np.array([500.0, 0, 300]),
+                           "rotation_vector": (0, 0, np.float32(0))}, PoseFormat())
+    np.testing.assert_array_equal(got, m)
