@@ -69,7 +69,8 @@ def test_manifest_image_size_and_data_set_pose_index_are_checked(tmp_path):
     doc = {"format": "hmlvs-images", "version": 1, "image_size": [640, 480, 3],
            "poses": [{"id": "p0", "on": "a.png", "off": "b.png", "joints": [0, 0, 0, 0, 0]}]}
     (tmp_path / "manifest.json").write_text(json.dumps(doc))
-    with pytest.raises(ValueError, match=r"image_size must be \[width, height\]"):
+    with pytest.raises(ValueError, match=r"manifest.json: image_size: must be \[width, height\] "
+                       "in pixels of 2 items, got 3"):
         read_manifest(tmp_path)
     from hmlvs import Dataset
 
@@ -234,3 +235,33 @@ def test_poses_given_in_code_as_arrays_still_read():
     got = pose_from_entry({"position": np.array([500.0, 0, 300]),
                            "rotation_vector": (0, 0, np.float32(0))}, PoseFormat())
     np.testing.assert_array_equal(got, m)
+
+
+# --- manifests beyond the board -----------------------------------------------------------
+
+@pytest.mark.parametrize("change, message", [
+    # joint readings written as texts were read as numbers
+    (lambda d: d["poses"][0].update(joints=["0.1", 0, 0, 0, 0]),
+     r"entry 0 \(id p0\): joints\[0\]: must be a number, got '0.1'"),
+    (lambda d: d["poses"][0].update(joints=[]),
+     r"entry 0 \(id p0\): joints: must hold at least one joint reading"),
+    (lambda d: d["poses"][0].update(on=5), r"entry 0 \(id p0\): on: must be an image file name"),
+    (lambda d: d["poses"][0].update(id=[1]), r"entry 0 \(id \[1\]\): id: must be an id"),
+    (lambda d: d.update(image_size=[640.5, 480]),
+     r"image_size\[0\]: must be a whole number of pixels, got 640.5"),
+    (lambda d: d.update(image_size=[0, 480]), r"image_size\[0\]: must be >= 1, got 0"),
+    (lambda d: d.update(joint_unit="grad"), r"joint_unit: must be one of rad, deg, got 'grad'"),
+    (lambda d: d.update(poses={"p0": {}}), r"poses: must be a list of entries"),
+    (lambda d: d.pop("poses"), r"lacks poses; it must be an image manifest"),
+    (lambda d: d.update(pose_file=3), r"pose_file: must be a file name, got 3"),
+])
+def test_manifest_with_a_wrong_value_names_the_key(tmp_path, change, message):
+    from hmlvs.data.manifest import read_manifest
+
+    doc = {"format": "hmlvs-images", "version": 1, "joint_unit": "rad",
+           "poses": [{"id": "p0", "on": "a.png", "off": "b.png", "joints": [0, 0, 0, 0, 0]}]}
+    change(doc)
+    (tmp_path / "manifest.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=message) as e:
+        read_manifest(tmp_path)
+    assert str(e.value).startswith(str(tmp_path / "manifest.json") + ": ")
