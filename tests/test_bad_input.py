@@ -100,7 +100,8 @@ def test_malformed_files(tmp_path):
     with pytest.raises(ValueError, match="not an hmlvs data set"):
         hmlvs.Dataset.load(f)
     f.write_text('{"format": "hmlvs-dataset", "version": 1, "points": [{"id": "a"}]}')
-    with pytest.raises(ValueError, match="entry 0 .*lacks field"):
+    with pytest.raises(ValueError, match=r"bad.json: points\[0\]: lacks pixel, reference, "
+                       "base_from_hand; it must be a calibration point"):
         hmlvs.Dataset.load(f)
     with pytest.raises(ValueError, match="no such data set file"):
         hmlvs.Dataset.load(tmp_path / "missing.npz")

@@ -194,6 +194,11 @@ def test_calibration_is_not_left_without_its_report(data, tmp_path, capsys, monk
     (["--holdout", "-0.5"], r"--holdout must be a fraction in \[0, 1\), got -0.5"),
     (["--holdout", "nan"], r"--holdout must be a fraction in \[0, 1\), got nan"),
     (["--mode", "bogus"], "--mode must be corners or homography, got 'bogus'"),
+    # values pybind11 refused with a TypeError traceback
+    (["--seed", "-1"], r"calibrate.seed must be an integer >= 0, got -1"),
+    (["--iterations", "1099511627776"],
+     r"pso.iterations must be at most 2147483647, got 1099511627776"),
+    (["--threads", "2147483648"], r"calibrate.threads must be at most 2147483647, got 2147483648"),
 ])
 def test_options_are_checked_whatever_the_input(data, tmp_path, capsys, args, message):
     import re
@@ -221,3 +226,85 @@ def test_empty_or_fractional_subsets_are_refused(data):
         ds.subset([])
     with pytest.raises(ValueError, match="whole numbers"):
         ds.subset([0.5])
+
+
+def test_held_out_rms_is_not_available_or_over_the_rays_that_meet_the_plane(data):
+    """An empty held-out set, or one whose rays all miss the plane, has no RMS (None, with a
+    note saying why), never NaN; rays that miss are counted and left out of the RMS."""
+    import hmlvs
+    from hmlvs import Dataset
+    from hmlvs.calibration.solvers import evaluate
+    import numpy as np
+
+    ds = Dataset.load(data)
+    q = hmlvs.Parameters.nominal()
+    empty = Dataset(np.zeros((0, 2)), np.zeros((0, 4, 4)), np.zeros((0, 3)))
+    r = evaluate(q, ds, empty)
+    assert r.test_rms is None
+    assert "held-out RMS not available: the held-out set is empty" in r.notes
+    test = ds.subset(np.arange(20))
+    errors = evaluate(q, ds, test).test_errors
+    assert np.isfinite(errors).all()
+    miss = test.pixels.copy()
+    miss[:5, 1] = 0.0  # rows far above the laser line: rays parallel to or away from the plane
+    missing = Dataset(miss, test.poses, test.points, ids=test.ids)
+    q_miss = q.replace(theta=0.01)  # the plane's trace moves to the image's lower half
+    full = evaluate(q_miss, ds, test)
+    part = evaluate(q_miss, ds, missing)
+    n_miss = int((~np.isfinite(part.test_errors)).sum())
+    assert n_miss == 5 and np.isfinite(full.test_errors).all()
+    assert "5 of 20 held-out points have rays that miss the laser plane at these parameters; " \
+        "the held-out RMS is over the others" in part.notes
+    want = np.sqrt(np.mean(full.test_errors[5:] ** 2))
+    assert part.test_rms == pytest.approx(want, rel=1e-12)
+    allmiss = Dataset(np.c_[test.pixels[:, 0], np.zeros(20)], test.poses, test.points)
+    r = evaluate(q_miss, ds, allmiss)
+    assert r.test_rms is None and any("every held-out point's ray misses" in n for n in r.notes)
+    text = _io.json_text({"test_rms_mm": r.test_rms})
+    assert json.loads(text) == {"test_rms_mm": None}
+
+
+def test_measure_in_text_mode_names_the_rejected_pairs(data, tmp_path, capsys):
+    """A pair rejected by measure is named on the terminal, not only in --json."""
+    import hmlvs
+    from hmlvs import Dataset, cli
+    import numpy as np
+
+    ds = Dataset.load(data)
+    cal = hmlvs.Calibration(params=cli._truth(cli.MOUNTING_DEG)).save(tmp_path / "cal.yaml")
+    entries = []
+    for k in range(3):
+        rows = ds.pose_index == k if ds.pose_index is not None else np.arange(len(ds)) == k
+        np.savetxt(tmp_path / f"p{k}.csv", ds.pixels[rows], delimiter=",", header="u,v",
+                   comments="")
+        entries.append({"id": f"p{k}", "stripe": f"p{k}.csv",
+                        "pose": ds.poses[rows][0].tolist()})
+    entries[1]["stripe"] = "gone.csv"
+    (tmp_path / "manifest.json").write_text(json.dumps(
+        {"format": "hmlvs-images", "version": 1, "poses": entries}))
+    code, out, err = _run(["measure", str(cal), str(tmp_path), "-o", str(tmp_path / "c.csv")],
+                          capsys)
+    assert code == 0, err
+    rejected = [x for x in out.splitlines() if x.startswith("p1: rejected: ")]
+    assert len(rejected) == 1 and "gone.csv" in rejected[0], out
+    assert not any(x.startswith(("p0: rejected", "p2: rejected")) for x in out.splitlines())
+
+
+def test_simulate_with_images_interrupted_leaves_nothing(tmp_path, capsys, monkeypatch):
+    """Ctrl-C while the images are rendered: exit 130, neither the data set nor the images."""
+    import hmlvs.data.manifest as manifest
+
+    real = manifest._write_png
+    calls = {"n": 0}
+
+    def interrupt_on_third(path, image):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+        real(path, image)
+
+    monkeypatch.setattr(manifest, "_write_png", interrupt_on_third)
+    code, out, _ = _run(["simulate", str(tmp_path / "s.npz"), "--poses", "4", "--images",
+                         str(tmp_path / "imgs")], capsys)
+    assert code == 130 and calls["n"] == 3
+    assert list(tmp_path.iterdir()) == []  # no s.npz, no image folder, no temporary folder

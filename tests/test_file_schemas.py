@@ -69,7 +69,8 @@ def test_manifest_image_size_and_data_set_pose_index_are_checked(tmp_path):
     doc = {"format": "hmlvs-images", "version": 1, "image_size": [640, 480, 3],
            "poses": [{"id": "p0", "on": "a.png", "off": "b.png", "joints": [0, 0, 0, 0, 0]}]}
     (tmp_path / "manifest.json").write_text(json.dumps(doc))
-    with pytest.raises(ValueError, match=r"image_size must be \[width, height\]"):
+    with pytest.raises(ValueError, match=r"manifest.json: image_size: must be \[width, height\] "
+                       "in pixels of 2 items, got 3"):
         read_manifest(tmp_path)
     from hmlvs import Dataset
 
@@ -77,5 +78,190 @@ def test_manifest_image_size_and_data_set_pose_index_are_checked(tmp_path):
         {"id": "a", "pixel": [1, 2], "reference": [0, 0, 0],
          "base_from_hand": np.eye(4).tolist(), "pose_index": 1.7}]}
     (tmp_path / "d.json").write_text(json.dumps(d))
-    with pytest.raises(ValueError, match="pose_index must be a whole number, got 1.7"):
+    with pytest.raises(ValueError, match=r"d.json: points\[0\]\.pose_index: must be a whole "
+                       "number, got 1.7"):
         Dataset.load(tmp_path / "d.json")
+
+
+# --- data sets (.json and .npz) -----------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def small_dataset():
+    import hmlvs
+
+    return hmlvs.simulate(seed=0).dataset.subset(np.arange(6))
+
+
+@pytest.mark.parametrize("change, message", [
+    # a text where a number belongs was read as that number
+    (lambda d: d["points"][3].update(pixel=[1, "2"]),
+     r"points\[3\]\.pixel\[1\]: must be a number, got '2'"),
+    (lambda d: d["points"][3].update(reference=[1, 2]),
+     r"points\[3\]\.reference: must be the reference point \[x, y, z\] of 3 items, got 2"),
+    (lambda d: d["points"][3].update(base_from_hand=[[1, 0, 0, 0]] * 3),
+     r"points\[3\]\.base_from_hand: must be the 4x4 base_from_hand pose of 4 items, got 3"),
+    (lambda d: d["points"][3].pop("reference"),
+     r"points\[3\]: lacks reference; it must be a calibration point \{id, pixel, reference"),
+    (lambda d: d["points"][0].update(id=None),
+     r"points\[0\]\.id: must be an id \(a text or a whole number\), got null"),
+    (lambda d: d["points"][2].update(joints=[0.1, "x"]),
+     r"points\[2\]\.joints\[1\]: must be a number, got 'x'"),
+    # a pose_index on some points only was dropped
+    (lambda d: d["points"][4].update(pose_index=2),
+     r"points\[4\] has pose_index but points\[0\] does not: give pose_index for every point"),
+    (lambda d: [e.update(joints=[0.0] * (4 if i == 5 else 5)) for i, e in
+                enumerate(d["points"])],
+     r"points\[5\]\.joints: has 4 readings, points\[0\] has 5"),
+    (lambda d: d.update(points={"a": 1}), r"points: must be a list of calibration points"),
+    (lambda d: d.update(joint_unit="grad"), r"joint_unit: must be one of rad, deg, got 'grad'"),
+    (lambda d: d.update(meta=[1]), r"meta: must be a mapping"),
+])
+def test_json_data_set_with_a_wrong_entry_names_the_entry(tmp_path, small_dataset, change,
+                                                          message):
+    from hmlvs import Dataset
+
+    doc = small_dataset.to_json_dict()
+    change(doc)
+    path = tmp_path / "d.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=message) as e:
+        Dataset.load(path)
+    assert str(e.value).startswith(f"{path}: ") and str(e.value).count(str(path)) == 1
+
+
+def _header(**change):
+    h = {"format": "hmlvs-dataset", "version": 1, "length_unit": "mm", "joint_unit": "rad",
+         "meta": {}}
+    h.update(change)
+    return np.array(json.dumps(h))
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"pixels": np.zeros((6, 3))},
+     r"pixels: must be the stripe pixels of shape \(m, 2\), got shape \(6, 3\)"),
+    # numbers stored as texts were converted silently
+    ({"pixels": np.full((6, 2), "300")},
+     r"pixels: must be the stripe pixels: numbers, got an array of <U3"),
+    ({"points": np.full((6, 3), np.inf)},
+     r"points: must be finite; the entry at \(0, 0\) is inf"),
+    ({"poses": np.zeros((6, 3, 4))}, r"poses: must be the base_from_hand poses of shape "
+     r"\(m, 4, 4\), got shape \(6, 3, 4\)"),
+    ({"pose_index": np.full(6, 0.5)}, r"pose_index: must be the pose index of each point: "
+     "whole numbers, got an array of float64"),
+    ({"header": None}, r"lacks header; it must be an hmlvs data set \(.npz: header, pixels"),
+    ({"ids": None}, r"lacks ids"),
+    ({"header": _header(joint_unit="grad")},
+     r"header\.joint_unit: must be one of rad, deg, got 'grad'"),
+    ({"header": _header(meta="none")}, r"header\.meta: must be a mapping"),
+    ({"header": _header(version=2)}, r"data set format version 2 is newer than this hmlvs"),
+    ({"poses": np.zeros((5, 4, 4))}, r"pixels has 6 rows but poses has 5"),
+])
+def test_npz_data_set_with_a_wrong_array_names_the_array(tmp_path, small_dataset, change,
+                                                         message):
+    from hmlvs import Dataset
+
+    with np.load(small_dataset.save(tmp_path / "ok.npz")) as z:
+        arrays = dict(z)
+    arrays.update(change)
+    path = tmp_path / "d.npz"
+    np.savez(path, **{k: v for k, v in arrays.items() if v is not None})
+    with pytest.raises(ValueError, match=message) as e:
+        Dataset.load(path)
+    assert str(e.value).startswith(f"{path}: ") and str(e.value).count(str(path)) == 1
+
+
+def test_a_valid_data_set_reads_back_in_both_forms(tmp_path, small_dataset):
+    from hmlvs import Dataset
+
+    for name in ("d.npz", "d.json"):
+        back = Dataset.load(small_dataset.save(tmp_path / name))
+        np.testing.assert_array_equal(back.pixels, small_dataset.pixels)
+        np.testing.assert_array_equal(back.poses, small_dataset.poses)
+        np.testing.assert_array_equal(back.ids, small_dataset.ids)
+
+
+# --- pose files (YAML) and manifest poses -----------------------------------------------
+
+@pytest.mark.parametrize("text, message", [
+    # numbers given as texts or booleans were read as numbers
+    ("pose_format: {unit: m}\nposes:\n  - {id: a, position: ['0.5', 0, 0.3], "
+     "rotation_vector: [0, 0, 1]}\n", r"poses\[0\]\.position\[0\]: must be a number, got '0.5'"),
+    ("pose_format: {unit: m}\nposes:\n  - {id: a, position: [0.5, 0, 0.3], "
+     "rotation_vector: [0, 0, true]}\n",
+     r"poses\[0\]\.rotation_vector\[2\]: must be a number, got True"),
+    ("- [500, 0, '300', 0, 0, 1]\n", r"poses\[0\]\[2\]: must be a number, got '300'"),
+    # a misspelt key was ignored
+    ("pose_format: {unit: m, order: xyzw}\nposes:\n  - [0.5, 0, 0.3, 0, 0, 1]\n",
+     r"pose_format: unknown key 'order'; the keys are unit, quaternion_order"),
+    ("pose_format: {unit: m}\nposes:\n  - {id: a, position: [0.5, 0, 0.3], rotation: [0, 0, "
+     "1]}\n", r"poses\[0\]: unknown key 'rotation'; the keys are id, pose, position"),
+    ("pose_format: {unit: m}\nposes:\n  - [[1, 0, 0, 0.5], [0, 1, 0, 0], [0, 0, 1, 0.3]]\n",
+     r"poses\[0\]: must be a 4x4 base_from_hand matrix of 4 items, got 3"),
+    ("pose_format: {unit: m}\nposes:\n  - 5\n",
+     r"poses\[0\]: must be a pose: a row of 16, 7 or 6 numbers, a 4x4 matrix, or a mapping"),
+    ("pose_format: {unit: m}\nposes: []\n", r"poses: must hold at least one pose, got \[\]"),
+    ("pose_format: {unit: m}\n", r"lacks poses; it must be a pose file"),
+    ("pose_format: {unit: m}\nposes:\n  - {id: [1], position: [0.5, 0, 0.3], "
+     "rotation_vector: [0, 0, 1]}\n", r"poses\[0\]\.id: must be an id"),
+])
+def test_yaml_pose_file_with_a_wrong_value_names_the_pose(tmp_path, text, message):
+    from hmlvs.data.poses import read_poses
+
+    path = tmp_path / "p.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=message) as e:
+        read_poses(path, unit="m" if text.startswith("-") else None)
+    assert str(e.value).startswith(f"{path}: ")
+
+
+def test_manifest_pose_with_a_text_for_a_number_names_the_entry(tmp_path):
+    from hmlvs.data.manifest import read_manifest
+
+    doc = {"format": "hmlvs-images", "version": 1, "poses": [
+        {"id": "p0", "stripe": "s.csv",
+         "pose": {"position": [500, "0", 300], "rotation_vector": [0, 0, 1]}}]}
+    (tmp_path / "manifest.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=r"manifest.json: entry 0 \(id p0\): pose\.position\[1\]: "
+                       "must be a number, got '0'"):
+        read_manifest(tmp_path)
+
+
+def test_poses_given_in_code_as_arrays_still_read():
+    from hmlvs.data.poses import PoseFormat, pose_from_entry
+
+    m = np.eye(4)
+    m[:3, 3] = [500.0, 0.0, 300.0]
+    np.testing.assert_array_equal(pose_from_entry(m, PoseFormat()), m)
+    got = pose_from_entry({"position": np.array([500.0, 0, 300]),
+                           "rotation_vector": (0, 0, np.float32(0))}, PoseFormat())
+    np.testing.assert_array_equal(got, m)
+
+
+# --- manifests beyond the board -----------------------------------------------------------
+
+@pytest.mark.parametrize("change, message", [
+    # joint readings written as texts were read as numbers
+    (lambda d: d["poses"][0].update(joints=["0.1", 0, 0, 0, 0]),
+     r"entry 0 \(id p0\): joints\[0\]: must be a number, got '0.1'"),
+    (lambda d: d["poses"][0].update(joints=[]),
+     r"entry 0 \(id p0\): joints: must hold at least one joint reading"),
+    (lambda d: d["poses"][0].update(on=5), r"entry 0 \(id p0\): on: must be an image file name"),
+    (lambda d: d["poses"][0].update(id=[1]), r"entry 0 \(id \[1\]\): id: must be an id"),
+    (lambda d: d.update(image_size=[640.5, 480]),
+     r"image_size\[0\]: must be a whole number of pixels, got 640.5"),
+    (lambda d: d.update(image_size=[0, 480]), r"image_size\[0\]: must be >= 1, got 0"),
+    (lambda d: d.update(joint_unit="grad"), r"joint_unit: must be one of rad, deg, got 'grad'"),
+    (lambda d: d.update(poses={"p0": {}}), r"poses: must be a list of entries"),
+    (lambda d: d.pop("poses"), r"lacks poses; it must be an image manifest"),
+    (lambda d: d.update(pose_file=3), r"pose_file: must be a file name, got 3"),
+])
+def test_manifest_with_a_wrong_value_names_the_key(tmp_path, change, message):
+    from hmlvs.data.manifest import read_manifest
+
+    doc = {"format": "hmlvs-images", "version": 1, "joint_unit": "rad",
+           "poses": [{"id": "p0", "on": "a.png", "off": "b.png", "joints": [0, 0, 0, 0, 0]}]}
+    change(doc)
+    (tmp_path / "manifest.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=message) as e:
+        read_manifest(tmp_path)
+    assert str(e.value).startswith(str(tmp_path / "manifest.json") + ": ")

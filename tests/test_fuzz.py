@@ -118,6 +118,56 @@ def test_pose_file_loader(tmp_path_factory, rows, header):
     _loads_or_value_error(lambda: read_poses(path, unit="m"))
 
 
+VALID_POSE_FILE = {"pose_format": {"unit": "m", "quaternion_order": "xyzw"}, "poses": [
+    {"id": "a", "position": [0.5, 0.0, 0.3], "quaternion": [0.0, 0.0, 0.0, 1.0]},
+    {"id": "b", "position": [0.5, 0.1, 0.3], "rotation_vector": [0.0, 0.0, 1.0]}]}
+
+
+@FUZZ
+@given(doc=st.one_of(json_values, _mutations(VALID_POSE_FILE),
+                     _mutations(VALID_POSE_FILE["poses"][0]).map(
+                         lambda e: dict(VALID_POSE_FILE, poses=[e]))))
+def test_yaml_pose_file_loader(tmp_path_factory, doc):
+    path = tmp_path_factory.mktemp("p") / "poses.yaml"
+    path.write_text(json.dumps(doc))  # JSON is YAML
+    _loads_or_value_error(lambda: read_poses(path))
+
+
+VALID_POINT = {"id": "a", "pixel": [300.0, 200.0], "reference": [600.0, 0.0, 0.0],
+               "base_from_hand": np.eye(4).tolist(), "joints": [0.0] * 5, "pose_index": 0}
+
+
+@FUZZ
+@given(entry=_mutations(VALID_POINT))
+def test_dataset_entry_loader(tmp_path_factory, entry):
+    path = tmp_path_factory.mktemp("d") / "d.json"
+    path.write_text(json.dumps({"format": "hmlvs-dataset", "version": 1,
+                                "points": [VALID_POINT, entry]}))
+    _loads_or_value_error(Dataset.load, path)
+
+
+npz_members = st.one_of(
+    st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=8).map(np.asarray),
+    st.integers(0, 3).flatmap(lambda m: st.sampled_from([
+        np.zeros((m, 2)), np.zeros((m, 4, 4)), np.full((m, 3), np.nan), np.arange(m),
+        np.array(["x"] * m), np.zeros((m, 2), bool), np.array("{}"), np.array(json.dumps(
+            {"format": "hmlvs-dataset", "version": 1, "meta": []}))])))
+
+
+@FUZZ
+@given(changes=st.dictionaries(st.sampled_from(["header", "pixels", "poses", "points", "ids",
+                                                "joints", "pose_index"]),
+                               st.one_of(st.none(), npz_members), max_size=3))
+def test_npz_dataset_loader(tmp_path_factory, changes):
+    folder = tmp_path_factory.mktemp("z")
+    ds = hmlvs.simulate(seed=0).dataset.subset(np.arange(3))
+    with np.load(ds.save(folder / "ok.npz")) as z:
+        members = dict(z)
+    members.update(changes)
+    np.savez(folder / "d.npz", **{k: v for k, v in members.items() if v is not None})
+    _loads_or_value_error(Dataset.load, folder / "d.npz")
+
+
 @FUZZ
 @given(doc=st.one_of(json_values, st.fixed_dictionaries({
     "format": st.just("hmlvs-dataset"), "version": st.just(1), "points": json_values})))

@@ -75,7 +75,8 @@ def _write(path, doc):
                                             "no laser-on image"),
         (lambda d: d.update(format="other"), "not an hmlvs image manifest"),
         (lambda d: d["poses"][0].update(pose=[[1, 0], [0, 1]], joints=None) or
-         d["poses"][0].pop("joints"), r"'pose' must be a finite 4x4"),
+         d["poses"][0].pop("joints"), r"entry 0 \(id p000\): pose: must be a 4x4 "
+         "base_from_hand matrix of 4 items, got 2"),
     ],
 )
 def test_malformed_manifests_name_file_and_entry(rendered, change, match):

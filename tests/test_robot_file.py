@@ -105,13 +105,26 @@ def test_cli_measure_with_robot_file(tmp_path, capsys):
 
 @pytest.mark.parametrize(
     "text, match",
-    [("name: x\n", r"arm.yaml: the robot description needs 'links'"),
-     ("links: [{a: 1, alpha: 0, dd: 3}]\n", r"arm.yaml: malformed robot description"),
-     ("links: [{a: 1, alpha: 0, d: .nan}]\n", r"arm.yaml: malformed robot description \(DH link 1 "
-      "has a non-finite entry"),
-     ("[1, 2]\n", r"arm.yaml: a robot description is a mapping"),
-     ("links: [{a: 1, alpha: 0, d: 3}]\nconvention: craig\n", "convention must be 'standard' or "
-      "'modified'")],
+    [("name: x\n", r"arm.yaml: lacks links; it must be a robot description: a mapping with "
+      r"'links', a list of DH rows \{a, alpha, d\[, offset, prismatic, theta\]\}"),
+     ("links: [{a: 1, alpha: 0, dd: 3}]\n", r"arm.yaml: links\[0\]: lacks d \(it has the "
+      r"unknown key\(s\) 'dd'\); it must be a DH row"),
+     ("links: [{a: 1, alpha: 0, d: .nan}]\n", r"arm.yaml: links\[0\]\.d: must be a finite "
+      "number, got nan"),
+     ("[1, 2]\n", r"arm.yaml: must be a robot description: a mapping with 'links'"),
+     ("links: [{a: 1, alpha: 0, d: 3}]\nconvention: craig\n", r"arm.yaml: convention: must be "
+      "one of standard, modified, got 'craig'"),
+     ("links: []\n", r"arm.yaml: links: must hold at least one DH row, got \[\]"),
+     ("links: [{a: 1, alpha: 0, d: '3'}]\n", r"arm.yaml: links\[0\]\.d: must be a length in "
+      "mm, got '3'"),
+     ("links: [{a: 1, alpha: 0, d: 3, prismatic: 1}]\n", r"arm.yaml: links\[0\]\.prismatic: "
+      "must be true or false, got 1"),
+     ("links: [{a: 1, alpha: 0, d: 3}]\nconventoin: modified\n", r"arm.yaml: unknown key "
+      "'conventoin'; the keys are name, convention, links"),
+     ("links: [{a: 1, alpha: 0, d: 3}]\nflange_from_hand: [[1, 0], [0, 1]]\n",
+      r"arm.yaml: flange_from_hand: must be a 4x4 transform of 4 items, got 2"),
+     ("links: [{a: 1, alpha: 0, d: 3}]\njoint_limits: [[1, 0]]\n", r"arm.yaml: malformed "
+      r"robot description \(joint_limits must be \(1, 2\) with lower <= upper\)")],
 )
 def test_bad_robot_files(tmp_path, text, match):
     (tmp_path / "arm.yaml").write_text(text)

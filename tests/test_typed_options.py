@@ -64,13 +64,30 @@ def sim():
 @pytest.mark.parametrize("kwargs, name", [
     ({"method": "pso"}, "pso.swarm_size"), ({"method": "lm"}, "lm.max_iterations"),
     ({"method": "random"}, "random.evaluations"), ({"method": "pso"}, "calibrate.threads"),
-    ({"method": "pso"}, "calibrate.runs")])
+    ({"method": "pso"}, "calibrate.runs"), ({"method": "pso"}, "pso.iterations")])
 def test_calibrate_keywords_are_validated(sim, kwargs, name, bad):
     """The existing keyword interface gives the sentence before any solve, never a
     pybind11 TypeError."""
     key = name.split(".")[1]
     with pytest.raises(ValueError, match=rf"^{name} must be "):
         hmlvs.calibrate(sim, **kwargs, **{key: bad})
+
+
+@pytest.mark.parametrize("bad", ["2", math.nan, math.inf, -math.inf])
+@pytest.mark.parametrize("name", ["pso.c1", "pso.c2", "pso.w_max", "pso.w_min", "pso.vmax"])
+def test_calibrate_coefficients_are_validated(sim, name, bad):
+    """A non-finite PSO coefficient is refused, not run (it returned the initial swarm's best
+    with termination max_iterations and no warning)."""
+    with pytest.raises(ValueError, match=rf"^{name} must be a finite number"):
+        hmlvs.calibrate(sim, method="pso", **{name.split(".")[1]: bad})
+
+
+@pytest.mark.parametrize("bad, message", [(-1, "an integer >= 0, got -1"),
+                                          (2**70, "at most 18446744073709551615"),
+                                          ("3", "an integer >= 0, got '3'")])
+def test_calibrate_seed_is_validated(sim, bad, message):
+    with pytest.raises(ValueError, match=rf"^calibrate.seed must be {message}"):
+        hmlvs.calibrate(sim, method="pso", seed=bad)
 
 
 def test_unknown_option_lists_the_valid_ones(sim):

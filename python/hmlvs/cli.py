@@ -229,14 +229,28 @@ def _main(
 
 
 def _is_manifest(path: Path) -> bool:
-    """An image manifest: a folder, ``manifest.json``/``.yaml``, or a JSON/YAML file whose
-    format is ``hmlvs-images``."""
+    """An image manifest: a folder, ``manifest.json``/``.yaml``, or a JSON/YAML file of any
+    name whose format is ``hmlvs-images`` (wherever the file puts its ``format`` key)."""
     if path.is_dir() or path.name in ("manifest.json", "manifest.yaml", "manifest.yml"):
         return True
-    if path.suffix.lower() in (".json", ".yaml", ".yml") and path.is_file():
+    if path.suffix.lower() not in (".json", ".yaml", ".yml") or not path.is_file():
+        return False
+    try:
         with open(path, "rb") as fh:
-            return b"hmlvs-images" in fh.read(4096)
-    return False
+            head = fh.read(4096)
+            if b"hmlvs-images" in head:
+                return True
+            if b"hmlvs-dataset" in head or b"hmlvs-images" not in fh.read():
+                return False
+    except OSError:
+        return False
+    from ._io import read_document
+
+    try:
+        doc = read_document(path, "manifest")
+    except ValueError:
+        return False
+    return isinstance(doc, dict) and doc.get("format") == "hmlvs-images"
 
 
 def _solve_progress(quiet: bool):

@@ -68,7 +68,7 @@ class Dataset:
             raise ValueError(f"ids must have {m} entries, got shape {ids.shape}")
         uniq, counts = np.unique(ids, return_counts=True)
         if np.any(counts > 1):
-            raise ValueError(f"ids must be unique; {uniq[counts > 1][0]!r} appears "
+            raise ValueError(f"ids must be unique; {str(uniq[counts > 1][0])!r} appears "
                              f"{counts[counts > 1][0]} times")
         joints = None
         if self.joints is not None:
@@ -222,17 +222,23 @@ class Dataset:
     @classmethod
     def load(cls, path: str | os.PathLike) -> "Dataset":
         """Read a data set written by :meth:`save` (``.npz`` or ``.json``)."""
+        from .schema import validate
+
         path = existing_file(path, "data set file")
         try:
             if path.suffix == ".npz":
                 with np.load(path, allow_pickle=False) as z:
-                    header = json.loads(str(z["header"]))
-                    _check_header(header, path)
-                    return cls(z["pixels"], z["poses"], z["points"], ids=z["ids"],
-                               joints=z["joints"] if "joints" in z else None,
-                               joint_unit=header.get("joint_unit", "rad"),
-                               pose_index=z["pose_index"] if "pose_index" in z else None,
-                               meta=header.get("meta", {}))
+                    arrays = {k: z[k] for k in z.files}
+                validate(arrays, _npz_schema(), str(path))
+                header = json.loads(str(arrays["header"]))
+                _check_header(header, path)
+                validate(header, _header_schema(), str(path), "header")
+                return cls(arrays["pixels"], arrays["poses"], arrays["points"],
+                           ids=arrays["ids"], joints=arrays.get("joints"),
+                           joint_unit=header.get("joint_unit", "rad"),
+                           pose_index=arrays.get("pose_index"),
+                           length_unit=header.get("length_unit", "mm"),
+                           meta=header.get("meta", {}))
             if path.suffix == ".json":
                 with open(path, encoding="utf-8") as fh:
                     d = json.load(fh)
@@ -242,6 +248,8 @@ class Dataset:
             raise ValueError(f"{path}: malformed data set file ({type(e).__name__}: {e})") \
                 from None
         except ValueError as e:
+            if str(e).startswith(f"{path}: "):  # the schema's message names the file already
+                raise ValueError(str(e)) from None
             raise ValueError(f"{path}: {e}") from None
         except Exception as e:  # noqa: BLE001 - numpy raises assorted errors on corrupt files
             raise ValueError(f"{path}: malformed data set file ({type(e).__name__}: {e})") \
@@ -250,36 +258,38 @@ class Dataset:
 
     @classmethod
     def from_json_dict(cls, d: dict[str, Any], source: str = "data set") -> "Dataset":
+        """A data set from its JSON form (:meth:`to_json_dict`), validated by its schema: a
+        wrong entry raises one ValueError naming ``source`` and the entry
+        (``points[3].pixel: must be 2 numbers``)."""
+        from .schema import validate
+
         _check_header(d, source)
-        entries = d.get("points")
-        if not isinstance(entries, list):
-            raise ValueError("'points' must be a list of entries")
-        pixels, poses, points, ids, joints, pidx = [], [], [], [], [], []
-        for i, e in enumerate(entries):
-            try:
-                ids.append(str(e["id"]))
-                pixels.append(e["pixel"])
-                points.append(e["reference"])
-                poses.append(e["base_from_hand"])
-                if "joints" in e:
-                    joints.append(e["joints"])
-                if "pose_index" in e:
-                    pi = e["pose_index"]
-                    if isinstance(pi, bool) or not isinstance(pi, int):
-                        raise ValueError(f"{source}: entry {i}: pose_index must be a whole "
-                                         f"number, got {pi!r}")
-                    pidx.append(pi)
-            except (KeyError, TypeError) as err:
-                eid = e.get("id", "?") if isinstance(e, dict) else "?"
-                raise ValueError(f"entry {i} (id {eid}) lacks field {err}") from None
-        if joints and len(joints) != len(entries):
-            raise ValueError("some entries have joint readings and some do not")
-        return cls(np.array(pixels, float).reshape(-1, 2), np.array(poses, float).reshape(-1, 4, 4),
-                   np.array(points, float).reshape(-1, 3), ids=np.array(ids),
-                   joints=np.array(joints, float) if joints else None,
+        validate(d, _json_schema(), str(source))
+        entries = d["points"]
+        for key in ("joints", "pose_index"):
+            having = [key in e for e in entries]
+            if any(having) and not all(having):
+                i = having.index(not having[0])
+                raise ValueError(f"{source}: points[{i}] {'has' if having[i] else 'lacks'} "
+                                 f"{key} but points[0] {'has' if having[0] else 'does not'}: "
+                                 f"give {key} for every point or for none")
+        if entries and "joints" in entries[0]:
+            n = len(entries[0]["joints"])
+            for i, e in enumerate(entries):
+                if len(e["joints"]) != n:
+                    raise ValueError(f"{source}: points[{i}].joints: has {len(e['joints'])} "
+                                     f"readings, points[0] has {n}")
+        m = len(entries)
+        return cls(np.array([e["pixel"] for e in entries], float).reshape(m, 2),
+                   np.array([e["base_from_hand"] for e in entries], float).reshape(m, 4, 4),
+                   np.array([e["reference"] for e in entries], float).reshape(m, 3),
+                   ids=np.array([str(e["id"]) for e in entries]),
+                   joints=np.array([e["joints"] for e in entries], float)
+                   if entries and "joints" in entries[0] else None,
                    joint_unit=d.get("joint_unit", "rad"),
-                   pose_index=np.array(pidx, dtype=np.int64) if len(pidx) == len(entries) and pidx
-                   else None, length_unit=d.get("length_unit", "mm"), meta=d.get("meta", {}))
+                   pose_index=np.array([e["pose_index"] for e in entries], dtype=np.int64)
+                   if entries and "pose_index" in entries[0] else None,
+                   length_unit=d.get("length_unit", "mm"), meta=d.get("meta", {}))
 
 
 def fit_and_test(dataset: Any, test: Any = None) -> tuple["Dataset", "Dataset | None"]:
@@ -310,6 +320,52 @@ def check_format(d: Any, fmt: str, version: int, source: Any, what: str) -> None
 
 def _check_header(d: dict[str, Any], source: Any) -> None:
     check_format(d, FORMAT, FORMAT_VERSION, source, "data set")
+
+
+def _header_schema(**more: Any) -> Any:
+    """The keys a data set's header holds (the JSON file's top level, the .npz's header)."""
+    from . import schema as sc
+
+    return sc.Field("struct", "an hmlvs data set", required=("format",), keys={
+        **sc.header(FORMAT, FORMAT_VERSION),
+        "length_unit": sc.text("a length unit", choices=tuple(_LENGTH_SCALE)),
+        "joint_unit": sc.text("an angle unit", choices=_ANGLE_UNITS),
+        "meta": sc.Field("map", "a mapping (notes on the data)"), **more})
+
+
+def _json_schema() -> Any:
+    """A data set in JSON: the header and a list of calibration points."""
+    from . import schema as sc
+
+    def numbers(n: int, what: str) -> Any:
+        return sc.Field("list", what, length=n, items=sc.number())
+
+    entry = sc.Field(
+        "struct", "a calibration point {id, pixel, reference, base_from_hand[, joints, "
+        "pose_index]}", required=("id", "pixel", "reference", "base_from_hand"), keys={
+            "id": sc.identifier(), "pixel": numbers(2, "the stripe pixel [u, v]"),
+            "reference": numbers(3, "the reference point [x, y, z]"),
+            "base_from_hand": sc.matrix(4, 4, "the 4x4 base_from_hand pose"),
+            "joints": sc.Field("list", "the joint readings", items=sc.number()),
+            "pose_index": sc.integer()})
+    return _header_schema(points=sc.Field("list", "a list of calibration points",
+                                          items=entry))
+
+
+def _npz_schema() -> Any:
+    """A data set in .npz: its arrays (m points) and the JSON header."""
+    from . import schema as sc
+
+    return sc.Field(
+        "struct", "an hmlvs data set (.npz: header, pixels, poses, points, ids)",
+        required=("header", "pixels", "poses", "points", "ids"), keys={
+            "header": sc.array((), "the JSON header", dtype="id"),
+            "pixels": sc.array(("m", 2), "the stripe pixels"),
+            "poses": sc.array(("m", 4, 4), "the base_from_hand poses"),
+            "points": sc.array(("m", 3), "the reference points"),
+            "ids": sc.array(("m",), "the point ids", dtype="id"),
+            "joints": sc.array(("m", "n"), "the joint readings"),
+            "pose_index": sc.array(("m",), "the pose index of each point", dtype="int")})
 
 
 def _split_count(fit: float | int, total: int, what: str) -> int:

@@ -62,6 +62,35 @@ def _board_schema() -> Any:
                         "origin": vec3, "row_direction": vec3, "col_direction": vec3})
 
 
+def _manifest_schema() -> Any:
+    """The manifest's typed keys; ``board``, ``robot`` and ``pose_format`` have their own
+    readers (:func:`checkerboard_of`, :func:`~hmlvs.data.robot_file.robot_from_description`,
+    :meth:`~hmlvs.data.poses.PoseFormat.from_dict`), and other keys are kept (a renderer's
+    notes)."""
+    from ..data import schema as sc
+
+    return sc.Field("struct", "an image manifest {format, version, poses, ...}",
+                    required=("poses",), keys={
+                        "image_size": sc.Field("list", "[width, height] in pixels", length=2,
+                                               items=sc.integer("a whole number of pixels",
+                                                                minimum=1), nullable=True),
+                        "joint_unit": sc.text("an angle unit", choices=("rad", "deg")),
+                        "pose_file": sc.text("a file name", nullable=True),
+                        "poses": sc.Field("list", "a list of entries {id, on, off | stripe, "
+                                          "joints | pose}")})
+
+
+def _entry_schema() -> Any:
+    """One manifest entry's typed keys (which of them it must have is checked after)."""
+    from ..data import schema as sc
+
+    return sc.Field("struct", "an entry {id, on, off | stripe, joints | pose}", keys={
+        "id": sc.identifier(), "on": sc.text("an image file name"),
+        "off": sc.text("an image file name"), "stripe": sc.text("a stripe list file name"),
+        "joints": sc.Field("list", "a list of joint readings", items=sc.number(),
+                           check=sc.non_empty("joint reading"))})
+
+
 def checkerboard_of(spec: Any, source: Any) -> Any:
     """A :class:`~hmlvs.Checkerboard` from a manifest's ``board`` block, validated (rows,
     cols, square, optional origin and directions; any other key is refused by name)."""
@@ -98,14 +127,11 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
         doc = yaml.safe_load(text) if path.suffix in (".yaml", ".yml") else json.loads(text)
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, yaml.YAMLError) as e:
         raise ValueError(f"{path}: unreadable manifest ({type(e).__name__}: {e})") from None
+    from .schema import validate
+
     check_format(doc, FORMAT, VERSION, path, "image manifest")
-    size = doc.get("image_size")
-    if size is not None and not (isinstance(size, list) and len(size) == 2 and all(
-            isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in size)):
-        raise ValueError(f"{path}: image_size must be [width, height] in pixels, got {size!r}")
-    entries = doc.get("poses")
-    if not isinstance(entries, list):
-        raise ValueError(f"{path}: the manifest's 'poses' must be a list of entries")
+    validate(doc, _manifest_schema(), str(path))
+    entries = doc["poses"]
     fmt = PoseFormat.from_dict(doc.get("pose_format"), str(path))
     file_poses = _pose_file(doc, fmt, path) if doc.get("pose_file") is not None else None
     out: list[dict[str, Any]] = []
@@ -121,6 +147,7 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
                              "files with its readings")
         pid = str(e["id"])
         where = f"{path}: entry {i} (id {pid})"
+        validate(e, _entry_schema(), where)
         if pid in seen:
             raise ValueError(f"{where} repeats the id of entry {seen[pid]}")
         seen[pid] = i
@@ -137,8 +164,6 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
                 e["pose"] = pose_from_entry(e["pose"], fmt)
             except ValueError as err:
                 raise ValueError(f"{where}: {err}") from None
-        elif "joints" in e and (not _numeric(e["joints"]) or np.ndim(e["joints"]) != 1):
-            raise ValueError(f"{where}: 'joints' must be a list of numbers")
         has_images = "on" in e or "off" in e
         if has_images == ("stripe" in e):
             raise ValueError(f"{where} must name either an image pair ('on' and 'off') or a "
@@ -190,14 +215,6 @@ def _pair_poses(entries: list[dict[str, Any]], file_poses: tuple[list[str] | Non
                          f"{', '.join(extra[:5])}{' ...' if len(extra) > 5 else ''}")
     for e in entries:
         e["pose"] = poses[row[str(e["id"])]]
-
-
-def _numeric(x: Any) -> bool:
-    try:
-        np.asarray(x, dtype=float)
-        return True
-    except (TypeError, ValueError):
-        return False
 
 
 def read_stripe_list(path: Path) -> tuple[np.ndarray, np.ndarray]:

@@ -215,13 +215,96 @@ def pose_from_row(values: Any, rotation: str, fmt: PoseFormat) -> np.ndarray:
     return pose
 
 
-def pose_from_entry(value: Any, fmt: PoseFormat) -> np.ndarray:
+# ------------------------------------------------------------------------------------------
+# schemas (hmlvs.data.schema): the forms a pose and a YAML pose file take
+
+
+def _vector(n: int, what: str) -> Any:
+    from . import schema as sc
+
+    return sc.Field("list", what, length=n, items=sc.number())
+
+
+_POSE_FORMS = ("a 4x4 base_from_hand matrix, or a mapping {position: [x, y, z], quaternion: "
+               "[4 numbers] | rotation_vector: [rx, ry, rz]}")
+
+
+def _pose_schema() -> Any:
+    """A ``pose`` value: a 4x4 matrix (nested lists) or a position-and-rotation mapping."""
+    from . import schema as sc
+
+    mapping = sc.Field("struct", "a pose mapping", extra="error", keys={
+        "position": _vector(3, "the position [x, y, z]"),
+        "quaternion": _vector(4, "a quaternion of 4 numbers"),
+        "rotation_vector": _vector(3, "a rotation vector [rx, ry, rz]")})
+    matrix = sc.matrix(4, 4, "a 4x4 base_from_hand matrix")
+    return sc.Field("select", _POSE_FORMS, select=lambda v: mapping if isinstance(v, dict)
+                    else matrix if isinstance(v, list) else None)
+
+
+def _file_schema(form: str) -> Any:
+    """A YAML pose file: a list of poses (``form="list"``) or a mapping ``{pose_format,
+    poses}`` (``form="mapping"``). A pose is a row of numbers, a 4x4 matrix or a mapping
+    ``{id, position, quaternion | rotation_vector}`` / ``{id, pose}``."""
+    from . import schema as sc
+
+    mapping = sc.Field("struct", "a pose mapping", extra="error", keys={
+        "id": sc.identifier(), "pose": _pose_schema(),
+        "position": _vector(3, "the position [x, y, z]"),
+        "quaternion": _vector(4, "a quaternion of 4 numbers"),
+        "rotation_vector": _vector(3, "a rotation vector [rx, ry, rz]")})
+    matrix = sc.matrix(4, 4, "a 4x4 base_from_hand matrix")
+    row = sc.Field("list", "a row of 16, 7 or 6 numbers", items=sc.number())
+
+    def form_of(v: Any) -> Any:
+        if isinstance(v, dict):
+            return mapping
+        if isinstance(v, list):
+            return matrix if v and all(isinstance(x, list) for x in v) else row
+        return None
+
+    pose = sc.Field("select", "a pose: a row of 16, 7 or 6 numbers, a 4x4 matrix, or a mapping "
+                    "{id, position, quaternion | rotation_vector} or {id, pose}", select=form_of)
+    poses = sc.Field("list", "a list of poses", items=pose, check=sc.non_empty("pose"))
+    if form == "list":
+        return poses
+    return sc.Field("struct", "a pose file: a list of poses, or a mapping {pose_format, poses}",
+                    required=("poses",), extra="error", keys={
+                        "poses": poses,
+                        "pose_format": sc.Field("struct", "a mapping {unit: m|mm, "
+                                                "quaternion_order: xyzw|wxyz}", extra="error",
+                                                nullable=True, keys={
+                                                    "unit": sc.text(choices=tuple(UNITS)),
+                                                    "quaternion_order": sc.text(
+                                                        choices=QUATERNION_ORDERS)})})
+
+
+def _as_lists(value: Any) -> Any:
+    """Arrays and tuples (poses given in code) as the lists a YAML file would hold."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [_as_lists(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _as_lists(v) for k, v in value.items()}
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def pose_from_entry(value: Any, fmt: PoseFormat, path: str = "pose") -> np.ndarray:
     """A manifest entry's ``pose`` -> a 4x4 base_from_hand pose in mm.
 
     ``value`` is a 4x4 matrix (nested lists), or a mapping ``{position: [x, y, z],
     quaternion: [4 numbers]}`` or ``{position: [x, y, z], rotation_vector: [rx, ry, rz]}``;
-    positions in ``fmt.unit``. Raises ValueError saying what is wrong.
+    positions in ``fmt.unit``. Its form is checked by the schema (``pose.position: must be
+    the position [x, y, z] of 3 items``, ``path`` naming the value); then ValueError says
+    what else is wrong.
     """
+    from .schema import validate
+
+    value = _as_lists(value)
+    validate(value, _pose_schema(), "", path)
     if isinstance(value, dict):
         keys = set(value)
         rot_keys = keys & {"quaternion", "rotation_vector"}
@@ -339,6 +422,12 @@ def _read_yaml(path: Path, rotation: str | None, fmt: PoseFormat, explicit: dict
         doc = yaml.safe_load(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
         raise ValueError(f"{path}: unreadable pose file ({type(e).__name__}: {e})") from None
+    from .schema import validate
+
+    if isinstance(doc, list):
+        validate(doc, _file_schema("list"), str(path), "poses")
+    elif isinstance(doc, dict):
+        validate(doc, _file_schema("mapping"), str(path))
     entries = doc
     if isinstance(doc, dict):
         if "pose_format" in doc:
@@ -370,7 +459,7 @@ def _read_yaml(path: Path, rotation: str | None, fmt: PoseFormat, explicit: dict
                 body = {k: v for k, v in e.items() if k != "id"}
                 if set(body) == {"pose"}:
                     body = body["pose"]
-                poses.append(pose_from_entry(body, fmt))
+                poses.append(pose_from_entry(body, fmt, path=""))
             else:
                 arr = _numbers(e, None, "the pose")
                 if arr.shape == (4, 4):

@@ -14,14 +14,39 @@ from ..geometry.robot import Robot
 BUILTIN: dict[str, Callable[[], Robot]] = {"SCORBOT ER-VII": Robot.scorbot_er7}
 
 
+def _schema() -> Any:
+    """The :meth:`Robot.to_dict` mapping: DH rows (mm, rad), base and tool transforms,
+    optional joint limits. Unknown keys are refused by name (a misspelt ``convention`` would
+    otherwise leave the default in force)."""
+    from . import schema as sc
+
+    link = sc.Field("struct", "a DH row {a, alpha, d[, offset, prismatic, theta]} (mm, rad)",
+                    required=("a", "alpha", "d"), extra="error", keys={
+                        "a": sc.number("a length in mm"), "alpha": sc.number("an angle in rad"),
+                        "d": sc.number("a length in mm"), "offset": sc.number(),
+                        "theta": sc.number("an angle in rad"), "prismatic": sc.Field("bool")})
+    return sc.Field(
+        "struct", "a robot description: a mapping with 'links', a list of DH rows {a, alpha, "
+        "d[, offset, prismatic, theta]} (the hmlvs.Robot.to_dict form)",
+        required=("links",), extra="error", keys={
+            "name": sc.text("a name"),
+            "convention": sc.text("the DH convention", choices=("standard", "modified")),
+            "links": sc.Field("list", "a list of DH rows", items=link,
+                              check=sc.non_empty("DH row")),
+            "base_from_link0": sc.matrix(4, 4, "a 4x4 transform"),
+            "flange_from_hand": sc.matrix(4, 4, "a 4x4 transform"),
+            "joint_limits": sc.Field("list", "a list of [lower, upper] per joint",
+                                     nullable=True, items=sc.Field(
+                                         "list", "[lower, upper]", length=2,
+                                         items=sc.number()))})
+
+
 def robot_from_dict(d: Any, source: str) -> Robot:
-    """A Robot from its ``to_dict`` mapping; ValueError naming ``source`` and the problem."""
-    if not isinstance(d, dict):
-        raise ValueError(f"{source}: a robot description is a mapping with 'links' (the "
-                         f"hmlvs.Robot.to_dict form), got {type(d).__name__}")
-    if not isinstance(d.get("links"), list) or not d["links"]:
-        raise ValueError(f"{source}: the robot description needs 'links', a list of DH rows "
-                         "{a, alpha, d, offset, prismatic, theta}")
+    """A Robot from its ``to_dict`` mapping, validated by its schema; ValueError naming
+    ``source`` and the key (``arm.yaml: links[2].d: must be a length in mm, got '350'``)."""
+    from .schema import validate
+
+    validate(d, _schema(), str(source))
     try:
         return Robot.from_dict(d)
     except (ValueError, TypeError, AttributeError) as e:

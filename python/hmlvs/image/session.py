@@ -69,6 +69,21 @@ class _Reject(Exception):
     """A whole image pair is unusable (the message says why)."""
 
 
+_BOARD_POSE_HINT = ("check the board's origin, row_direction and col_direction in the "
+                    "manifest and this pair's pose")
+
+
+def _opencv_failure(err: Exception, stage: str, hint: str = _BOARD_POSE_HINT) -> _Reject:
+    """An OpenCV error inside one pair's processing, as that pair's rejection: OpenCV
+    asserts on degenerate input (corners predicted far from the detected ones, as with a
+    wrong board origin or direction in the manifest), which concerns this pair only."""
+    lines = str(err).strip().splitlines() or [type(err).__name__]
+    what = getattr(err, "err", "") or lines[-1]
+    func = getattr(err, "func", "")
+    return _Reject(f"{stage}: OpenCV failed ({func + ': ' if func else ''}{what})"
+                   + (f"; {hint}" if hint else ""))
+
+
 def _load(item: Any, folder: Any, what: str) -> tuple[np.ndarray, str]:
     from pathlib import Path
 
@@ -128,6 +143,8 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     (dataset, report) : the data set (ids ``"<pose id>:<point id>"``, ``pose_index`` = pair
         index, joints in rad) and one :class:`ImageReport` per pair.
     """
+    import cv2
+
     from ..data.dataset import Dataset
     from ..geometry.board import Checkerboard
     from ..geometry.robot import Robot
@@ -178,9 +195,14 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                                                                                 board))
             except ValueError as e:
                 raise _Reject(f"checkerboard: {e}") from None
+            except cv2.error as e:
+                raise _opencv_failure(e, "checkerboard") from None
             info["corners"] = len(corners)
-            cp = calibration_points(stripe, corners, board, mode=mode, tolerance=tolerance,
-                                    step=step)
+            try:
+                cp = calibration_points(stripe, corners, board, mode=mode, tolerance=tolerance,
+                                        step=step)
+            except cv2.error as e:
+                raise _opencv_failure(e, "calibration points") from None
             info["rejected"] = dict(cp.rejected)
             if len(cp) == 0:
                 raise _Reject("no calibration points: " + (

@@ -18,6 +18,7 @@ from ..geometry.board import BoardSpec, CharucoSpec
 from .corners import detect_board, detect_charuco
 from .session import (
     ImageReport,
+    _opencv_failure,
     _read_manifest,
     _read_pair,
     _record_id,
@@ -74,6 +75,8 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     without a stripe, without the board or with fewer than 6 numbered corners is reported
     and skipped; the rest of the session goes through.
     """
+    import cv2
+
     from ..geometry.robot import Robot
 
     records, doc, folder = _read_manifest(source)
@@ -104,6 +107,8 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
                 corners = detect_corners(pair.off, detector_board)
             except ValueError as e:
                 raise _Reject(str(e)) from None
+            except cv2.error as e:
+                raise _opencv_failure(e, "board", hint="") from None
             if len(corners) < MIN_CORNERS:
                 raise _Reject(f"only {len(corners)} board corners found and numbered; a view "
                               f"needs at least {MIN_CORNERS}")
