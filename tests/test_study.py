@@ -172,6 +172,47 @@ def test_progress_bar_leaves_results_alone_and_closes():
             np.testing.assert_array_equal(a.fit_rms, b.fit_rms)
 
 
+def test_study_does_not_warn_about_the_parameters_it_frees_on_purpose():
+    """All 14 parameters are free in the study (the paper's set-up, stated in its Notes): the
+    flat-direction warnings of each solve would only bury the terminal."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        hmlvs.study(**TINY)
+    assert not [w for w in caught if issubclass(w.category, hmlvs.HmlvsDataWarning)]
+
+
+def test_progress_bar_counts_runs_of_the_whole_study_with_an_eta(monkeypatch):
+    """The overall bar counts runs (each step's share of its runs, whatever unit the step
+    reports in: runs, PSO generations or evaluations) and both bars show an ETA."""
+    from hmlvs.paper import study as study_module
+
+    bars = []
+    real = study_module._Reporter
+
+    class Spy(real):
+        def __init__(self, *a, **k):
+            super().__init__(*a, **k)
+            bars.append(self)
+
+        def update(self, done, total, _best=0.0):
+            ok = super().update(done, total, _best)
+            task = self.bar.tasks[self.overall]
+            assert self.runs_before <= task.completed <= self.runs_before + self.runs
+            return ok
+
+    monkeypatch.setattr(study_module, "_Reporter", Spy)
+    hmlvs.study(**{**TINY, "progress": True})
+    (rep,) = bars
+    task = rep.bar.tasks[rep.overall]
+    # TINY: per s, 2 x runs_lm + 2 x runs_pso + 1 random-search run
+    per_s = 2 * TINY["runs_lm"] + 2 * TINY["runs_pso"] + 1
+    assert task.total == per_s * len(TINY["s_values"]) == task.completed
+    names = [type(c).__name__ for c in rep.bar.columns]
+    assert "TimeRemainingColumn" in names and "MofNCompleteColumn" in names
+
+
 @pytest.mark.parametrize(
     "kwargs, match",
     [({"s_values": ()}, "s_values is empty"),
