@@ -137,7 +137,8 @@ int main(int argc, char** argv) {
          ", \"threads\": " + std::to_string(threads) +
              ", \"last_best_fitness\": " + std::to_string(best));
     Emit("bare_loop_" + std::to_string(threads) + "_threads", Median(bare_times) * 1e3, "ms", reps,
-         ", \"threads\": " + std::to_string(threads));
+         ", \"threads\": " + std::to_string(threads) +
+             ", \"evaluations\": " + std::to_string(evaluations));
   }
   // 3. LM solves from a perturbed start (s = 0.01 around the truth): modern mode, paper mode, and
   // paper mode with Ceres' NumericDiffCostFunction (the reference its cost matches bit for bit),
