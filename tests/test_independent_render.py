@@ -1,0 +1,78 @@
+"""The image pipeline on images it did not render (issue 14, first "Done when" bullet).
+
+``independent_render.py`` renders the paper's Table 2 sensor from MODEL.md alone (no code of
+``hmlvs.sim``): k = 4.8e-4, laser reflectance lower on dark squares and not proportional to
+the ambient albedo (dark 0.25 / light 0.9 for the laser, 0.07 / 0.85 under ambient light),
+area-integrated pixels, 0.5 px blur, 10 % laser speckle, 1 grey level of noise, random yaw
+/ tilt / height 230-400 mm, 16 views + 4 held out. ``independent_check.py`` measures the
+session pipeline (``hmlvs calibrate DIR --mode homography``: the paper model with the
+manifest's board pose) on them; the baseline is the fit of the exact stripe pixels plus
+0.05 px of noise (RMS over 5 draws).
+
+Measured (seeds 0, 1, 2; LM from the nominal parameters):
+
+- before (the laser-off frame divided out as if the laser's return were proportional to it,
+  ``albedo_offset=0``): the stripe is lost on the light squares (its normalised peak falls
+  below the automatic threshold: ~5000 of ~10000 columns found); FOUND columns 0.20-0.24 px
+  RMS, up to 1.3-1.6 px, nearly all within 4 px of a square's edge; map error on held-out
+  true stripes 8-12 x the baseline (one noise draw).
+- after (the return fitted as proportional to ``off + a``, ``albedo_offset``): all columns
+  found; FOUND 0.059, 0.069, 0.061 px RMS, at most 0.30, 0.31, 0.28 px; map error 1.95, 3.2,
+  4.3 x the baseline (1.3, 4.6, 3.9 x a baseline on the same views the pipeline used).
+
+Not reached, and why:
+
+- 0.06 px RMS on every seed and 0.3 px at most: what is left is the laser speckle (10 %,
+  ~2 px grains), which Steger's smoothing at 3 px averages over a few columns only.
+- map error within 1.5 x: views are missing (below), the reference points come from the
+  detected corners (per-square homographies: 0.008 mm RMS in the board plane, which alone
+  gives 0.003-0.0045 mm of map error), and the centre errors are slightly larger than the
+  baseline's and correlated along the stripe (per-view means up to 0.02 px).
+- all 16 views: ``findChessboardCornersSB`` finds no 3 x 3 grid in 1-4 of 16 views although
+  9-19 inner corners are visible (close views, squares of ~130 px); the corner detector
+  (``hmlvs.image.corners``) is outside this change.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+import sys
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+import independent_check as C  # noqa: E402
+
+pytestmark = pytest.mark.scene
+
+
+@pytest.fixture(scope="module", params=[0, 1])
+def measured(request, tmp_path_factory):
+    folder = tmp_path_factory.mktemp(f"independent{request.param}")
+    m = C.measure(request.param, "lm", folder)
+    truth = dict(np.load(folder / "truth.npz"))
+    before = C.stripe_errors(folder, truth, albedo_offset=0.0)
+    return m, before
+
+
+def test_stripe_centres_on_accepted_columns(measured):
+    m, before = measured
+    s = m["stripe"]
+    columns = sum(v["n"] for k, v in s.items() if k != "per_view_found_rms")
+    assert s["FOUND"]["n"] > 9000 and s["FOUND"]["n"] > 0.95 * columns  # of 16 x 640
+    assert s["FOUND"]["rms"] < 0.08 and s["FOUND"]["max"] < 0.4
+    # before: the stripe lost on the light squares, and the rest 3 x worse, over 1 px at worst
+    assert before["FOUND"]["n"] < 0.7 * s["FOUND"]["n"]
+    assert before["FOUND"]["rms"] > 2.5 * s["FOUND"]["rms"]
+    assert before["FOUND"]["max"] > 1.0
+
+
+def test_views_and_map_error(measured):
+    m, _ = measured
+    assert len(m["used"]) >= 11
+    # dropped views: the corner detector's (not the stripe's)
+    assert all(r.startswith("checkerboard") for r in m["dropped"].values())
+    assert m["map"]["rms"] < 5.0 * m["baseline"]["rms"]  # measured 1.95 and 3.2
+    assert m["map"]["rms"] < 0.015  # mm on held-out true stripes (measured 0.003-0.008)
