@@ -159,8 +159,11 @@ if __name__ == "__main__":
     ap.add_argument("--keep", help="render into this folder (kept) instead of a temporary one")
     ap.add_argument("--albedo-step", type=float, help="the stripe's ALBEDO_EDGE check "
                     "(default: the session's)")
+    ap.add_argument("--albedo-offset", type=float, help="the stripe's albedo offset (default: "
+                    "fitted; 0: the laser-off frame divided out as it is)")
     a = ap.parse_args()
-    opts = None if a.albedo_step is None else {"albedo_step": a.albedo_step}
+    opts = {k: v for k, v in (("albedo_step", a.albedo_step),
+                              ("albedo_offset", a.albedo_offset)) if v is not None}
     for s in a.seeds:
         print(report(measure(s, a.method, None if a.keep is None else f"{a.keep}/s{s}", opts)),
               flush=True)

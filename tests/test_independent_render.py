@@ -15,10 +15,12 @@ Measured (seeds 0, 1, 2; LM from the nominal parameters):
   ``albedo_offset=0``): the stripe is lost on the light squares (its normalised peak falls
   below the automatic threshold: ~5000 of ~10000 columns found); FOUND columns 0.20-0.24 px
   RMS, up to 1.3-1.6 px, nearly all within 4 px of a square's edge; map error on held-out
-  true stripes 8-12 x the baseline (one noise draw).
+  true stripes 0.013, 0.030, 0.041 mm: 7.7, 12.5, 11.6 x the baseline.
 - after (the return fitted as proportional to ``off + a``, ``albedo_offset``): all columns
-  found; FOUND 0.059, 0.069, 0.061 px RMS, at most 0.30, 0.31, 0.28 px; map error 1.95, 3.2,
-  4.3 x the baseline (1.3, 4.6, 3.9 x a baseline on the same views the pipeline used).
+  found (within 3 px of an edge 0.077 px RMS, elsewhere 0.061); FOUND 0.059, 0.069, 0.061
+  px RMS, at most 0.30, 0.31, 0.28 px; map error 0.0034, 0.0078, 0.015 mm: 1.95, 3.2, 4.3 x
+  the baseline (1.3, 4.6, 3.9 x a baseline on the same views the pipeline used). The CLI
+  (pso+lm) gives the same 0.0034 mm on seed 0.
 
 Not reached, and why:
 
@@ -26,11 +28,14 @@ Not reached, and why:
   ~2 px grains), which Steger's smoothing at 3 px averages over a few columns only.
 - map error within 1.5 x: views are missing (below), the reference points come from the
   detected corners (per-square homographies: 0.008 mm RMS in the board plane, which alone
-  gives 0.003-0.0045 mm of map error), and the centre errors are slightly larger than the
-  baseline's and correlated along the stripe (per-view means up to 0.02 px).
-- all 16 views: ``findChessboardCornersSB`` finds no 3 x 3 grid in 1-4 of 16 views although
-  9-19 inner corners are visible (close views, squares of ~130 px); the corner detector
-  (``hmlvs.image.corners``) is outside this change.
+  gives 0.003-0.0045 mm of map error), and the centre errors, though close to the
+  baseline's 0.05 px per column, are correlated along the stripe: their per-view means
+  reach 0.02 px (noise and speckle; 0.003 px without them), and removing those means
+  alone takes seed 2's map error from 0.015 to 0.0056 mm.
+- all 16 views: ``findChessboardCornersSB`` finds no 3 x 3 grid in 1-4 of 16 views, close
+  views (230-250 mm, squares of ~130 px) near the board's border, some of which show only
+  two rows of inner corners; with ``CALIB_CB_EXHAUSTIVE`` it finds 2 of the 7 dropped views
+  of seeds 0-2. The corner detector (``hmlvs.image.corners``) is outside this change.
 """
 
 from __future__ import annotations
