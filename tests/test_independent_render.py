@@ -83,3 +83,30 @@ def test_views_and_map_error(measured):
     assert all(r.startswith("checkerboard") for r in m["dropped"].values())
     assert m["map"]["rms"] < 5.0 * m["baseline"]["rms"]  # measured 1.32 and 2.8
     assert m["map"]["rms"] < 0.012  # mm on held-out true stripes (measured 0.0023, 0.0069)
+
+
+def test_albedo_offset_recovers_an_affine_laser_return():
+    """A stripe over squares whose laser return is 0.2 + 0.8 x (ambient albedo): the offset
+    a with return proportional to off + a is 0.25 x the ambient scale; a return proportional
+    to the ambient albedo gives 0; one that does not follow it gives inf."""
+    from hmlvs.image.stripe import albedo_offset, difference_image
+
+    rng = np.random.default_rng(3)
+    h, w = 120, 400
+    alb = np.where((np.arange(w) // 50) % 2 == 0, 0.1, 0.9)[None, :].repeat(h, axis=0)
+    v = np.arange(h)[:, None]
+    line = np.exp(-0.5 * ((v - 60.3) / 1.8) ** 2)
+
+    def pair(ret):
+        off = 150.0 * alb + rng.normal(0, 1, (h, w))
+        on = 150.0 * alb + 80.0 * ret * line + rng.normal(0, 1, (h, w))
+        return [np.clip(np.rint(x), 0, 255).astype(np.uint8) for x in (on, off)]
+
+    on, off = pair(0.2 + 0.8 * alb)
+    assert albedo_offset(on, off) == pytest.approx(0.25 * 150, rel=0.15)
+    on, off = pair(alb)
+    assert abs(albedo_offset(on, off)) < 3.0
+    on, off = pair(np.ones_like(alb) - 0.5 * alb)
+    assert np.isinf(albedo_offset(on, off))
+    np.testing.assert_array_equal(difference_image(on, off, normalize=True, offset=np.inf),
+                                  difference_image(on, off))
