@@ -23,17 +23,20 @@ Measured (seeds 0, 1, 2; LM from the nominal parameters):
   (pso+lm) gives the same 0.0034 mm on seed 0.
 - and with the stripe points mapped to the board by the homography of all corners where it
   fits them (``hmlvs.image.points.GLOBAL_RESIDUAL``; the reference points' error 0.008-0.0096
-  -> 0.004-0.005 mm): map error 0.0023, 0.0069, 0.0139 mm: 1.32, 2.8, 4.0 x the baseline.
+  -> 0.004-0.005 mm): map error 0.0023, 0.0069, 0.0139 mm: 1.32, 2.8, 4.0 x the baseline;
+  with it also in squares where some of the four corners were not found (747 -> 888, 627 ->
+  739, 691 -> 838 points): 0.0025, 0.0047, 0.0098 mm, 1.44, 1.96, 2.80 x the baseline
+  (0.99, 2.8, 2.5 x a baseline on the same views).
 
 Not reached, and why:
 
 - 0.06 px RMS on every seed and 0.3 px at most: what is left is the laser speckle (10 %,
   ~2 px grains), which Steger's smoothing at 3 px averages over a few columns only.
-- map error within 1.5 x (reached on seed 0 only): views are missing (below), and the centre
+- map error within 1.5 x (reached on seed 0 only, 1.44): views are missing (below), and the centre
   errors, though close to the baseline's 0.05 px per column, are correlated along the
   stripe over ~12 columns (Steger's smoothing at 3 px of the sensor noise and speckle;
   lag 8: 0.22), so their per-view means reach 0.01-0.02 px (0.003 px without noise and
-  speckle); removing those means alone takes seed 2's map error from 0.015 to 0.0056 mm.
+  speckle); removing those means alone took seed 2's map error from 0.015 to 0.0056 mm.
 - all 16 views: ``findChessboardCornersSB`` finds no 3 x 3 grid in 1-4 of 16 views, close
   views (230-250 mm, squares of ~130 px) near the board's border, some of which show only
   two rows of inner corners; with ``CALIB_CB_EXHAUSTIVE`` it finds 2 of the 7 dropped views
@@ -81,8 +84,8 @@ def test_views_and_map_error(measured):
     assert len(m["used"]) >= 11
     # dropped views: the corner detector's (not the stripe's)
     assert all(r.startswith("checkerboard") for r in m["dropped"].values())
-    assert m["map"]["rms"] < 5.0 * m["baseline"]["rms"]  # measured 1.32 and 2.8
-    assert m["map"]["rms"] < 0.012  # mm on held-out true stripes (measured 0.0023, 0.0069)
+    assert m["map"]["rms"] < 3.0 * m["baseline"]["rms"]  # measured 1.44 and 1.96
+    assert m["map"]["rms"] < 0.008  # mm on held-out true stripes (measured 0.0025, 0.0047)
 
 
 def test_albedo_offset_recovers_an_affine_laser_return():
