@@ -210,7 +210,7 @@ def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None
             xy = cv2.perspectiveTransform(pu.reshape(1, 1, 2), hm).reshape(2)
             ii, jj = int(np.floor(xy[0] / sq)), int(np.floor(xy[1] / sq))
             if (ii, jj) == (i, j):
-                placed = rxy if use_global else xy
+                placed = xy
                 break
             i, j = ii, jj
         if placed is None:

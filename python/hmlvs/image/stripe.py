@@ -106,7 +106,9 @@ def difference_image(on: np.ndarray, off: np.ndarray, channel: int | None = None
         raise ValueError(f"the laser-on image is {a.shape[1]} x {a.shape[0]} pixels but the "
                          f"laser-off image is {b.shape[1]} x {b.shape[0]}")
     offset = _real(offset, "offset")
-    if normalize and offset != 0.0 and not np.isnan(offset):
+    if np.isnan(offset):
+        raise ValueError("offset must be a number or inf, got nan")
+    if normalize and offset != 0.0:
         if np.isinf(offset):
             return _core._difference_image(a, b, False, -1.0, -1.0)
         fb = b.astype(np.float64)
@@ -130,12 +132,11 @@ def albedo_offset(on: np.ndarray, off: np.ndarray, direction: Direction = "colum
     laser-off frame then makes the stripe several times brighter on the dark squares than on
     the light ones, an automatic threshold loses it on the light ones, and where the stripe
     crosses an edge its profile stays skewed. With two surfaces (a checkerboard's print and
-    paper) the return is an affine function of the laser-off level, fitted here: the
-    median peak of the difference image (averaged over 5 px along the stripe) and the
-    median laser-off level
-    under it, on the scan lines whose peak lies on a dark and on a light surface (each
-    away from edges, unsaturated, well above the noise). Returns 0 when the stripe does not
-    cross two clearly different levels (fewer than 10 scan lines on either).
+    paper) the return is an affine function of the laser-off level, fitted here: the median
+    peak of the difference image (averaged over 5 px along the stripe) and the median
+    laser-off level under it, on the scan lines whose peak lies on a dark and on a light
+    surface (each away from edges, unsaturated, well above the noise). Returns 0 when the
+    stripe does not cross two clearly different levels (fewer than 10 scan lines on either).
     """
     import cv2
 
