@@ -14,6 +14,7 @@ from .stripe import (
     StripeResult,
     _as_gray,
     _normalized_threshold,
+    albedo_offset,
     assess_stripe,
     difference_image,
     extract_stripe,
@@ -471,7 +472,10 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
     """The stripe of one laser on/off pair, as the session pipeline extracts it.
 
     Difference image (paper Eq. 23; divided by the laser-off frame with ``normalize``, which
-    removes most of the pull of the board's edges on the stripe) and :func:`extract_stripe`
+    removes most of the pull of the board's edges on the stripe: by ``off + a``, the laser's
+    return being an affine function of the laser-off level whose offset ``a`` is fitted to
+    the stripe by :func:`~hmlvs.image.stripe.albedo_offset`, or given as ``albedo_offset``;
+    0 divides by the laser-off frame itself) and :func:`extract_stripe`
     with ``stripe_options``; for a normalised image without a given threshold, a noise-aware
     one; without a given ``method``, Steger's at ``steger_sigma`` = half the stripe's median
     FWHM (at least 3 px), robust to laser speckle. With ``assess`` the centres are checked
@@ -489,15 +493,22 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
     on_g = _as_gray(on, "the laser-on image", channel)
     stripe_options = dict(stripe_options)
     albedo_step = stripe_options.pop("albedo_step", None)
+    albedo_offset_ = stripe_options.pop("albedo_offset", None)
     if off is None:
         return _stripe_and_background(on_g, None, normalize, dict(
-            stripe_options, assess=assess, albedo_step=albedo_step))[0]
+            stripe_options, assess=assess, albedo_step=albedo_step,
+            albedo_offset=albedo_offset_))[0]
     off_g = _as_gray(off, "the laser-off image", channel)
-    d = difference_image(on_g, off_g, normalize=normalize)
     opts = dict(stripe_options)
+    offset = 0.0
+    if normalize:
+        offset = albedo_offset(on_g, off_g, opts.get("direction", "columns")) \
+            if albedo_offset_ is None else float(albedo_offset_)
+        normalize = not np.isinf(offset)
+    d = difference_image(on_g, off_g, normalize=normalize, offset=offset if normalize else 0.0)
     automatic = opts.get("threshold") is None
     if normalize and automatic:
-        opts["threshold"] = _normalized_threshold(on_g, off_g, d)
+        opts["threshold"] = _normalized_threshold(on_g, off_g, d, offset)
     if opts.get("method") is None:
         # The pipeline's default centre: Steger's line detector at a scale fitted to the
         # stripe (half its median FWHM, at least 3 px). Its smoothing along the stripe
@@ -577,4 +588,5 @@ def _counts_text(counts: dict[str, int]) -> str:
 
 def _core_options(stripe_options: dict[str, Any]) -> dict[str, Any]:
     """The options of :func:`extract_stripe` among the pipeline's stripe options."""
-    return {k: v for k, v in stripe_options.items() if k != "albedo_step"}
+    return {k: v for k, v in stripe_options.items()
+            if k not in ("albedo_step", "albedo_offset")}

@@ -81,7 +81,7 @@ def _as_gray(image: Any, name: str, channel: int | None) -> np.ndarray:
 
 def difference_image(on: np.ndarray, off: np.ndarray, channel: int | None = None,
                      normalize: bool = False, scale: float | None = None,
-                     floor: float | None = None) -> np.ndarray:
+                     floor: float | None = None, offset: float = 0.0) -> np.ndarray:
     """Laser-on minus laser-off, clipped at zero (paper Eq. 23), optionally albedo-normalised.
 
     Parameters
@@ -90,6 +90,11 @@ def difference_image(on: np.ndarray, off: np.ndarray, channel: int | None = None
         colour (rows x cols x 3 BGR / 4 BGRA as OpenCV reads them).
     channel : for colour images, the channel to use (e.g. 2 for the red channel of a red
         laser in BGR); None converts colour to gray.
+    normalize, scale, floor : divide by the laser-off frame: ``(on - off) * scale /
+        max(off + offset, floor)``; ``scale`` defaults to the mean of ``off + offset``,
+        ``floor`` to 0.1 x the mean of ``off`` (at least 1).
+    offset : the laser's return taken as proportional to ``off + offset`` rather than to
+        ``off`` (see :func:`albedo_offset`); ``inf``: not normalised.
 
     Returns
     -------
@@ -100,9 +105,75 @@ def difference_image(on: np.ndarray, off: np.ndarray, channel: int | None = None
     if a.shape != b.shape:
         raise ValueError(f"the laser-on image is {a.shape[1]} x {a.shape[0]} pixels but the "
                          f"laser-off image is {b.shape[1]} x {b.shape[0]}")
+    offset = _real(offset, "offset")
+    if np.isnan(offset):
+        raise ValueError("offset must be a number or inf, got nan")
+    if normalize and offset != 0.0:
+        if np.isinf(offset):
+            return _core._difference_image(a, b, False, -1.0, -1.0)
+        fb = b.astype(np.float64)
+        mean = float(fb.mean())
+        s = mean + offset if scale is None else _positive(scale, "scale")
+        fl = max(1.0, 0.1 * mean) if floor is None else _positive(floor, "floor")
+        d = np.maximum(a.astype(np.float64) - fb, 0.0) * s / np.maximum(fb + offset, fl)
+        return np.clip(np.rint(d), 0, np.iinfo(a.dtype).max).astype(a.dtype)
     return _core._difference_image(a, b, bool(normalize),
                                    -1.0 if scale is None else _positive(scale, "scale"),
                                    -1.0 if floor is None else _positive(floor, "floor"))
+
+
+def albedo_offset(on: np.ndarray, off: np.ndarray, direction: Direction = "columns") -> float:
+    """How the laser's return follows the laser-off frame: the offset a (grey levels) for
+    which the stripe's peak is proportional to ``off + a`` (0: to the laser-off frame itself,
+    what plain normalisation assumes; ``inf``: the return does not follow it).
+
+    A board's print reflects the laser in other proportions than the ambient light (toner
+    that is black to the eye returns a red or infrared laser far better): dividing by the
+    laser-off frame then makes the stripe several times brighter on the dark squares than on
+    the light ones, an automatic threshold loses it on the light ones, and where the stripe
+    crosses an edge its profile stays skewed. With two surfaces (a checkerboard's print and
+    paper) the return is an affine function of the laser-off level, fitted here: the median
+    peak of the difference image (averaged over 5 px along the stripe) and the median
+    laser-off level under it, on the scan lines whose peak lies on a dark and on a light
+    surface (each away from edges, unsaturated, well above the noise). Returns 0 when the
+    stripe does not cross two clearly different levels (fewer than 10 scan lines on either).
+    """
+    import cv2
+
+    a = _as_gray(on, "the laser-on image", None)
+    b = _as_gray(off, "the laser-off image", None)
+    if direction == "rows":
+        a, b = a.T, b.T
+    raw = np.maximum(a.astype(np.float32) - b.astype(np.float32), 0)
+    noise = float(_core._estimate_difference_noise(_core._difference_image(
+        np.ascontiguousarray(a), np.ascontiguousarray(b), False, -1.0, -1.0)))
+    sm = cv2.blur(raw, (5, 1))  # along the stripe: less noise, the same peak
+    offs = cv2.GaussianBlur(b.astype(np.float32), (0, 0), 1.0)
+    box = np.ones((7, 7), np.uint8)
+    flat = cv2.dilate(offs, box) <= 1.2 * np.maximum(cv2.erode(offs, box), 1.0)
+    top = float(np.iinfo(a.dtype).max)
+    cols = np.arange(a.shape[1])
+    m = np.argmax(sm, axis=0)
+    peak = sm[m, cols]
+    level = offs[m, cols]
+    lo, hi = np.clip(m - 2, 0, a.shape[0] - 1), np.clip(m + 2, 0, a.shape[0] - 1)
+    ok = flat[m, cols] & (peak > max(5.0 * noise, 3.0)) & (a[lo, cols] < top) & \
+        (a[m, cols] < top) & (a[hi, cols] < top)
+    if ok.sum() < 20:
+        return 0.0
+    peak, level = peak[ok], level[ok]
+    p2, p98 = np.percentile(level, [2, 98])
+    if not p98 > 2.0 * max(p2, 1.0):
+        return 0.0
+    split = np.sqrt(max(p2, 1.0) * p98)
+    dark = level < split
+    if dark.sum() < 10 or (~dark).sum() < 10:
+        return 0.0
+    pd, pl = float(np.median(peak[dark])), float(np.median(peak[~dark]))
+    od, ol = float(np.median(level[dark])), float(np.median(level[~dark]))
+    if pl <= pd:
+        return float("inf")
+    return max((pd * ol - pl * od) / (pl - pd), -0.5 * od)
 
 
 # ------------------------------------------------------------------------------------------
@@ -335,7 +406,8 @@ def _nonneg(x: Any, name: str) -> float:
     return v
 
 
-def _normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray) -> float:
+def _normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray,
+                          offset: float = 0.0) -> float:
     """Automatic threshold for an albedo-normalised difference image.
 
     Normalising multiplies the noise by the gain mean(off) / max(off, floor), which is
@@ -347,5 +419,6 @@ def _normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray) -> flo
     raw = _core._difference_image(on, off, False, -1.0, -1.0)
     sigma = float(_core._estimate_difference_noise(raw))
     mean = float(off.mean())
-    gain = mean / np.maximum(off[::4, ::4].astype(float), max(1.0, 0.1 * mean))
+    gain = (mean + offset) / np.maximum(off[::4, ::4].astype(float) + offset,
+                                        max(1.0, 0.1 * mean))
     return max(5.0 * sigma * float(np.percentile(gain, 95)), 0.15 * float(d[::4].max()))

@@ -1,0 +1,254 @@
+"""An independent renderer of laser on/off sessions, written from MODEL.md and
+docs/file-formats.md alone (it shares no code with ``hmlvs.sim``), to measure the image
+pipeline on images the project did not make.
+
+The scene: the paper's Table 2 sensor (640 x 480 px, 7.4 um pixels, f = 8 mm, H = 140 mm,
+theta = 25 deg) with the division-model radial distortion k = 4.8e-4 / mm^2 (MODEL.md step 2)
+on a hand moved by random poses (yaw, tilt, camera 230-400 mm above the board) over the
+paper's checkerboard (6 x 8 inner corners, 30 mm squares, on the plane z = 0 of the base).
+
+Image formation, per pixel: the area of the pixel is integrated (``ss`` x ``ss`` samples);
+every sample's ray (MODEL.md steps 1-2, inverted to a ray) meets the board plane, whose
+printed albedo (dark 0.07, light 0.85, a white margin and a grey table around it) is lit by
+vignetted ambient light. The laser sheet has a Gaussian thickness profile (1-sigma 0.45 mm
+across the plane) and falls off as 1 / range; its return is the surface's albedo *at the
+laser's wavelength* (dark 0.25, light 0.9: not proportional to the ambient albedo, as with
+a real red laser on printed toner). Then a slight optical blur, multiplicative laser
+speckle correlated over about 2 px, 1 grey level of Gaussian sensor noise, rounding and
+clipping to 8 bits (so the stripe saturates where it is bright on white squares at short
+range).
+
+The truth of every view: the hand pose and, for every image column, the row where the
+centre plane of the laser sheet meets the board (``true_centres``).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+#: the rendered sensor: Table 2 nominal values with k = 4.8e-4 / mm^2 (MODEL.md units)
+TRUE = {"f": 8.0, "Su": 0.0074, "Sv": 0.0074, "Cu": 320.0, "Cv": 240.0, "k": 4.8e-4,
+        "H": 140.0, "theta": 5 * np.pi / 36, "omega": 0.0, "phi": 0.0, "varphi": 0.0,
+        "tx": 60.0, "ty": 0.0, "tz": -45.0}
+#: the paper's board, in the manifest's form (docs/file-formats.md)
+BOARD = {"rows": 6, "cols": 8, "square": 30.0, "origin": [700.0, 90.0, 0.0],
+         "row_direction": [-1.0, 0.0, 0.0], "col_direction": [0.0, -1.0, 0.0]}
+SIZE = (640, 480)
+ORDER = ("f", "Su", "Sv", "Cu", "Cv", "k", "H", "theta", "omega", "phi", "varphi",
+         "tx", "ty", "tz")
+
+ALBEDO = {"dark": 0.07, "light": 0.85, "table": 0.35}        # ambient (visible)
+LASER_ALBEDO = {"dark": 0.25, "light": 0.9, "table": 0.45}   # at the laser's wavelength
+
+
+def _rz(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+
+
+def _ry(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0, s], [0, 1.0, 0], [-s, 0, c]])
+
+
+def _axis_angle(axis: np.ndarray, a: float) -> np.ndarray:
+    k = np.asarray(axis, float) / np.linalg.norm(axis)
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(a) * kx + (1 - np.cos(a)) * kx @ kx
+
+
+def hand_from_camera(p: dict) -> np.ndarray:
+    """MODEL.md step 4: R_C = Rz(omega) Ry(phi) Rz(varphi), t = (tx, ty, tz)."""
+    t = np.eye(4)
+    t[:3, :3] = _rz(p["omega"]) @ _ry(p["phi"]) @ _rz(p["varphi"])
+    t[:3, 3] = [p["tx"], p["ty"], p["tz"]]
+    return t
+
+
+def camera_rays(p: dict, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(..., 3) camera-frame ray directions (Xu, Yu, f) of pixels (u, v): MODEL.md 1-2."""
+    xd, yd = p["Su"] * (u - p["Cu"]), p["Sv"] * (v - p["Cv"])
+    s = 1.0 + p["k"] * (xd * xd + yd * yd)
+    return np.stack([xd / s, yd / s, np.full(np.shape(xd), p["f"])], axis=-1)
+
+
+def board_hits(p: dict, pose: np.ndarray, u: np.ndarray, v: np.ndarray):
+    """Where the rays of pixels (u, v) meet the board plane z = 0: (base points (..., 3),
+    camera-frame points (..., 3)); NaN where the ray points away from the plane."""
+    bc = pose @ hand_from_camera(p)
+    d = camera_rays(p, u, v)
+    db = d @ bc[:3, :3].T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = -bc[2, 3] / db[..., 2]
+    s = np.where(s > 0, s, np.nan)
+    return bc[:3, 3] + s[..., None] * db, s[..., None] * d
+
+
+def plane_offset(p: dict, pc: np.ndarray) -> np.ndarray:
+    """Signed distance (mm) of camera-frame points from the laser plane y + z tan(theta) = H."""
+    t = np.tan(p["theta"])
+    return (pc[..., 1] + pc[..., 2] * t - p["H"]) / np.hypot(1.0, t)
+
+
+def board_coords(pts: np.ndarray, board: dict = BOARD) -> np.ndarray:
+    """(..., 2) board coordinates (mm along the row and column directions) of base points."""
+    rel = pts - np.asarray(board["origin"])
+    return np.stack([rel @ np.asarray(board["row_direction"]),
+                     rel @ np.asarray(board["col_direction"])], axis=-1)
+
+
+def albedos(xy: np.ndarray, board: dict = BOARD) -> tuple[np.ndarray, np.ndarray]:
+    """(ambient, laser) albedo at board coordinates: squares from -1 to rows (cols) square
+    widths, a half-square white margin, the table beyond."""
+    sq = board["square"]
+    i, j = np.floor(xy[..., 0] / sq), np.floor(xy[..., 1] / sq)
+    x, y = xy[..., 0] / sq, xy[..., 1] / sq
+    squares = (i >= -1) & (i <= board["rows"] - 1) & (j >= -1) & (j <= board["cols"] - 1)
+    paper = (x >= -1.5) & (x <= board["rows"] + 0.5) & (y >= -1.5) & (y <= board["cols"] + 0.5)
+    dark = squares & ((i + j) % 2 == 0)
+    amb = np.where(dark, ALBEDO["dark"], np.where(paper, ALBEDO["light"], ALBEDO["table"]))
+    las = np.where(dark, LASER_ALBEDO["dark"],
+                   np.where(paper, LASER_ALBEDO["light"], LASER_ALBEDO["table"]))
+    bad = ~np.isfinite(xy).all(axis=-1)
+    return np.where(bad, 0.0, amb), np.where(bad, 0.0, las)
+
+
+def true_centres(p: dict, pose: np.ndarray, size: tuple[int, int] = SIZE) -> np.ndarray:
+    """(width,) the exact stripe centre row of every column: the row whose ray meets the
+    board on the centre plane of the laser sheet (NaN where none inside the image)."""
+    u = np.arange(size[0], dtype=float)
+    lo, hi = np.full_like(u, -0.5), np.full_like(u, size[1] - 0.5)
+
+    def g(v: np.ndarray) -> np.ndarray:
+        return plane_offset(p, board_hits(p, pose, u, v)[1])
+
+    glo, ghi = g(lo), g(hi)
+    ok = np.isfinite(glo) & np.isfinite(ghi) & (np.sign(glo) != np.sign(ghi))
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        gm = g(mid)
+        same = np.sign(gm) == np.sign(glo)
+        lo, glo = np.where(same, mid, lo), np.where(same, gm, glo)
+        hi = np.where(same, hi, mid)
+    return np.where(ok, 0.5 * (lo + hi), np.nan)
+
+
+def random_pose(rng: np.random.Generator, p: dict = TRUE, board: dict = BOARD,
+                max_tilt: float = np.radians(15)) -> np.ndarray:
+    """A base_from_hand pose: camera looking down at a random yaw, tilted up to ``max_tilt``
+    about a random horizontal axis, 230-400 mm above the board, placed so that the stripe's
+    middle lands on a random point of the board's inner area and crosses it for at least
+    250 columns."""
+    sq = board["square"]
+    while True:
+        yaw = rng.uniform(-np.pi, np.pi)
+        r0 = np.column_stack([[np.cos(yaw), np.sin(yaw), 0], [np.sin(yaw), -np.cos(yaw), 0],
+                              [0, 0, -1.0]])
+        a = rng.uniform(0, 2 * np.pi)
+        r = _axis_angle([np.cos(a), np.sin(a), 0], rng.uniform(0, max_tilt)) @ r0
+        bc = np.eye(4)
+        bc[:3, :3], bc[:3, 3] = r, [0.0, 0.0, rng.uniform(230, 400)]
+        pose = bc @ np.linalg.inv(hand_from_camera(p))
+        v = true_centres(p, pose)
+        if not np.isfinite(v[320]) or not 30 < v[320] < SIZE[1] - 30:
+            continue
+        mid = board_hits(p, pose, np.array(320.0), np.array(v[320]))[0]
+        target = np.asarray(board["origin"]) + rng.uniform(0.5, board["rows"] - 1.5) * sq * \
+            np.asarray(board["row_direction"]) + rng.uniform(0.5, board["cols"] - 1.5) * sq * \
+            np.asarray(board["col_direction"])
+        pose[:2, 3] += (target - mid)[:2]
+        u = np.arange(SIZE[0], dtype=float)
+        v = true_centres(p, pose)
+        xy = board_coords(board_hits(p, pose, u, v)[0], board)
+        inner = (xy[:, 0] > 0) & (xy[:, 0] < (board["rows"] - 1) * sq) & \
+            (xy[:, 1] > 0) & (xy[:, 1] < (board["cols"] - 1) * sq) & np.isfinite(v) & \
+            (v > 10) & (v < SIZE[1] - 11)
+        if inner.sum() >= 250:
+            return pose
+
+
+def render_view(p: dict, pose: np.ndarray, rng: np.random.Generator, *, ss: int = 4,
+                ambient: float = 150.0, laser: float = 110.0, sheet_sigma: float = 0.45,
+                blur: float = 0.5, speckle: float = 0.1, noise: float = 1.0,
+                board: dict = BOARD) -> tuple[np.ndarray, np.ndarray]:
+    """(laser-on, laser-off) 8-bit images of one pose. Pixels are integrated over their area
+    with ``ss`` x ``ss`` samples wherever the albedo changes within the pixel's neighbourhood
+    and wherever the laser sheet can reach (elsewhere the scene is constant over a pixel)."""
+    w, h = SIZE
+    off = (np.arange(ss) + 0.5) / ss - 0.5
+    sub_u, sub_v = np.meshgrid(off, off)
+
+    def samples(u: np.ndarray, v: np.ndarray):
+        """Area samples of pixels (u, v): ambient albedo and laser return, (n, ss * ss)."""
+        uu, vv = u[:, None] + sub_u.ravel(), v[:, None] + sub_v.ravel()
+        pts, pc = board_hits(p, pose, uu, vv)
+        amb, las = albedos(board_coords(pts, board), board)
+        d = plane_offset(p, pc)
+        dist = np.linalg.norm(pc - np.array([0.0, p["H"], 0.0]), axis=-1)
+        beam = np.nan_to_num(np.exp(-0.5 * (d / sheet_sigma) ** 2) * 300.0 / dist)
+        return amb, las * beam
+
+    vg, ug = np.mgrid[0:h, 0:w].astype(float)
+    amb_img = albedos(board_coords(board_hits(p, pose, ug, vg)[0], board), board)[0]
+    kernel = np.ones((3, 3), np.uint8)
+    a8 = np.rint(amb_img * 100).astype(np.uint8)
+    mixed = cv2.dilate(a8, kernel) != cv2.erode(a8, kernel)
+    rows = true_centres(p, pose)
+    band = np.zeros((h, w), bool)
+    if np.isfinite(rows).any():
+        lo, hi = np.nanmin(rows), np.nanmax(rows)
+        band[max(0, int(lo) - 20):min(h, int(hi) + 21)] = True
+    sel = mixed | band
+    amb_s, las_s = samples(ug[sel], vg[sel])
+    amb_img[sel] = amb_s.mean(axis=1)
+    las_img = np.zeros((h, w))
+    las_img[sel] = las_s.mean(axis=1)
+    yy, xx = np.mgrid[0:h, 0:w]
+    vignette = 1.0 - 0.3 * ((xx - w / 2) ** 2 + (yy - h / 2) ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
+    amb_img *= ambient * vignette
+    las_img *= laser
+    if speckle > 0:
+        field = cv2.GaussianBlur(rng.standard_normal((h, w)), (0, 0), 1.0)
+        las_img *= np.clip(1.0 + speckle * field / field.std(), 0.0, None)
+    if blur > 0:
+        amb_img = cv2.GaussianBlur(amb_img, (0, 0), blur)
+        las_img = cv2.GaussianBlur(las_img, (0, 0), blur)
+
+    def shoot(img: np.ndarray) -> np.ndarray:
+        return np.clip(np.rint(img + noise * rng.standard_normal(img.shape)), 0, 255
+                       ).astype(np.uint8)
+
+    return shoot(amb_img + las_img), shoot(amb_img)
+
+
+def render_session(folder: str | Path, seed: int = 0, views: int = 16, held_out: int = 4,
+                   **options) -> dict:
+    """Render ``views`` image pairs into ``folder`` (manifest.json, p000_on.png, ...) and
+    draw ``held_out`` further poses for testing (no images). Returns the truth: ``params``,
+    ``poses`` (views + held_out, 4, 4), ``centres`` (views + held_out, width) and ``ids``;
+    also saved as ``truth.npz`` in ``folder``."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    poses = np.array([random_pose(rng) for _ in range(views + held_out)])
+    centres = np.array([true_centres(TRUE, q) for q in poses])
+    entries = []
+    for i in range(views):
+        on, off = render_view(TRUE, poses[i], rng, **options)
+        pid = f"p{i:03d}"
+        cv2.imwrite(str(folder / f"{pid}_on.png"), on)
+        cv2.imwrite(str(folder / f"{pid}_off.png"), off)
+        entries.append({"id": pid, "on": f"{pid}_on.png", "off": f"{pid}_off.png",
+                        "pose": poses[i].tolist()})
+    manifest = {"format": "hmlvs-images", "version": 1, "image_size": list(SIZE),
+                "board": BOARD, "poses": entries}
+    (folder / "manifest.json").write_text(json.dumps(manifest, indent=1))
+    ids = [f"p{i:03d}" for i in range(views)] + [f"h{i:03d}" for i in range(held_out)]
+    truth = {"params": np.array([TRUE[n] for n in ORDER]), "poses": poses,
+             "centres": centres, "ids": np.array(ids), "views": views}
+    np.savez(folder / "truth.npz", **truth)
+    return truth
