@@ -38,3 +38,38 @@ def test_ctrl_c_stops_a_long_api_solve(method):
     word, seconds = r.stdout.split()
     assert word == "interrupted"
     assert float(seconds) < 30
+
+
+LOADING = textwrap.dedent("""
+    import sys, types
+
+    class Interrupted(types.ModuleType):  # Ctrl-C arriving while the command line loads
+        def __getattr__(self, name):
+            raise KeyboardInterrupt
+
+    import hmlvs
+    sys.modules["hmlvs.cli"] = Interrupted("hmlvs.cli")
+    sys.argv = ["hmlvs", "--help"]
+    from hmlvs.__main__ import run
+    run()
+""")
+
+
+def test_ctrl_c_while_the_command_line_loads_exits_130_without_a_traceback():
+    r = subprocess.run([sys.executable, "-c", LOADING], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 130
+    assert r.stderr.strip() == "interrupted"
+
+
+def test_ctrl_c_outside_a_commands_guard_exits_130(monkeypatch, capsys):
+    from hmlvs import cli
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "_command", interrupted)
+    with pytest.raises(SystemExit) as e:
+        cli.main(["--help"])
+    assert e.value.code == 130
+    assert capsys.readouterr().err.strip() == "interrupted"

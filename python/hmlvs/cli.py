@@ -1116,6 +1116,9 @@ def main(argv: Optional[list[str]] = None) -> None:
         _command().main(args=argv, prog_name="hmlvs")
     except SystemExit:
         raise
+    except KeyboardInterrupt:  # outside a command's guard, e.g. while parsing the options
+        print("interrupted", file=sys.stderr)
+        sys.exit(130)
     except Exception as e:  # reached only outside _guard, e.g. while printing results
         try:
             with _guard():
