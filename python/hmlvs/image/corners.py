@@ -134,7 +134,13 @@ def _handedness(board: Any) -> float:
 
 def _orientation(px: np.ndarray, idx: np.ndarray, board: Any) -> float:
     """Image cross product sign of the board's row and column steps under a numbering."""
-    rc = np.stack([idx // board.cols, idx % board.cols], axis=-1).reshape(-1, 2).astype(float)
+    return _orientation_rc(px, np.stack([idx // board.cols, idx % board.cols], axis=-1))
+
+
+def _orientation_rc(px: np.ndarray, rc: np.ndarray) -> float:
+    """Image cross product sign of the row and column steps of corners at board (row,
+    column) positions ``rc``."""
+    rc = np.asarray(rc).reshape(-1, 2).astype(float)
     # affine fit px = [r, c, 1] A: its 2x2 part holds the row and column steps
     a, *_ = np.linalg.lstsq(np.hstack([rc, np.ones((len(rc), 1))]), px.reshape(-1, 2),
                             rcond=None)
@@ -272,6 +278,18 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
         idx = c.ravel()
         px = grid.reshape(-1, 2)
         rule = "top-left"
+    return _refine_and_extend(gray, px, idx, board, spacing, extend, rule)
+
+
+def _refine_and_extend(gray: np.ndarray, px: np.ndarray, idx: np.ndarray, board: Any,
+                       spacing: float, extend: bool, rule: str) -> Corners:
+    """Numbered corners (pixels ``px``, board indices ``idx``) refined with ``cornerSubPix``
+    and, with ``extend``, completed by following the board's homography (see
+    :func:`find_corners`)."""
+    import cv2
+    h, w = gray.shape
+    n_board = board.rows * board.cols
+    bxy = board.board_coordinates()
     win = int(np.clip(round(0.2 * spacing), 2, 9))
     # findChessboardCornersSB's own sub-pixel positions are less accurate on sharp images
     # than cornerSubPix (about 0.1 px against 0.05 px RMS on rendered boards, and off by
@@ -362,6 +380,239 @@ def detect_board(image: np.ndarray, board: Any,
     an image that is not 8- or 16-bit.
     """
     return find_corners(image, board, None, options=options)
+
+
+# ------------------------------------------------------------------------------------------
+# Partly visible plain checkerboards
+
+
+class NumberingError(ValueError):
+    """Corners were found, but which board corners they are cannot be decided safely."""
+
+
+@dataclass(frozen=True)
+class CornerGrid:
+    """A regular grid of checkerboard corners found in an image but not numbered on the
+    board: a partly visible plain checkerboard shows the same pattern wherever it is cut, so
+    which rows and columns of the board the grid covers needs a prediction
+    (:func:`number_grid`).
+
+    Attributes
+    ----------
+    pixels : (m, n, 2) corner pixels in the detector's grid order
+    spacing : median distance between neighbouring corners (px)
+    image_size : (width, height) of the image
+    """
+
+    pixels: np.ndarray
+    spacing: float
+    image_size: tuple[int, int]
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return int(self.pixels.shape[0]), int(self.pixels.shape[1])
+
+
+# pattern sizes tried with CALIB_CB_LARGER, smallest first: a larger request fails on a
+# small view, a smaller one sometimes returns a grid that skips rows (checked and dropped)
+_GRID_SIZES = ((3, 3), (4, 4), (5, 5))
+
+
+def _uniform_cells(gray: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """(m-1, n-1) bool: which cells of the (m, n, 2) corner grid are one uniform square of
+    the colour a checkerboard puts there (cells alternate dark and light).
+    ``findChessboardCornersSB`` with ``CALIB_CB_LARGER`` can return grids that skip rows or
+    repeat corners (measured on rendered partial views): a cell spanning two or more squares
+    is not uniform inside (samples at 1/4, 1/2 and 3/4 of its sides) and fails here, and so
+    does a cell with a corner that is not an X-junction."""
+    import cv2
+    m, n = grid.shape[:2]
+    bad = np.zeros((max(m - 1, 0), max(n - 1, 0)), bool)
+    if m < 2 or n < 2 or (m - 1) * (n - 1) < 2:
+        return bad
+    f = np.array([0.25, 0.5, 0.75])
+    s, t = (a.ravel()[:, None] for a in np.meshgrid(f, f, indexing="ij"))
+    p00, p10 = grid[:-1, :-1, None], grid[1:, :-1, None]
+    p01, p11 = grid[:-1, 1:, None], grid[1:, 1:, None]
+    pts = (1 - s) * (1 - t) * p00 + s * (1 - t) * p10 + (1 - s) * t * p01 + s * t * p11
+    xy = pts.reshape(-1, 2).astype(np.float32)
+    vals = cv2.remap(gray.astype(np.float32), xy[:, :1].copy(), xy[:, 1:].copy(),
+                     cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
+    vals = vals.reshape(m - 1, n - 1, len(f) ** 2)
+    mean = vals.mean(axis=2)
+    spread = vals.max(axis=2) - vals.min(axis=2)
+    parity = (np.add.outer(np.arange(m - 1), np.arange(n - 1)) % 2).astype(bool)
+    contrast = float(np.median(mean[parity]) - np.median(mean[~parity]))
+    top = float(np.percentile(gray, 99.5) - np.percentile(gray, 0.5))
+    if abs(contrast) < max(0.15 * top, 8.0):
+        return bad
+    mid = 0.5 * (np.median(mean[parity]) + np.median(mean[~parity]))
+    side = np.where(parity, 1.0, -1.0) * np.sign(contrast) * (mean - mid)
+    ok = (side > 0.25 * abs(contrast)) & (spread < 0.5 * abs(contrast)) & (vals >= 0).all(axis=2)
+    # Every corner must be an X-junction (four squares alternating around it). The outer
+    # corners of the edge squares, where they meet the white border, are L-junctions (three
+    # light quadrants) and findChessboardCornersSB takes them for a row of corners.
+    di = np.concatenate([grid[1:] - grid[:-1], grid[-1:] - grid[-2:-1]], axis=0)
+    dj = np.concatenate([grid[:, 1:] - grid[:, :-1], grid[:, -1:] - grid[:, -2:-1]], axis=1)
+    q = []
+    for a, b in ((0.35, 0.35), (-0.35, -0.35), (0.35, -0.35), (-0.35, 0.35)):
+        xy = (grid + a * di + b * dj).reshape(-1, 2).astype(np.float32)
+        q.append(cv2.remap(gray.astype(np.float32), xy[:, :1].copy(), xy[:, 1:].copy(),
+                           cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                           borderValue=np.nan).reshape(m, n))
+    gap = np.maximum(np.minimum(q[0], q[1]) - np.maximum(q[2], q[3]),
+                     np.minimum(q[2], q[3]) - np.maximum(q[0], q[1]))
+    x = np.nan_to_num(gap, nan=-1.0) > 0.5 * abs(contrast)
+    return ok & x[:-1, :-1] & x[1:, :-1] & x[:-1, 1:] & x[1:, 1:]
+
+
+def _largest_block(ok: np.ndarray) -> tuple[int, int, int, int] | None:
+    """The largest rectangle (i0, i1, j0, j1), inclusive, of True cells; None if none."""
+    best, found = 0, None
+    m, n = ok.shape
+    for i0 in range(m):
+        for i1 in range(i0, m):
+            rows = ok[i0:i1 + 1].all(axis=0)
+            j = 0
+            while j < n:
+                if not rows[j]:
+                    j += 1
+                    continue
+                j1 = j
+                while j1 + 1 < n and rows[j1 + 1]:
+                    j1 += 1
+                area = (i1 - i0 + 2) * (j1 - j + 2)
+                if area > best:
+                    best, found = area, (i0, i1, j, j1)
+                j = j1 + 1
+    return found
+
+
+def detect_grid(image: np.ndarray, board: Any = None) -> CornerGrid:
+    """The corners of a (possibly partly visible) plain checkerboard as an unnumbered grid.
+
+    ``findChessboardCornersSB`` with ``CALIB_CB_LARGER`` (which returns the whole grid it
+    can follow, starting from a requested 3 x 3, 4 x 4 or 5 x 5) gives the candidates. Of
+    each, the largest block of cells that are each one uniform square, alternating dark and
+    light, is kept (OpenCV's grid can skip rows or repeat corners); the largest such block
+    with at least 6 corners that fits on the board is returned. Number it with
+    :func:`number_grid`.
+
+    Raises :class:`BoardNotFoundError` when no such grid is found."""
+    import cv2
+
+    from ..geometry.board import Checkerboard
+    board = Checkerboard() if board is None else board
+    gray = _to_8bit(_as_gray(image, "the image", None))
+    h, w = gray.shape
+    flags = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY | cv2.CALIB_CB_LARGER
+    best: np.ndarray | None = None
+    seen = []
+    for size in _GRID_SIZES:
+        if min(size) > min(board.rows, board.cols):
+            break
+        ok, found, meta = cv2.findChessboardCornersSBWithMeta(gray, size, flags)
+        if not ok or found is None or meta is None or found.shape[0] != meta.size:
+            continue
+        grid = found.reshape(meta.shape[0], meta.shape[1], 2).astype(float)
+        cells = _uniform_cells(gray, grid)
+        block = _largest_block(cells) if cells.size else None
+        if block is None:
+            seen.append(f"{grid.shape[0]} x {grid.shape[1]} (not a checkerboard grid)")
+            continue
+        i0, i1, j0, j1 = block
+        sub = grid[i0:i1 + 2, j0:j1 + 2]
+        m, n = sub.shape[:2]
+        if not ((m <= board.rows and n <= board.cols) or (m <= board.cols and n <= board.rows)):
+            seen.append(f"{m} x {n} (larger than the board)")
+            continue
+        if m * n < 6:
+            seen.append(f"{m} x {n} (too few regular corners)")
+            continue
+        if best is None or sub.shape[0] * sub.shape[1] > best.shape[0] * best.shape[1]:
+            best = sub
+        if cells.all():  # the whole grid is regular: a larger request finds no more
+            break
+    if best is not None:
+        return CornerGrid(best, _spacing(best.reshape(-1, 2)), (w, h))
+    extra = f"; rejected: {', '.join(seen)}" if seen else ""
+    raise BoardNotFoundError("no checkerboard found in the image (findChessboardCornersSB "
+                             f"found no regular grid of at least 6 corners{extra})")
+
+
+def _placements(shape: tuple[int, int], board: Any, px: np.ndarray
+                ) -> list[tuple[np.ndarray, str]]:
+    """Every way an (m, n) grid of corners can lie on the board with the board's handedness:
+    (board indices of the grid's corners in grid order, a description)."""
+    m, n = shape
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(m), np.arange(n), indexing="ij"))
+    sign = _handedness(board)
+    out = []
+    for swap in (False, True):
+        for si in (1, -1):
+            for sj in (1, -1):
+                r0, c0 = (sj * j, si * i) if swap else (si * i, sj * j)
+                if _orientation_rc(px, np.stack([r0, c0], axis=1)) != sign:
+                    continue
+                r0, c0 = r0 - r0.min(), c0 - c0.min()
+                for dr in range(board.rows - int(r0.max())):
+                    for dc in range(board.cols - int(c0.max())):
+                        r, c = r0 + dr, c0 + dc
+                        out.append((r * board.cols + c,
+                                    f"rows {dr}-{dr + int(r0.max())}, columns "
+                                    f"{dc}-{dc + int(c0.max())}, first corner r{r[0]}c{c[0]}"))
+    return out
+
+
+def number_grid(image: np.ndarray, grid: CornerGrid, board: Any, expected: np.ndarray,
+                ratio: float = 3.0, options: CornerOptions | None = None) -> Corners:
+    """Number a partly visible board's corners (:func:`detect_grid`) from predicted pixels.
+
+    ``expected`` (rows*cols, 2) holds where every board corner should appear (row-major,
+    NaN allowed), e.g. projected from the robot pose with a first calibration. Every
+    placement of the grid on the board (each offset, and each orientation with the board's
+    handedness) is scored by the RMS distance of the found corners from the predicted pixels
+    of the corners it assigns. The best is taken only when it lies within ``max_error``
+    corner spacings (:class:`CornerOptions`) and the second best is at least ``ratio`` times
+    farther; otherwise :class:`NumberingError` says why and nothing is numbered (with the
+    default ratio 3 the prediction may be off by up to a quarter of a square). The corners
+    are then refined and extended over the board as in :func:`find_corners`
+    (``Corners.rule == "predicted"``)."""
+    options = CornerOptions() if options is None else options
+    gray = _to_8bit(_as_gray(image, "the image", None))
+    exp = np.asarray(expected, dtype=float)
+    n_board = board.rows * board.cols
+    if exp.shape != (n_board, 2):
+        raise ValueError(f"expected must hold the ({n_board}, 2) predicted pixels of the "
+                         f"board's corners, got shape {exp.shape}")
+    m, n = grid.shape
+    px = grid.pixels.reshape(-1, 2)
+    spacing = grid.spacing
+    scored = []
+    for idx, what in _placements((m, n), board, px):
+        e = exp[idx]
+        if not np.isfinite(e).all():
+            continue
+        scored.append((float(np.sqrt(np.mean(np.sum((px - e) ** 2, axis=1)))), what, idx))
+    if not scored:
+        raise NumberingError(f"the {m} x {n} corners found cannot be placed on the "
+                             f"{board.rows} x {board.cols} board where the prediction sees it")
+    scored.sort(key=lambda x: x[0])
+    best, what, idx = scored[0]
+    second = scored[1][0] if len(scored) > 1 else np.inf
+    limit = options.max_error * spacing
+    if best > limit:
+        raise NumberingError(
+            f"partly visible board: the {m} x {n} corners found lie {best:.1f} px RMS from "
+            f"the nearest placement of the predicted board ({what}), more than "
+            f"{options.max_error:g} of the corner spacing ({spacing:.0f} px): the prediction "
+            "(robot pose, first calibration) is too far off to number them")
+    if second < ratio * best:
+        raise NumberingError(
+            f"partly visible board: its numbering is ambiguous: the {m} x {n} corners found "
+            f"lie {best:.1f} px RMS from the predicted board as {what} and {second:.1f} px "
+            f"as {scored[1][1]} (the best must be {ratio:g} x closer)")
+    return _refine_and_extend(gray, px, idx, board, spacing, options.extend, "predicted")
 
 
 def detect_charuco(image: np.ndarray, board: Any, min_corners: int = 4) -> Corners:

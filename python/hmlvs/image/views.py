@@ -15,7 +15,8 @@ import numpy as np
 from ..data.manifest import checkerboard_of
 from ..data.views import ViewData
 from ..geometry.board import BoardSpec, CharucoSpec
-from .corners import detect_board, detect_charuco
+from .corners import BoardNotFoundError, detect_board, detect_charuco, detect_grid
+from .partial import PartialView, number_partial_views
 from .session import (
     ImageReport,
     _read_manifest,
@@ -68,9 +69,12 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     """An image session (a manifest, see docs/file-formats.md) -> joint-calibration views.
 
     Returns (views, board, image size (w, h), the board's measured base_from_board or None,
-    one :class:`ImageReport` per pair). A checkerboard must be fully visible (its numbering
-    is then fixed across views by :func:`hmlvs.calibration.joint.calibrate_joint`); a
-    ChArUco board may be partly visible, its corners numbered by the marker ids. A pair
+    one :class:`ImageReport` per pair). A fully visible checkerboard is numbered by the
+    top-left rule (made consistent across views by
+    :func:`hmlvs.calibration.joint.calibrate_joint`); a partly visible one from its robot pose
+    and a first calibration on the whole-board views (:mod:`hmlvs.image.partial`), or the
+    view is rejected with the reason; a ChArUco board may be partly visible, its corners
+    numbered by the marker ids. A pair
     without a stripe, without the board or with fewer than 6 numbered corners is reported
     and skipped; the rest of the session goes through.
     """
@@ -92,6 +96,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         rows=board_spec.rows, cols=board_spec.cols, square=board_spec.square)
     views: list[ViewData] = []
     reports: list[ImageReport] = []
+    partial: list[tuple[int, PartialView, Any]] = []
     size = None
     for index, rec in enumerate(records):
         pid = _record_id(rec, index)
@@ -102,6 +107,16 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
             size = pair.size
             try:
                 corners = detect_corners(pair.off, detector_board)
+            except BoardNotFoundError as e:
+                grid = None if board_spec.unambiguous else _partial_grid(pair.off,
+                                                                         detector_board)
+                if grid is None:
+                    raise _Reject(str(e)) from None
+                # numbered below, from a first calibration on the whole-board views
+                partial.append((len(reports), PartialView(pid, pair.off, grid, pair.pose,
+                                                          pair.stripe.pixels), pair))
+                reports.append(None)  # type: ignore[arg-type]
+                continue
             except ValueError as e:
                 raise _Reject(str(e)) from None
             if len(corners) < MIN_CORNERS:
@@ -115,6 +130,9 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         reports.append(ImageReport(pid, index, pair.on_name, pair.off_name, True, "",
                                    pair.stripe.counts(), len(corners.index),
                                    int(pair.stripe.found.sum())))
+    if partial:
+        _add_partial_views(partial, views, reports, board_spec, size, detector_board,
+                           board_pose)
     if size is None:
         raise ValueError("no image pair could be read: " +
                          "; ".join(f"{r.id}: {r.reason}" for r in reports))
@@ -128,3 +146,34 @@ def detect_corners(image: np.ndarray, board: Any) -> Any:
     if getattr(board, "unambiguous", False):
         return detect_charuco(image, board)
     return detect_board(image, board)
+
+
+def _partial_grid(image: np.ndarray, board: Any) -> Any:
+    """The unnumbered corner grid of a partly visible plain checkerboard, or None."""
+    try:
+        return detect_grid(image, board)
+    except ValueError:
+        return None
+
+
+def _add_partial_views(partial: list[tuple[int, PartialView, Any]], views: list[ViewData],
+                       reports: list[ImageReport], board: BoardSpec, size: Any,
+                       detector_board: Any, board_pose: np.ndarray | None) -> None:
+    """Number the partial views (:func:`number_partial_views`) and put them in session order
+    among ``views``; fill their reports."""
+    full = list(views)
+    numbered, reasons = number_partial_views(full, [p for _, p, _ in partial], board, size,
+                                             detector_board, board_pose, MIN_CORNERS)
+    # the whole-board views' places in the session: the reports accepted so far, in order
+    keyed = list(zip([k for k, r in enumerate(reports) if r is not None and r.ok], full))
+    for (slot, p, pair), corners, why in zip(partial, numbered, reasons):
+        if corners is None:
+            reports[slot] = ImageReport(p.id, slot, pair.on_name, pair.off_name, False, why)
+            continue
+        keyed.append((slot, ViewData(p.id, np.asarray(corners.pixels, float),
+                                     np.asarray(corners.index, int), p.stripe,
+                                     p.base_from_hand)))
+        reports[slot] = ImageReport(p.id, slot, pair.on_name, pair.off_name, True, "",
+                                    pair.stripe.counts(), len(corners.index),
+                                    int(pair.stripe.found.sum()))
+    views[:] = [v for _, v in sorted(keyed, key=lambda kv: kv[0])]
