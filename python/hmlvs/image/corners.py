@@ -414,60 +414,60 @@ class CornerGrid:
 
 
 # pattern sizes tried with CALIB_CB_LARGER, smallest first: a larger request fails on a
-# small view, a smaller one sometimes returns a grid that skips rows (checked and dropped)
+# small view; the grid returned can skip rows or repeat corners (measured on rendered partial
+# views), so only its regular cells seed the grid, which is then grown row by row
 _GRID_SIZES = ((3, 3), (4, 4), (5, 5))
 
 
-def _uniform_cells(gray: np.ndarray, grid: np.ndarray) -> np.ndarray:
-    """(m-1, n-1) bool: which cells of the (m, n, 2) corner grid are one uniform square of
-    the colour a checkerboard puts there (cells alternate dark and light).
-    ``findChessboardCornersSB`` with ``CALIB_CB_LARGER`` can return grids that skip rows or
-    repeat corners (measured on rendered partial views): a cell spanning two or more squares
-    is not uniform inside (samples at 1/4, 1/2 and 3/4 of its sides) and fails here, and so
-    does a cell with a corner that is not an X-junction."""
+def _sample(gray: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Bilinear grey values of the float32 image at pixels ``pts`` (..., 2); NaN outside."""
     import cv2
-    m, n = grid.shape[:2]
-    bad = np.zeros((max(m - 1, 0), max(n - 1, 0)), bool)
-    if m < 2 or n < 2 or (m - 1) * (n - 1) < 2:
-        return bad
+    xy = np.ascontiguousarray(pts, np.float32).reshape(-1, 2)
+    v = cv2.remap(gray, xy[:, :1].copy(), xy[:, 1:].copy(), cv2.INTER_LINEAR,
+                  borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
+    return v.reshape(pts.shape[:-1])
+
+
+def _grid_stats(gray: np.ndarray, grid: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """For an (m, n, 2) corner grid on a float32 image: per cell the mean and spread (max -
+    min) of 9 samples at 1/4, 1/2 and 3/4 of its sides; per corner the X-junction gap (how
+    far the two diagonally opposite quadrant samples, at 0.35 of the grid steps, stand out
+    from the other two: about the board's contrast at a corner where four squares meet,
+    about 0 or less at the L-junction where an edge square meets the white border) and its
+    four quadrant samples."""
     f = np.array([0.25, 0.5, 0.75])
     s, t = (a.ravel()[:, None] for a in np.meshgrid(f, f, indexing="ij"))
     p00, p10 = grid[:-1, :-1, None], grid[1:, :-1, None]
     p01, p11 = grid[:-1, 1:, None], grid[1:, 1:, None]
-    pts = (1 - s) * (1 - t) * p00 + s * (1 - t) * p10 + (1 - s) * t * p01 + s * t * p11
-    xy = pts.reshape(-1, 2).astype(np.float32)
-    vals = cv2.remap(gray.astype(np.float32), xy[:, :1].copy(), xy[:, 1:].copy(),
-                     cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
-    vals = vals.reshape(m - 1, n - 1, len(f) ** 2)
+    vals = _sample(gray, (1 - s) * (1 - t) * p00 + s * (1 - t) * p10 + (1 - s) * t * p01
+                   + s * t * p11)
     mean = vals.mean(axis=2)
     spread = vals.max(axis=2) - vals.min(axis=2)
-    parity = (np.add.outer(np.arange(m - 1), np.arange(n - 1)) % 2).astype(bool)
-    contrast = float(np.median(mean[parity]) - np.median(mean[~parity]))
-    top = float(np.percentile(gray, 99.5) - np.percentile(gray, 0.5))
-    if abs(contrast) < max(0.15 * top, 8.0):
-        return bad
-    mid = 0.5 * (np.median(mean[parity]) + np.median(mean[~parity]))
-    side = np.where(parity, 1.0, -1.0) * np.sign(contrast) * (mean - mid)
-    ok = (side > 0.25 * abs(contrast)) & (spread < 0.5 * abs(contrast)) & (vals >= 0).all(axis=2)
-    # Every corner must be an X-junction (four squares alternating around it). The outer
-    # corners of the edge squares, where they meet the white border, are L-junctions (three
-    # light quadrants) and findChessboardCornersSB takes them for a row of corners.
     di = np.concatenate([grid[1:] - grid[:-1], grid[-1:] - grid[-2:-1]], axis=0)
     dj = np.concatenate([grid[:, 1:] - grid[:, :-1], grid[:, -1:] - grid[:, -2:-1]], axis=1)
-    q = []
-    for a, b in ((0.35, 0.35), (-0.35, -0.35), (0.35, -0.35), (-0.35, 0.35)):
-        xy = (grid + a * di + b * dj).reshape(-1, 2).astype(np.float32)
-        q.append(cv2.remap(gray.astype(np.float32), xy[:, :1].copy(), xy[:, 1:].copy(),
-                           cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                           borderValue=np.nan).reshape(m, n))
+    q = np.stack([_sample(gray, grid + a * di + b * dj) for a, b in
+                  ((0.35, 0.35), (-0.35, -0.35), (0.35, -0.35), (-0.35, 0.35))])
     gap = np.maximum(np.minimum(q[0], q[1]) - np.maximum(q[2], q[3]),
                      np.minimum(q[2], q[3]) - np.maximum(q[0], q[1]))
-    x = np.nan_to_num(gap, nan=-1.0) > 0.5 * abs(contrast)
-    return ok & x[:-1, :-1] & x[1:, :-1] & x[:-1, 1:] & x[1:, 1:]
+    return mean, spread, gap, q
+
+
+def _regular_cells(stats: tuple, contrast: float, mid: float, sign: float) -> np.ndarray:
+    """(m-1, n-1) bool: cells that are one uniform square, dark or light as a checkerboard
+    puts them (cell (0, 0) light when ``sign`` > 0), with an X-junction at each corner."""
+    mean, spread, gap, _ = stats
+    parity = np.add.outer(np.arange(mean.shape[0]), np.arange(mean.shape[1])) % 2
+    side = np.where(parity == 0, 1.0, -1.0) * sign * (mean - mid)
+    with np.errstate(invalid="ignore"):
+        x = gap > 0.5 * contrast
+        return ((side > 0.25 * contrast) & (spread < 0.5 * contrast) & x[:-1, :-1]
+                & x[1:, :-1] & x[:-1, 1:] & x[1:, 1:])
 
 
 def _largest_block(ok: np.ndarray) -> tuple[int, int, int, int] | None:
-    """The largest rectangle (i0, i1, j0, j1), inclusive, of True cells; None if none."""
+    """The rectangle (i0, i1, j0, j1), inclusive, of True cells with the most corners; None
+    if no cell is True."""
     best, found = 0, None
     m, n = ok.shape
     for i0 in range(m):
@@ -488,53 +488,115 @@ def _largest_block(ok: np.ndarray) -> tuple[int, int, int, int] | None:
     return found
 
 
+def _fits(shape: tuple[int, ...], board: Any) -> bool:
+    m, n = shape[0], shape[1]
+    return (m <= board.rows and n <= board.cols) or (m <= board.cols and n <= board.rows)
+
+
+def _grow(gray8: np.ndarray, gray: np.ndarray, grid: np.ndarray, board: Any, contrast: float,
+          mid: float, sign: float) -> np.ndarray:
+    """Grow a regular corner grid by whole rows and columns: each new row is predicted by the
+    grid's homography, refined with ``cornerSubPix`` and kept when every corner moved less
+    than a quarter of the spacing and every new cell is regular (:func:`_regular_cells`)."""
+    import cv2
+    h, w = gray.shape
+    blocked = set()
+    while len(blocked) < 4:
+        for side in range(4):
+            if side in blocked:
+                continue
+            axis, front = divmod(side, 2)
+            g = grid if axis == 0 else grid.transpose(1, 0, 2)
+            m, n = g.shape[:2]
+            if not _fits((m + 1, n) if axis == 0 else (n, m + 1), board):
+                blocked.add(side)
+                continue
+            i, j = np.meshgrid(np.arange(m), np.arange(n), indexing="ij")
+            src = np.stack([i.ravel(), j.ravel()], axis=1).astype(np.float64)
+            hmat, _ = cv2.findHomography(src, g.reshape(-1, 2), 0)
+            if hmat is None:
+                blocked.add(side)
+                continue
+            row = -1.0 if front else float(m)
+            new_ij = np.stack([np.full(n, row), np.arange(n, dtype=float)], axis=1)
+            pred = cv2.perspectiveTransform(new_ij.reshape(-1, 1, 2), hmat).reshape(-1, 2)
+            spacing = _spacing(g.reshape(-1, 2))
+            win = int(np.clip(round(0.2 * spacing), 2, 9))
+            if not ((pred >= win + 2).all() and (pred[:, 0] <= w - 3 - win).all()
+                    and (pred[:, 1] <= h - 3 - win).all()):
+                blocked.add(side)
+                continue
+            ref = _refine(gray8, pred, win)
+            cand = np.concatenate([ref[None], g] if front else [g, ref[None]], axis=0)
+            s = -sign if front else sign  # prepending a row shifts the cells' parity
+            cand = cand if axis == 0 else cand.transpose(1, 0, 2)
+            cells = _regular_cells(_grid_stats(gray, cand), contrast, mid, s)
+            new = cells[0] if (front and axis == 0) else cells[-1] if axis == 0 else \
+                cells[:, 0] if front else cells[:, -1]
+            if np.linalg.norm(ref - pred, axis=1).max() > 0.25 * spacing or not new.all():
+                blocked.add(side)
+                continue
+            grid, sign = cand, s
+            blocked.clear()
+    return grid
+
+
 def detect_grid(image: np.ndarray, board: Any = None) -> CornerGrid:
     """The corners of a (possibly partly visible) plain checkerboard as an unnumbered grid.
 
     ``findChessboardCornersSB`` with ``CALIB_CB_LARGER`` (which returns the whole grid it
-    can follow, starting from a requested 3 x 3, 4 x 4 or 5 x 5) gives the candidates. Of
-    each, the largest block of cells that are each one uniform square, alternating dark and
-    light, is kept (OpenCV's grid can skip rows or repeat corners); the largest such block
-    with at least 6 corners that fits on the board is returned. Number it with
-    :func:`number_grid`.
+    can follow, starting from a requested 3 x 3, 4 x 4 or 5 x 5) gives the candidates. Its
+    grid can skip rows, repeat corners or take the outer corners of the edge squares for a
+    row of corners, so only its largest block of regular cells is kept (each cell one
+    uniform square, dark and light alternating, every corner an X-junction) and grown by
+    whole rows and columns while the new cells are regular. The first grid of at least 6
+    corners that fits on the board is returned; number it with :func:`number_grid`.
 
     Raises :class:`BoardNotFoundError` when no such grid is found."""
     import cv2
 
     from ..geometry.board import Checkerboard
     board = Checkerboard() if board is None else board
-    gray = _to_8bit(_as_gray(image, "the image", None))
+    gray8 = _to_8bit(_as_gray(image, "the image", None))
+    gray = gray8.astype(np.float32)
     h, w = gray.shape
+    top = float(np.percentile(gray, 99.5) - np.percentile(gray, 0.5))
     flags = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY | cv2.CALIB_CB_LARGER
-    best: np.ndarray | None = None
     seen = []
     for size in _GRID_SIZES:
         if min(size) > min(board.rows, board.cols):
             break
-        ok, found, meta = cv2.findChessboardCornersSBWithMeta(gray, size, flags)
+        ok, found, meta = cv2.findChessboardCornersSBWithMeta(gray8, size, flags)
         if not ok or found is None or meta is None or found.shape[0] != meta.size:
             continue
         grid = found.reshape(meta.shape[0], meta.shape[1], 2).astype(float)
-        cells = _uniform_cells(gray, grid)
-        block = _largest_block(cells) if cells.size else None
-        if block is None:
-            seen.append(f"{grid.shape[0]} x {grid.shape[1]} (not a checkerboard grid)")
+        if min(grid.shape[:2]) < 2:
             continue
-        i0, i1, j0, j1 = block
-        sub = grid[i0:i1 + 2, j0:j1 + 2]
-        m, n = sub.shape[:2]
-        if not ((m <= board.rows and n <= board.cols) or (m <= board.cols and n <= board.rows)):
-            seen.append(f"{m} x {n} (larger than the board)")
+        stats = _grid_stats(gray, grid)
+        q = stats[3]
+        contrast = float(np.nanmedian(np.abs(q[0] + q[1] - q[2] - q[3]) / 2))
+        mid = 0.5 * float(np.nanpercentile(q, 25) + np.nanpercentile(q, 75))
+        if not contrast > max(0.15 * top, 8.0):
+            seen.append(f"{grid.shape[0]} x {grid.shape[1]} (too little contrast)")
             continue
-        if m * n < 6:
-            seen.append(f"{m} x {n} (too few regular corners)")
+        blocks = [(b, sg) for sg in (1.0, -1.0)
+                  if (b := _largest_block(_regular_cells(stats, contrast, mid, sg)))]
+        if not blocks:
+            seen.append(f"{grid.shape[0]} x {grid.shape[1]} (no regular cell)")
             continue
-        if best is None or sub.shape[0] * sub.shape[1] > best.shape[0] * best.shape[1]:
-            best = sub
-        if cells.all():  # the whole grid is regular: a larger request finds no more
-            break
-    if best is not None:
-        return CornerGrid(best, _spacing(best.reshape(-1, 2)), (w, h))
+        (i0, i1, j0, j1), sign = max(blocks, key=lambda b: (b[0][1] - b[0][0] + 2)
+                                     * (b[0][3] - b[0][2] + 2))
+        # cell (i0, j0) becomes the seed's cell (0, 0): its colour sign follows the parity
+        sign = sign if (i0 + j0) % 2 == 0 else -sign
+        seed = grid[i0:i1 + 2, j0:j1 + 2]
+        if not _fits(seed.shape, board):
+            seen.append(f"{seed.shape[0]} x {seed.shape[1]} (larger than the board)")
+            continue
+        grown = _grow(gray8, gray, seed, board, contrast, mid, sign)
+        if grown.shape[0] * grown.shape[1] < 6:
+            seen.append(f"{grown.shape[0]} x {grown.shape[1]} (too few regular corners)")
+            continue
+        return CornerGrid(grown, _spacing(grown.reshape(-1, 2)), (w, h))
     extra = f"; rejected: {', '.join(seen)}" if seen else ""
     raise BoardNotFoundError("no checkerboard found in the image (findChessboardCornersSB "
                              f"found no regular grid of at least 6 corners{extra})")

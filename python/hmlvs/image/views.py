@@ -111,7 +111,10 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
                 grid = None if board_spec.unambiguous else _partial_grid(pair.off,
                                                                          detector_board)
                 if grid is None:
-                    raise _Reject(str(e)) from None
+                    if board_spec.unambiguous:
+                        raise _Reject(str(e)) from None
+                    raise _Reject(str(e).split("; for a partly visible")[0] + "; nor a partly "
+                                  "visible one (no regular grid of at least 6 corners)") from None
                 # numbered below, from a first calibration on the whole-board views
                 partial.append((len(reports), PartialView(pid, pair.off, grid, pair.pose,
                                                           pair.stripe.pixels), pair))
