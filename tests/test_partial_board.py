@@ -9,6 +9,7 @@ from dataclasses import replace
 import math
 
 from hmlvs.calibration.joint import calibrate_joint
+from hmlvs.cli import main as cli_main
 from hmlvs.geometry.board import Checkerboard
 from hmlvs.image.corners import CornerOptions, NumberingError, detect_grid, number_grid
 from hmlvs.image.partial import PartialView, number_partial_views, predicted_board_pixels
@@ -21,6 +22,8 @@ from hmlvs.sim.general import (
 )
 import numpy as np
 import pytest
+
+pytestmark = pytest.mark.scene  # rendered images
 
 SEEDS = (0, 2)
 FULL, PARTIAL = 6, 3
@@ -215,3 +218,19 @@ def test_predicted_board_pixels_are_the_true_corners_with_the_true_sensor():
         px = predicted_board_pixels(s.sensor, s.base_from_hand[i], BOARD)
         assert np.abs(px - s.corners[i]).max() < 1e-6
     assert math.isfinite(float(px.sum()))
+
+
+def test_hmlvs_calibrate_uses_the_partial_views(sessions, tmp_path, capsys):
+    """The command line on a rendered session: the partial views are listed with their
+    corners and counted in the calibration."""
+    s, r, views, reports = sessions[SEEDS[0]]
+    used = [v.id for v in views if int(v.id[1:]) >= FULL]
+    assert used
+    with pytest.raises(SystemExit) as e:
+        cli_main(["calibrate", str(r.manifest.parent), "--out", str(tmp_path / "cal.yaml")])
+    out = capsys.readouterr().out
+    assert e.value.code == 0, out
+    for v in views:
+        assert f"{v.id}: {len(v.corner_index)} corners" in out, out
+    assert f"chain mode (robot poses), {len(views)} views" in out, out
+    assert (tmp_path / "cal.yaml").exists()
