@@ -282,10 +282,11 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
 
 
 def _refine_and_extend(gray: np.ndarray, px: np.ndarray, idx: np.ndarray, board: Any,
-                       spacing: float, extend: bool, rule: str) -> Corners:
+                       spacing: float, extend: bool, rule: str,
+                       x_check: bool = False) -> Corners:
     """Numbered corners (pixels ``px``, board indices ``idx``) refined with ``cornerSubPix``
     and, with ``extend``, completed by following the board's homography (see
-    :func:`find_corners`)."""
+    :func:`find_corners`); with ``x_check`` an added corner must be an X-junction."""
     import cv2
     h, w = gray.shape
     n_board = board.rows * board.cols
@@ -305,7 +306,7 @@ def _refine_and_extend(gray: np.ndarray, px: np.ndarray, idx: np.ndarray, board:
     anchor = np.ones(len(idx), bool)
     gray32 = gray.astype(np.float32)
     contrast = None
-    if extend and len(idx) >= 4:
+    if extend and x_check and len(idx) >= 4:
         hmat, _ = cv2.findHomography(bxy[idx], px, 0)
         if hmat is not None:
             contrast = float(np.nanmedian(np.abs(_x_gap(gray32, px, bxy[idx], hmat,
@@ -719,7 +720,8 @@ def number_grid(image: np.ndarray, grid: CornerGrid, board: Any, expected: np.nd
             f"partly visible board: its numbering is ambiguous: the {m} x {n} corners found "
             f"lie {best:.1f} px RMS from the predicted board as {what} and {second:.1f} px "
             f"as {scored[1][1]} (the best must be {ratio:g} x closer)")
-    return _refine_and_extend(gray, px, idx, board, spacing, options.extend, "predicted")
+    return _refine_and_extend(gray, px, idx, board, spacing, options.extend, "predicted",
+                              x_check=True)
 
 
 def detect_charuco(image: np.ndarray, board: Any, min_corners: int = 4) -> Corners:

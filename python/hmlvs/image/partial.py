@@ -17,22 +17,25 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..data.views import ViewData
-from .corners import CornerGrid, Corners, number_grid
+from .corners import CornerGrid, Corners, detect_grid, number_grid
+from .session import ImageReport
 
 
 @dataclass(frozen=True)
 class PartialView:
     """A view whose board was found only as an unnumbered grid of corners.
 
-    id : the view's id; image : its laser-off (grey) image; grid : the corners found;
-    base_from_hand : the robot's pose (None without one); stripe : (m, 2) stripe pixels
+    id : the view's id; image : its laser-off (grey) image; grid : the corners found, or
+    None with ``reason`` saying why not; base_from_hand : the robot's pose (None without
+    one); stripe : (m, 2) stripe pixels
     """
 
     id: str
     image: np.ndarray
-    grid: CornerGrid
+    grid: CornerGrid | None
     base_from_hand: np.ndarray | None
     stripe: np.ndarray
+    reason: str = ""
 
 
 def predicted_board_pixels(sensor: Any, base_from_hand: np.ndarray, board: Any) -> np.ndarray:
@@ -97,3 +100,43 @@ def number_partial_views(full: Sequence[ViewData], partial: Sequence[PartialView
             continue
         out[k] = corners
     return out, reasons
+
+
+def partial_view(pid: str, pair: Any, board: Any, whole_error: Exception) -> PartialView:
+    """The :class:`PartialView` of an image pair (``hmlvs.image.session._Pair``) in which
+    no whole board was found (``whole_error`` says so): its corner grid, or the reason why
+    there is none."""
+    try:
+        grid, reason = detect_grid(pair.off, board), ""
+    except ValueError:
+        grid = None
+        reason = (str(whole_error).split("; for a partly visible")[0] + "; nor a partly "
+                  "visible one (no regular grid of at least 6 corners)")
+    return PartialView(pid, pair.off, grid, pair.pose, pair.stripe.pixels, reason)
+
+
+def add_partial_views(partial: list[tuple[int, PartialView, Any]], views: list[ViewData],
+                      reports: list[Any], board: Any, size: Any, detector_board: Any,
+                      board_pose: np.ndarray | None, min_corners: int) -> None:
+    """Number the partial views (:func:`number_partial_views`) of
+    :func:`hmlvs.image.views.views_from_images` and put them in session order among
+    ``views``; fill their reports (``reports[slot]`` is None for each (slot, view, pair))."""
+    full = list(views)
+    found = [p for _, p, _ in partial if p.grid is not None]
+    numbered, reasons = number_partial_views(full, found, board, size, detector_board,
+                                             board_pose, min_corners)
+    result = iter(zip(numbered, reasons))
+    # the whole-board views' places in the session: the reports accepted so far, in order
+    keyed = list(zip([k for k, r in enumerate(reports) if r is not None and r.ok], full))
+    for slot, p, pair in partial:
+        corners, why = next(result) if p.grid is not None else (None, p.reason)
+        if corners is None:
+            reports[slot] = ImageReport(p.id, slot, pair.on_name, pair.off_name, False, why)
+            continue
+        keyed.append((slot, ViewData(p.id, np.asarray(corners.pixels, float),
+                                     np.asarray(corners.index, int), p.stripe,
+                                     p.base_from_hand)))
+        reports[slot] = ImageReport(p.id, slot, pair.on_name, pair.off_name, True, "",
+                                    pair.stripe.counts(), len(corners.index),
+                                    int(pair.stripe.found.sum()))
+    views[:] = [v for _, v in sorted(keyed, key=lambda kv: kv[0])]

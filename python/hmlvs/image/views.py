@@ -15,8 +15,8 @@ import numpy as np
 from ..data.manifest import checkerboard_of
 from ..data.views import ViewData
 from ..geometry.board import BoardSpec, CharucoSpec
-from .corners import BoardNotFoundError, detect_board, detect_charuco, detect_grid
-from .partial import PartialView, number_partial_views
+from .corners import BoardNotFoundError, detect_board, detect_charuco
+from .partial import PartialView, add_partial_views, partial_view
 from .session import (
     ImageReport,
     _read_manifest,
@@ -108,16 +108,11 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
             try:
                 corners = detect_corners(pair.off, detector_board)
             except BoardNotFoundError as e:
-                grid = None if board_spec.unambiguous else _partial_grid(pair.off,
-                                                                         detector_board)
-                if grid is None:
-                    if board_spec.unambiguous:
-                        raise _Reject(str(e)) from None
-                    raise _Reject(str(e).split("; for a partly visible")[0] + "; nor a partly "
-                                  "visible one (no regular grid of at least 6 corners)") from None
-                # numbered below, from a first calibration on the whole-board views
-                partial.append((len(reports), PartialView(pid, pair.off, grid, pair.pose,
-                                                          pair.stripe.pixels), pair))
+                if board_spec.unambiguous:
+                    raise _Reject(str(e)) from None
+                # a partly visible board: numbered below from a first calibration
+                partial.append((len(reports), partial_view(pid, pair, detector_board, e),
+                                pair))
                 reports.append(None)  # type: ignore[arg-type]
                 continue
             except ValueError as e:
@@ -134,8 +129,8 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
                                    pair.stripe.counts(), len(corners.index),
                                    int(pair.stripe.found.sum())))
     if partial:
-        _add_partial_views(partial, views, reports, board_spec, size, detector_board,
-                           board_pose)
+        add_partial_views(partial, views, reports, board_spec, size, detector_board,
+                          board_pose, MIN_CORNERS)
     if size is None:
         raise ValueError("no image pair could be read: " +
                          "; ".join(f"{r.id}: {r.reason}" for r in reports))
@@ -150,33 +145,3 @@ def detect_corners(image: np.ndarray, board: Any) -> Any:
         return detect_charuco(image, board)
     return detect_board(image, board)
 
-
-def _partial_grid(image: np.ndarray, board: Any) -> Any:
-    """The unnumbered corner grid of a partly visible plain checkerboard, or None."""
-    try:
-        return detect_grid(image, board)
-    except ValueError:
-        return None
-
-
-def _add_partial_views(partial: list[tuple[int, PartialView, Any]], views: list[ViewData],
-                       reports: list[ImageReport], board: BoardSpec, size: Any,
-                       detector_board: Any, board_pose: np.ndarray | None) -> None:
-    """Number the partial views (:func:`number_partial_views`) and put them in session order
-    among ``views``; fill their reports."""
-    full = list(views)
-    numbered, reasons = number_partial_views(full, [p for _, p, _ in partial], board, size,
-                                             detector_board, board_pose, MIN_CORNERS)
-    # the whole-board views' places in the session: the reports accepted so far, in order
-    keyed = list(zip([k for k, r in enumerate(reports) if r is not None and r.ok], full))
-    for (slot, p, pair), corners, why in zip(partial, numbered, reasons):
-        if corners is None:
-            reports[slot] = ImageReport(p.id, slot, pair.on_name, pair.off_name, False, why)
-            continue
-        keyed.append((slot, ViewData(p.id, np.asarray(corners.pixels, float),
-                                     np.asarray(corners.index, int), p.stripe,
-                                     p.base_from_hand)))
-        reports[slot] = ImageReport(p.id, slot, pair.on_name, pair.off_name, True, "",
-                                    pair.stripe.counts(), len(corners.index),
-                                    int(pair.stripe.found.sum()))
-    views[:] = [v for _, v in sorted(keyed, key=lambda kv: kv[0])]
