@@ -15,7 +15,8 @@ import numpy as np
 from ..data.manifest import checkerboard_of
 from ..data.views import ViewData
 from ..geometry.board import BoardSpec, CharucoSpec
-from .corners import detect_board, detect_charuco
+from .corners import BoardNotFoundError, detect_board, detect_charuco
+from .partial import PartialView, add_partial_views, partial_view
 from .session import (
     ImageReport,
     _opencv_failure,
@@ -69,9 +70,12 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     """An image session (a manifest, see docs/file-formats.md) -> joint-calibration views.
 
     Returns (views, board, image size (w, h), the board's measured base_from_board or None,
-    one :class:`ImageReport` per pair). A checkerboard must be fully visible (its numbering
-    is then fixed across views by :func:`hmlvs.calibration.joint.calibrate_joint`); a
-    ChArUco board may be partly visible, its corners numbered by the marker ids. A pair
+    one :class:`ImageReport` per pair). A fully visible checkerboard is numbered by the
+    top-left rule (made consistent across views by
+    :func:`hmlvs.calibration.joint.calibrate_joint`); a partly visible one from its robot pose
+    and a first calibration on the whole-board views (:mod:`hmlvs.image.partial`), or the
+    view is rejected with the reason; a ChArUco board may be partly visible, its corners
+    numbered by the marker ids. A pair
     without a stripe, without the board or with fewer than 6 numbered corners is reported
     and skipped; the rest of the session goes through.
     """
@@ -95,6 +99,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         rows=board_spec.rows, cols=board_spec.cols, square=board_spec.square)
     views: list[ViewData] = []
     reports: list[ImageReport] = []
+    partial: list[tuple[int, PartialView, Any]] = []
     size = None
     for index, rec in enumerate(records):
         pid = _record_id(rec, index)
@@ -105,6 +110,14 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
             size = pair.size
             try:
                 corners = detect_corners(pair.off, detector_board)
+            except BoardNotFoundError as e:
+                if board_spec.unambiguous:
+                    raise _Reject(str(e)) from None
+                # a partly visible board: numbered below from a first calibration
+                partial.append((len(reports), partial_view(pid, pair, detector_board, e),
+                                pair))
+                reports.append(None)  # type: ignore[arg-type]
+                continue
             except ValueError as e:
                 raise _Reject(str(e)) from None
             except cv2.error as e:
@@ -120,6 +133,9 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         reports.append(ImageReport(pid, index, pair.on_name, pair.off_name, True, "",
                                    pair.stripe.counts(), len(corners.index),
                                    int(pair.stripe.found.sum())))
+    if partial:
+        add_partial_views(partial, views, reports, board_spec, size, detector_board,
+                          board_pose, MIN_CORNERS)
     if size is None:
         raise ValueError("no image pair could be read: " +
                          "; ".join(f"{r.id}: {r.reason}" for r in reports))
@@ -133,3 +149,4 @@ def detect_corners(image: np.ndarray, board: Any) -> Any:
     if getattr(board, "unambiguous", False):
         return detect_charuco(image, board)
     return detect_board(image, board)
+

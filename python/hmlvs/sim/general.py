@@ -305,6 +305,69 @@ def general_session(sensor: OpenCvSensor | None = None, board: Checkerboard | No
                           np.array(stripes), np.array(on_board), int(seed))
 
 
+def add_partial_views(session: GeneralSession, views: int, seed: int = 0, *,
+                      visible: tuple[float, float] = (0.3, 0.75),
+                      tilt_deg: tuple[float, float] = (10.0, 35.0),
+                      roll_deg: tuple[float, float] = (-60.0, 60.0),
+                      distance: tuple[float, float] = (300.0, 520.0),
+                      image_margin: float = 20.0, max_tries: int = 20000) -> GeneralSession:
+    """``session`` with ``views`` more views in which the board is only partly in the image.
+
+    Each new view aims at a point near the board's edge (up to 40 % of the board beyond
+    it), so that a fraction within ``visible`` of the inner corners lies at least
+    ``image_margin`` px inside the image and at least one corner lies outside it; the laser
+    line must cross the board inside the image over at least a fifth of the image width.
+    ``distance`` is the range of the distance (mm) from the camera to the aimed-at point. The
+    new views come last; their truth is computed as :func:`general_session`'s."""
+    truth, placed = session.sensor, session.board
+    w, h = truth.image_size
+    rng = np.random.default_rng([int(seed), 7919])
+    bxy = placed.board_coordinates()
+    corners_b = np.hstack([bxy, np.zeros((len(bxy), 1))])
+    outline = _board_outline(placed, 1.0)
+    bfb = truth.base_from_board
+    sq = placed.square
+    poses, cams, corners, stripes, on_board = [], [], [], [], []
+    tries = 0
+    while len(poses) < views:
+        tries += 1
+        if tries > max_tries:
+            raise ValueError(f"only {len(poses)} of {views} partial views fit after "
+                             f"{max_tries} tries")
+        look = np.array([rng.uniform(-0.4, 1.4) * (placed.rows - 1) * sq,
+                         rng.uniform(-0.4, 1.4) * (placed.cols - 1) * sq, 0.0])
+        bfc = _camera_pose(look, math.radians(rng.uniform(*tilt_deg)),
+                           rng.uniform(0.0, 2 * math.pi), math.radians(rng.uniform(*roll_deg)),
+                           rng.uniform(*distance))
+        cfb = np.linalg.inv(bfc)
+        if np.any(outline @ cfb[2, :3] + cfb[2, 3] <= 0):
+            continue
+        px = _project(truth, cfb, corners_b)
+        m = image_margin
+        inside = ((px[:, 0] >= m) & (px[:, 0] <= w - 1 - m) & (px[:, 1] >= m)
+                  & (px[:, 1] <= h - 1 - m))
+        out = ((px[:, 0] < 0) | (px[:, 0] > w - 1) | (px[:, 1] < 0) | (px[:, 1] > h - 1))
+        if not (visible[0] <= inside.mean() <= visible[1] and out.any()):
+            continue
+        try:
+            v, on = _true_stripe(truth, bfc, placed)
+        except ValueError:
+            continue
+        if on.sum() < 0.2 * w:
+            continue
+        poses.append(bfb @ bfc @ np.linalg.inv(truth.hand_from_camera))
+        cams.append(bfc)
+        corners.append(px)
+        stripes.append(v)
+        on_board.append(on)
+    cat = np.concatenate
+    return GeneralSession(truth, placed, cat([session.base_from_hand, np.array(poses)]),
+                          cat([session.board_from_camera, np.array(cams)]),
+                          cat([session.corners, np.array(corners)]),
+                          cat([session.stripe_v, np.array(stripes)]),
+                          cat([session.stripe_on_board, np.array(on_board)]), session.seed)
+
+
 # ------------------------------------------------------------------------------------------
 # Rendering
 

@@ -1,0 +1,142 @@
+"""Views of a partly visible plain checkerboard, numbered from the robot's pose.
+
+A plain checkerboard cut by the image border shows the same pattern wherever it is cut: its
+corners (:func:`hmlvs.image.corners.detect_grid`) could be any rows and columns of the board.
+The views of the whole board give a first calibration (:func:`calibrate_joint`); with it and
+a partial view's robot pose every board corner is predicted in that view, and the grid is
+placed where its corners land nearest, when that placement is clearly better than every
+other (:func:`hmlvs.image.corners.number_grid`). A view that cannot be numbered so is
+rejected with the reason, never guessed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..data.views import ViewData
+from .corners import CornerGrid, Corners, detect_grid, number_grid
+from .session import ImageReport
+
+
+@dataclass(frozen=True)
+class PartialView:
+    """A view whose board was found only as an unnumbered grid of corners.
+
+    id : the view's id; image : its laser-off (grey) image; grid : the corners found, or
+    None with ``reason`` saying why not; base_from_hand : the robot's pose (None without
+    one); stripe : (m, 2) stripe pixels
+    """
+
+    id: str
+    image: np.ndarray
+    grid: CornerGrid | None
+    base_from_hand: np.ndarray | None
+    stripe: np.ndarray
+    reason: str = ""
+
+
+def predicted_board_pixels(sensor: Any, base_from_hand: np.ndarray, board: Any) -> np.ndarray:
+    """(rows*cols, 2) pixels where a calibrated general sensor (:class:`OpenCvSensor` with
+    ``hand_from_camera`` and ``base_from_board``) sees every board corner at a robot pose;
+    NaN for corners behind the camera."""
+    import cv2
+
+    from ..geometry.board import BoardSpec
+    spec = BoardSpec.of(board)
+    pts = spec.points()
+    cam_from_board = (np.linalg.inv(sensor.hand_from_camera) @ np.linalg.inv(base_from_hand)
+                      @ sensor.base_from_board)
+    cam = pts @ cam_from_board[:3, :3].T + cam_from_board[:3, 3]
+    rvec, _ = cv2.Rodrigues(cam_from_board[:3, :3])
+    px, _ = cv2.projectPoints(pts.reshape(-1, 1, 3), rvec, cam_from_board[:3, 3].copy(),
+                              sensor.camera_matrix, sensor.dist_coeffs)
+    px = px.reshape(-1, 2).astype(float)
+    px[cam[:, 2] <= 1e-6] = np.nan
+    return px
+
+
+def number_partial_views(full: Sequence[ViewData], partial: Sequence[PartialView], board: Any,
+                         image_size: tuple[int, int], detector_board: Any,
+                         base_from_board: np.ndarray | None = None, min_corners: int = 6
+                         ) -> tuple[list[Corners | None], list[str]]:
+    """Number each partial view's corners from a first calibration on the ``full`` views.
+
+    Returns per partial view its :class:`Corners` (``rule == "predicted"``) or None, and the
+    reason ("" when numbered). ``detector_board`` is the :class:`hmlvs.Checkerboard` the
+    corners are numbered on; ``base_from_board`` a measured board pose, held fixed in the
+    first calibration as in the final one."""
+    from ..calibration.joint import calibrate_joint
+
+    out: list[Corners | None] = [None] * len(partial)
+    reasons = [""] * len(partial)
+    need = ("a partly visible board is numbered from its robot pose and a first calibration "
+            "from at least 3 views of the whole board")
+    if not partial:
+        return out, reasons
+    if len(full) < 3 or any(v.base_from_hand is None for v in full):
+        why = (f"{need}; the session has {len(full)}" if len(full) < 3
+               else f"{need}, all with robot poses")
+        return out, [why] * len(partial)
+    try:
+        first = calibrate_joint(list(full), board, image_size, base_from_board=base_from_board)
+    except ValueError as e:
+        return out, [f"{need}; that calibration failed: {e}"] * len(partial)
+    for k, p in enumerate(partial):
+        if p.base_from_hand is None:
+            reasons[k] = "a partly visible board needs the view's robot pose to be numbered"
+            continue
+        expected = predicted_board_pixels(first.sensor, p.base_from_hand, board)
+        try:
+            corners = number_grid(p.image, p.grid, detector_board, expected)
+        except ValueError as e:
+            reasons[k] = str(e)
+            continue
+        if len(corners) < min_corners:
+            reasons[k] = (f"partly visible board: only {len(corners)} corners numbered; a view "
+                          f"needs at least {min_corners}")
+            continue
+        out[k] = corners
+    return out, reasons
+
+
+def partial_view(pid: str, pair: Any, board: Any, whole_error: Exception) -> PartialView:
+    """The :class:`PartialView` of an image pair (``hmlvs.image.session._Pair``) in which
+    no whole board was found (``whole_error`` says so): its corner grid, or the reason why
+    there is none."""
+    try:
+        grid, reason = detect_grid(pair.off, board), ""
+    except ValueError:
+        grid = None
+        reason = (str(whole_error).split("; for a partly visible")[0] + "; nor a partly "
+                  "visible one (no regular grid of at least 6 corners)")
+    return PartialView(pid, pair.off, grid, pair.pose, pair.stripe.pixels, reason)
+
+
+def add_partial_views(partial: list[tuple[int, PartialView, Any]], views: list[ViewData],
+                      reports: list[Any], board: Any, size: Any, detector_board: Any,
+                      board_pose: np.ndarray | None, min_corners: int) -> None:
+    """Number the partial views (:func:`number_partial_views`) of
+    :func:`hmlvs.image.views.views_from_images` and put them in session order among
+    ``views``; fill their reports (``reports[slot]`` is None for each (slot, view, pair))."""
+    full = list(views)
+    found = [p for _, p, _ in partial if p.grid is not None]
+    numbered, reasons = number_partial_views(full, found, board, size, detector_board,
+                                             board_pose, min_corners)
+    result = iter(zip(numbered, reasons))
+    # the whole-board views' places in the session: the reports accepted so far, in order
+    keyed = list(zip([k for k, r in enumerate(reports) if r is not None and r.ok], full))
+    for slot, p, pair in partial:
+        corners, why = next(result) if p.grid is not None else (None, p.reason)
+        if corners is None:
+            reports[slot] = ImageReport(p.id, slot, pair.on_name, pair.off_name, False, why)
+            continue
+        keyed.append((slot, ViewData(p.id, np.asarray(corners.pixels, float),
+                                     np.asarray(corners.index, int), p.stripe,
+                                     p.base_from_hand)))
+        reports[slot] = ImageReport(p.id, slot, pair.on_name, pair.off_name, True, "",
+                                    pair.stripe.counts(), len(corners.index),
+                                    int(pair.stripe.found.sum()))
+    views[:] = [v for _, v in sorted(keyed, key=lambda kv: kv[0])]
