@@ -972,7 +972,7 @@ def export_calibration(
 def study(
     quick: bool = typer.Option(
         False, "--quick", help="Fewer runs: 30 LM starts, 5 PSO runs and 200,000 random-search "
-        "evaluations per s (about 20 s on 2 cores)."),
+        "evaluations per s (about 10 s on 2 cores)."),
     runs_lm: Optional[int] = typer.Option(
         None, "--runs-lm", help="LM starts per s, the same for paper-mode and modern LM "
         "(default 1000, the paper's; quick 30)."),
