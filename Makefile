@@ -55,10 +55,13 @@ style: test-install
 # Style, the C++ tests, the Python suite, then the tests that use simulated sessions or images
 # once more under another BLAS kernel: a result that depends on the CPU's last bits fails
 # here, not on a user's machine.
+# pytest runs one worker per core (pytest-xdist), each test file on one worker so that a file's
+# fixtures are built once.
+PYTEST := $(PYTHON) -m pytest -q -n auto --dist loadfile
 test: test-install style
 	ctest --test-dir $(TEST_BUILD_DIR) --output-on-failure
-	$(PYTHON) -m pytest -q
-	OPENBLAS_CORETYPE=Prescott $(PYTHON) -m pytest -q -m scene
+	$(PYTEST)
+	OPENBLAS_CORETYPE=Prescott $(PYTEST) -m scene
 
 # vision-calibration (the bench extra) is optional: without it the joint-calibration section
 # says so and still gives hmlvs' numbers.

@@ -20,6 +20,7 @@
 
 #include "hmlvs/model/cost.h"
 #include "hmlvs/model/model.h"
+#include "hmlvs/solvers/fitness.h"
 #include "hmlvs/solvers/lm_costs.h"
 #include "test_util.h"
 
@@ -275,6 +276,34 @@ TEST(Jacobians, PaperFastCostMatchesNumericDiffBitForBit) {
     }
   }
   EXPECT_GT(compared, 50);
+}
+
+TEST(Jacobians, ModernBatchCostStacksThePointCostsBitForBit) {
+  // The modern LM without a robust loss puts all points in one residual block: its residuals
+  // and Jacobian rows must be the per-point blocks' (checked against central differences
+  // above), stacked in point order, to the last bit.
+  const Vector14d q = Generic();
+  const OffsetScene s = MakeOffsetScene(q, 12);
+  const FitnessData data(s.scene.pixels, s.scene.poses, s.references);
+  const Eigen::Quaterniond rot(RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]));
+  const double quat[4] = {rot.x(), rot.y(), rot.z(), rot.w()};
+  const double* params[] = {q.data() + kF, quat, q.data() + kTx};
+  const std::unique_ptr<ceres::CostFunction> batch(NewModernBatchCost(data));
+  ASSERT_EQ(batch->num_residuals(), 36);
+  std::vector<double> r(36), j0(36 * 8), j1(36 * 4), j2(36 * 3);
+  double* jac[] = {j0.data(), j1.data(), j2.data()};
+  ASSERT_TRUE(batch->Evaluate(params, r.data(), jac));
+  for (Eigen::Index i = 0; i < 12; ++i) {
+    const std::unique_ptr<ceres::CostFunction> point(
+        NewModernQuaternionCost(data.u(i), data.v(i), data.ReferenceInHand(i)));
+    double ri[3], a[24], b[12], c[9];
+    double* ji[] = {a, b, c};
+    ASSERT_TRUE(point->Evaluate(params, ri, ji));
+    EXPECT_EQ(std::memcmp(ri, r.data() + 3 * i, sizeof(ri)), 0) << "point " << i;
+    EXPECT_EQ(std::memcmp(a, j0.data() + 24 * i, sizeof(a)), 0) << "point " << i;
+    EXPECT_EQ(std::memcmp(b, j1.data() + 12 * i, sizeof(b)), 0) << "point " << i;
+    EXPECT_EQ(std::memcmp(c, j2.data() + 9 * i, sizeof(c)), 0) << "point " << i;
+  }
 }
 
 }  // namespace

@@ -206,17 +206,44 @@ class ModernCost final : public ceres::SizedCostFunction<3, 8, 4, 3> {
  public:
   ModernCost(double u, double v, const Eigen::Vector3d& h) : u_(u), v_(v), h_(h) {}
 
-  bool Evaluate(double const* const* p, double* residual, double** jac) const override {
+  // What all points of one evaluation share: the parameters in paper order, the rotation as a
+  // matrix (Eigen's quaternion rotation of the unit vectors) and tan(theta).
+  struct Shared {
     double q[kNumParams];
-    for (int i = 0; i <= kTheta; ++i) q[i] = p[0][i];
-    q[kOmega] = q[kPhi] = q[kVarphi] = 0.0;
-    q[kTx] = p[2][0];
-    q[kTy] = p[2][1];
-    q[kTz] = p[2][2];
-    const double* quat = p[1];
-    const Eigen::Quaterniond rot(quat[3], quat[0], quat[1], quat[2]);
-    const double tan_theta = std::tan(q[kTheta]);
-    if (!(HandResidual(q, rot, tan_theta, u_, v_, h_.data(), residual) > 0.0)) return false;
+    const double* quat;
+    Eigen::Matrix3d m;
+    double tan_theta;
+  };
+
+  static Shared Prepare(double const* const* p) {
+    Shared sh;
+    for (int i = 0; i <= kTheta; ++i) sh.q[i] = p[0][i];
+    sh.q[kOmega] = sh.q[kPhi] = sh.q[kVarphi] = 0.0;
+    sh.q[kTx] = p[2][0];
+    sh.q[kTy] = p[2][1];
+    sh.q[kTz] = p[2][2];
+    sh.quat = p[1];
+    const Eigen::Quaterniond rot(sh.quat[3], sh.quat[0], sh.quat[1], sh.quat[2]);
+    for (int c = 0; c < 3; ++c) sh.m.col(c) = rot * Eigen::Vector3d::Unit(c);
+    sh.tan_theta = std::tan(sh.q[kTheta]);
+    return sh;
+  }
+
+  bool Evaluate(double const* const* p, double* residual, double** jac) const override {
+    return EvaluateWith(Prepare(p), residual, jac);
+  }
+
+  // E_h = h - (R_C cP + t) with R_C = m, and its Jacobian.
+  bool EvaluateWith(const Shared& sh, double* residual, double** jac) const {
+    const double* q = sh.q;
+    const double* quat = sh.quat;
+    const double tan_theta = sh.tan_theta;
+    const Eigen::Matrix3d& m = sh.m;
+    double camera[3];
+    if (!(PixelToCamera(q, tan_theta, u_, v_, camera) > 0.0)) return false;
+    const Eigen::Vector3d hand = m * Eigen::Vector3d(camera[0], camera[1], camera[2]) +
+                                 Eigen::Vector3d(q[kTx], q[kTy], q[kTz]);
+    for (int r = 0; r < 3; ++r) residual[r] = h_[r] - hand[r];
     if (jac == nullptr) return true;
 
     double xd, yd;
@@ -225,9 +252,6 @@ class ModernCost final : public ceres::SizedCostFunction<3, 8, 4, 3> {
     const double d = yd + f * tan_theta * s;
     const double g = q[kH] / d;
     const Eigen::Vector3d cp(g * xd, g * yd, g * f * s);
-    // d(rot * p)/dp: the rotation applied to the unit vectors.
-    Eigen::Matrix3d m;
-    for (int c = 0; c < 3; ++c) m.col(c) = rot * Eigen::Vector3d::Unit(c);
     // dcP for a change (dxd, dyd, df, dk, dtan, dh) of the camera model's inputs.
     auto camera_derivative = [&](double dxd, double dyd, double df, double dk, double dtan,
                                  double dh) {
@@ -281,6 +305,48 @@ class ModernCost final : public ceres::SizedCostFunction<3, 8, 4, 3> {
 ceres::CostFunction* NewModernQuaternionCost(double u, double v,
                                              const Eigen::Vector3d& reference_in_hand) {
   return new ModernCost(u, v, reference_in_hand);
+}
+
+namespace {
+
+// All points' ModernCost in one residual block (3 m residuals over the same three blocks): the
+// same residuals and Jacobian rows, without Ceres' per-block bookkeeping. Only without a robust
+// loss, which Ceres applies per residual block.
+class ModernBatchCost final : public ceres::CostFunction {
+ public:
+  explicit ModernBatchCost(const FitnessData& data) {
+    for (Eigen::Index i = 0; i < data.size(); ++i) {
+      points_.push_back(
+          std::make_unique<ModernCost>(data.u(i), data.v(i), data.ReferenceInHand(i)));
+    }
+    set_num_residuals(3 * static_cast<int>(points_.size()));
+    *mutable_parameter_block_sizes() = {kTheta + 1, 4, 3};
+  }
+
+  bool Evaluate(double const* const* p, double* residuals, double** jac) const override {
+    const ModernCost::Shared shared = ModernCost::Prepare(p);
+    for (std::size_t i = 0; i < points_.size(); ++i) {
+      double* rows[3] = {nullptr, nullptr, nullptr};
+      if (jac != nullptr) {  // rows 3i..3i+2 of each row-major block: contiguous
+        for (int b = 0; b < 3; ++b) {
+          if (jac[b] != nullptr) rows[b] = jac[b] + 3 * i * parameter_block_sizes()[b];
+        }
+      }
+      if (!points_[i]->EvaluateWith(shared, residuals + 3 * i, jac != nullptr ? rows : nullptr)) {
+        return false;
+      }
+    }
+    return true;
+  }
+
+ private:
+  std::vector<std::unique_ptr<ModernCost>> points_;
+};
+
+}  // namespace
+
+ceres::CostFunction* NewModernBatchCost(const FitnessData& data) {
+  return new ModernBatchCost(data);
 }
 
 ceres::CostFunction* NewModernEulerCost(double u, double v,
@@ -382,10 +448,14 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
   } else if (use_quaternion) {
     const Eigen::Quaterniond rq(RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]));
     quat = {rq.x(), rq.y(), rq.z(), rq.w()};
-    for (Eigen::Index i = 0; i < data.size(); ++i) {
-      ceres::CostFunction* cost =
-          NewModernQuaternionCost(data.u(i), data.v(i), data.ReferenceInHand(i));
-      problem.AddResidualBlock(cost, loss.get(), &q[kF], quat.data(), &q[kTx]);
+    if (loss == nullptr) {
+      problem.AddResidualBlock(NewModernBatchCost(data), nullptr, &q[kF], quat.data(), &q[kTx]);
+    } else {  // the robust loss applies per point: one residual block each
+      for (Eigen::Index i = 0; i < data.size(); ++i) {
+        ceres::CostFunction* cost =
+            NewModernQuaternionCost(data.u(i), data.v(i), data.ReferenceInHand(i));
+        problem.AddResidualBlock(cost, loss.get(), &q[kF], quat.data(), &q[kTx]);
+      }
     }
     problem.SetManifold(quat.data(), new ceres::EigenQuaternionManifold());
     HoldAndBound(&problem, &q[kF], kF, kTheta + 1, o);

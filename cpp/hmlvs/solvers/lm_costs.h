@@ -8,6 +8,8 @@
 #include <Eigen/Core>
 #include <array>
 
+#include "hmlvs/solvers/fitness.h"
+
 namespace hmlvs {
 
 /// The trigonometry of the paper-mode residual: R_C (ZYZ Euler angles) and tan(theta), which
@@ -58,6 +60,10 @@ ceres::CostFunction* NewPaperCost(double u, double v, const Eigen::Vector3d& ref
 /// [x, y, z, w] (4, solved on ceres::EigenQuaternionManifold), tx, ty, tz (3).
 ceres::CostFunction* NewModernQuaternionCost(double u, double v,
                                              const Eigen::Vector3d& reference_in_hand);
+
+/// The same for all points of `data` in one residual block (3 m residuals, rows in point
+/// order), used when no robust loss is set.
+ceres::CostFunction* NewModernBatchCost(const FitnessData& data);
 
 /// Modern mode when an Euler angle is held fixed: the three components of E_h over 14 scalar
 /// blocks (paper order), Jacobian by automatic differentiation.
