@@ -220,6 +220,20 @@ def _camera_pose(look_at: np.ndarray, tilt: float, azimuth: float, roll: float,
     return _transform(rot, look_at + distance * back)
 
 
+def _random_view(rng: np.random.Generator, placed: Any, sq: float,
+                 look_range: tuple[float, float], tilt_deg: tuple[float, float],
+                 roll_deg: tuple[float, float],
+                 distance: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """A random camera looking at a point of the board (its fraction of the board's extent
+    drawn from look_range): board_from_camera and its inverse."""
+    look = np.array([rng.uniform(*look_range) * (placed.rows - 1) * sq,
+                     rng.uniform(*look_range) * (placed.cols - 1) * sq, 0.0])
+    bfc = _camera_pose(look, math.radians(rng.uniform(*tilt_deg)),
+                       rng.uniform(0.0, 2 * math.pi), math.radians(rng.uniform(*roll_deg)),
+                       rng.uniform(*distance))
+    return bfc, np.linalg.inv(bfc)
+
+
 def general_session(sensor: OpenCvSensor | None = None, board: Checkerboard | None = None,
                     views: int = 20, seed: int = 0, *,
                     tilt_deg: tuple[float, float] = (10.0, 40.0),
@@ -273,12 +287,7 @@ def general_session(sensor: OpenCvSensor | None = None, board: Checkerboard | No
             raise ValueError(f"only {len(poses)} of {views} views fit after {max_tries} tries: "
                              "the board is too large for the image at these distances, or the "
                              "laser line misses it")
-        look = np.array([rng.uniform(0.2, 0.8) * (placed.rows - 1) * sq,
-                         rng.uniform(0.2, 0.8) * (placed.cols - 1) * sq, 0.0])
-        bfc = _camera_pose(look, math.radians(rng.uniform(*tilt_deg)),
-                           rng.uniform(0.0, 2 * math.pi), math.radians(rng.uniform(*roll_deg)),
-                           rng.uniform(*distance))
-        cfb = np.linalg.inv(bfc)
+        bfc, cfb = _random_view(rng, placed, sq, (0.2, 0.8), tilt_deg, roll_deg, distance)
         if np.any(outline @ cfb[2, :3] + cfb[2, 3] <= 0):
             continue
         edge = _project(truth, cfb, outline)
@@ -334,12 +343,7 @@ def add_partial_views(session: GeneralSession, views: int, seed: int = 0, *,
         if tries > max_tries:
             raise ValueError(f"only {len(poses)} of {views} partial views fit after "
                              f"{max_tries} tries")
-        look = np.array([rng.uniform(-0.4, 1.4) * (placed.rows - 1) * sq,
-                         rng.uniform(-0.4, 1.4) * (placed.cols - 1) * sq, 0.0])
-        bfc = _camera_pose(look, math.radians(rng.uniform(*tilt_deg)),
-                           rng.uniform(0.0, 2 * math.pi), math.radians(rng.uniform(*roll_deg)),
-                           rng.uniform(*distance))
-        cfb = np.linalg.inv(bfc)
+        bfc, cfb = _random_view(rng, placed, sq, (-0.4, 1.4), tilt_deg, roll_deg, distance)
         if np.any(outline @ cfb[2, :3] + cfb[2, 3] <= 0):
             continue
         px = _project(truth, cfb, corners_b)
