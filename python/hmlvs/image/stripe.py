@@ -144,9 +144,10 @@ def albedo_offset(on: np.ndarray, off: np.ndarray, direction: Direction = "colum
     b = _as_gray(off, "the laser-off image", None)
     if direction == "rows":
         a, b = a.T, b.T
-    raw = np.maximum(a.astype(np.float32) - b.astype(np.float32), 0)
-    noise = float(_core._estimate_difference_noise(_core._difference_image(
-        np.ascontiguousarray(a), np.ascontiguousarray(b), False, -1.0, -1.0)))
+    diff = _core._difference_image(np.ascontiguousarray(a), np.ascontiguousarray(b), False,
+                                   -1.0, -1.0)  # max(on - off, 0), once for both uses
+    noise = float(_core._estimate_difference_noise(diff))
+    raw = diff.astype(np.float32)
     sm = cv2.blur(raw, (5, 1))  # along the stripe: less noise, the same peak
     offs = cv2.GaussianBlur(b.astype(np.float32), (0, 0), 1.0)
     box = np.ones((7, 7), np.uint8)
