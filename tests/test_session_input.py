@@ -21,8 +21,9 @@ WRONG_ORIGIN = [700.0353292197043, 73.21365954759082, 87.62796006479756]
 
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
-    """4 pairs (seed 0) with the board's measured pose: p000, p002 and p003 give 8
-    calibration points, p001 shows no board."""
+    """4 pairs (seed 0) with the board's measured pose: 9 calibration points. p001 shows
+    only the board's corner (5 inner corners, no 3 x 3 grid for ``findChessboardCornersSB``):
+    its corners are found as X-junctions where the robot pose predicts them."""
     out = tmp_path_factory.mktemp("session") / "s"
     hmlvs.simulate.render_session(num_poses=4, seed=0, out_dir=out)
     return out
@@ -69,7 +70,7 @@ def test_an_opencv_error_in_one_pair_leaves_the_others_used(rendered, tmp_path, 
     folder, _ = _copy(rendered, tmp_path)
     ds, reports = hmlvs.dataset_from_images(folder)
     used = {r.id: r.points for r in reports if r.ok}
-    assert used == {"p000": 1, "p002": 1, "p003": 6}
+    assert used == {"p000": 1, "p001": 1, "p002": 1, "p003": 6}
     real = session.find_corners
     calls = []
 
@@ -83,7 +84,7 @@ def test_an_opencv_error_in_one_pair_leaves_the_others_used(rendered, tmp_path, 
     ds2, reports2 = hmlvs.dataset_from_images(folder)
     assert not reports2[0].ok and reports2[0].reason.startswith("checkerboard: OpenCV failed")
     assert "board's origin" in reports2[0].reason
-    assert {r.id: r.points for r in reports2 if r.ok} == {"p002": 1, "p003": 6}
+    assert {r.id: r.points for r in reports2 if r.ok} == {"p001": 1, "p002": 1, "p003": 6}
     assert len(ds2) == len(ds) - 1
     np.testing.assert_array_equal(ds2.points, ds.points[ds.pose_index != 0])
 
@@ -128,11 +129,11 @@ def test_calibrate_and_measure_take_a_manifest_file_of_any_name(rendered, tmp_pa
     forms = _manifest_forms(rendered, tmp_path)
     calibrate = [_run(["calibrate", str(f), "--method", "lm", "--out",
                        str(tmp_path / "c.yaml")], capsys) for f in forms]
-    # 8 points from 3 pairs, too few for 10 free parameters: the same refusal from the
+    # 9 points from 4 pairs, too few for 10 free parameters: the same refusal from the
     # calibration stage for every form, after the same per-pair lines
     for code, out, err in calibrate:
         assert code == 2
-        assert err.startswith("error: too few points: 8 calibration points"), err
+        assert err.startswith("error: too few points: 9 calibration points"), err
         assert out.splitlines()[0].startswith("p000: 1 points"), out
     assert calibrate[1:] == [calibrate[0]] * 2
     assert not (tmp_path / "c.yaml").exists()

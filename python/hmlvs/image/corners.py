@@ -186,9 +186,14 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
       pose (:func:`predicted_corners`). The detected corners (found with
       ``CALIB_CB_LARGER``, so a board larger than the view is found) are matched to them
       after removing their median offset, then through the board's homography; a corner is
-      matched within ``max_error`` times the corner spacing. So the expected pixels may be
-      off by a common shift of up to about half a square plus ``max_error`` of a square of
-      scatter. Required for a partly visible board.
+      matched within ``max_error`` times the corner spacing. Where no 3 x 3 grid is found
+      (a close view of the board's edge), the image's X-junctions near the predicted board
+      are taken instead. Either way the numbering must be clearly the best placement of
+      the corners on the board: the RMS distance from the expected pixels of the corners it
+      assigns at least 3 times smaller than that of the next best placement. So the
+      expected pixels may be off by up to about a quarter of a square; a view predicted
+      about half a square off is refused (``NumberingError``) rather than numbered one
+      square wrong. Required for a partly visible board.
     - otherwise, for a fully visible board only, a marker-free rule: among the orderings
       with the board's handedness (the camera sees the side ``board.normal`` points to), the
       one whose corner r0c0 is nearest the image's top-left (smallest u + v). It is right as
@@ -228,8 +233,9 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
         ok, found, _ = cv2.findChessboardCornersSBWithMeta(gray, (3, 3),
                                                            flags | cv2.CALIB_CB_LARGER)
         if not ok or found is None or len(found) < 4:
-            raise BoardNotFoundError("no checkerboard found in the image "
-                                     "(findChessboardCornersSB found no 3 x 3 grid of corners)")
+            # a close view of the board's edge can show fewer than 3 x 3 corners, or corners
+            # OpenCV does not follow: find its X-junctions where the prediction expects them
+            return _junction_corners(gray, board, expected, options)
         det = found.reshape(-1, 2).astype(float)
         spacing = _spacing(det)
         radius = max_error * spacing
@@ -262,6 +268,12 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
             raise ValueError("the expected corner pixels are a mirror image of the board as "
                              "the camera sees it (its rows and columns swapped or one of "
                              "them reversed): numbering them would label every corner wrong")
+        # The median offset taken out above makes any common error of the prediction look
+        # small: a prediction off by more than half a square would number every corner one
+        # square off. Placed on the board without it, the numbering must be clearly the best.
+        if np.ptp(idx // board.cols) > 0 and np.ptp(idx % board.cols) > 0:
+            idx = _place(px, idx // board.cols, idx % board.cols, board, expected, spacing,
+                         _RATIO, 1.0, f"the {len(idx)} corners found")
         rule = "expected"
     else:
         grid = _whole_board(gray, board, options.fallback)
@@ -279,6 +291,91 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
         px = grid.reshape(-1, 2)
         rule = "top-left"
     return _refine_and_extend(gray, px, idx, board, spacing, extend, rule)
+
+
+#: a numbering from predicted pixels is taken only when the next best placement on the board
+#: is this many times farther from them: the prediction may be off by a quarter of a square
+_RATIO = 3.0
+
+
+def _junction_corners(gray: np.ndarray, board: Any, expected: np.ndarray,
+                      options: CornerOptions) -> Corners:
+    """The corners of a board that ``findChessboardCornersSB`` does not find (a close view
+    of its edge, fewer than 3 x 3 corners): X-junctions of the image (maxima of the negative
+    Hessian determinant, refined with ``cornerSubPix``, two opposite quadrants dark and two
+    light), put on a lattice by the homography of the ``expected`` pixels, fitted again
+    to themselves and numbered on the board by :func:`_place`."""
+    import cv2
+
+    h, w = gray.shape
+    bxy = board.board_coordinates()
+    vis = np.isfinite(expected).all(axis=1)
+    inside = vis & (expected[:, 0] > -0.5) & (expected[:, 0] < w - 0.5) & \
+        (expected[:, 1] > -0.5) & (expected[:, 1] < h - 0.5)
+    none = BoardNotFoundError("no checkerboard found in the image (findChessboardCornersSB "
+                              "found no 3 x 3 grid of corners, nor X-junctions where the "
+                              "prediction expects the board)")
+    if vis.sum() < 4 or not inside.any():
+        raise none
+    h_exp, _ = cv2.findHomography(bxy[vis], expected[vis], 0)
+    if h_exp is None:
+        raise none
+    spacing = _spacing(expected[vis])
+    g = gray.astype(np.float32)
+    sm = cv2.GaussianBlur(g, (0, 0), max(1.0, 0.05 * spacing))
+    ixx = cv2.Sobel(sm, cv2.CV_32F, 2, 0, ksize=3)
+    iyy = cv2.Sobel(sm, cv2.CV_32F, 0, 2, ksize=3)
+    ixy = cv2.Sobel(sm, cv2.CV_32F, 1, 1, ksize=3)
+    sad = ixy * ixy - ixx * iyy  # > 0 at a saddle: an X-junction
+    k = 2 * int(max(2, 0.15 * spacing)) + 1
+    peak = (sad == cv2.dilate(sad, np.ones((k, k), np.uint8))) & (sad > 0.05 * sad.max())
+    win = int(np.clip(round(0.2 * spacing), 2, 9))
+    m = win + 2
+    v, u = np.nonzero(peak[m:h - m, m:w - m])
+    if u.size < 4:
+        raise none
+    order = np.argsort(-sad[v + m, u + m])[:400]
+    cand = _refine(gray, np.stack([u[order] + m, v[order] + m], axis=1).astype(float), win)
+    top = float(np.percentile(g, 99.5) - np.percentile(g, 0.5))
+    inv = np.linalg.inv(h_exp)
+    at_board = cv2.perspectiveTransform(cand.reshape(-1, 1, 2), inv).reshape(-1, 2)
+    gap, _ = _x_gap(g, cand, at_board, h_exp, board.square)
+    with np.errstate(invalid="ignore"):
+        cand = cand[gap > max(0.3 * top, 8.0)]
+    # one junction per corner: the refinement can bring two maxima to the same corner
+    keep: list[np.ndarray] = []
+    for c in cand:
+        if all(np.linalg.norm(c - o) > 0.3 * spacing for o in keep):
+            keep.append(c)
+    if len(keep) < 4:
+        raise none
+    cand = np.array(keep)
+    # the lattice: nearest corner of the predicted board, then of the board fitted to the
+    # junctions themselves (a prediction off by a fraction of a square loses no junction)
+    lab = np.rint(cv2.perspectiveTransform(cand.reshape(-1, 1, 2), inv).reshape(-1, 2)
+                  / board.square)
+    h_fit, inl = cv2.findHomography(lab * board.square, cand, cv2.RANSAC, 0.1 * spacing)
+    if h_fit is None or inl is None or inl.sum() < 4:
+        raise none
+    f = cv2.perspectiveTransform(cand.reshape(-1, 1, 2), np.linalg.inv(h_fit)).reshape(-1, 2)
+    lab = np.rint(f / board.square)
+    near = np.linalg.norm(cv2.perspectiveTransform(
+        (lab * board.square).reshape(-1, 1, 2), h_fit).reshape(-1, 2) - cand, axis=1)
+    ok = near < 0.1 * spacing
+    cand, lab = cand[ok], lab[ok].astype(int)
+    _, first = np.unique(lab, axis=0, return_index=True)
+    cand, lab = cand[np.sort(first)], lab[np.sort(first)]
+    if len(cand) < 4 or np.ptp(lab[:, 0]) == 0 or np.ptp(lab[:, 1]) == 0:
+        raise BoardNotFoundError(
+            f"no checkerboard found in the image (findChessboardCornersSB found no 3 x 3 "
+            f"grid of corners, and only {len(cand)} X-junctions in one row lie on a board "
+            "lattice)")
+    spacing = _spacing(cand)
+    idx = _place(cand, lab[:, 0] - lab[:, 0].min(), lab[:, 1] - lab[:, 1].min(), board,
+                 expected, spacing, _RATIO, options.max_error,
+                 f"the {len(cand)} X-junctions found")
+    return _refine_and_extend(gray, cand, idx, board, spacing, options.extend, "predicted",
+                              x_check=True)
 
 
 def _refine_and_extend(gray: np.ndarray, px: np.ndarray, idx: np.ndarray, board: Any,
@@ -648,12 +745,11 @@ def detect_grid(image: np.ndarray, board: Any = None) -> CornerGrid:
                              f"found no regular grid of at least 6 corners{extra})")
 
 
-def _placements(shape: tuple[int, int], board: Any, px: np.ndarray
+def _placements(i: np.ndarray, j: np.ndarray, board: Any, px: np.ndarray
                 ) -> list[tuple[np.ndarray, str]]:
-    """Every way an (m, n) grid of corners can lie on the board with the board's handedness:
-    (board indices of the grid's corners in grid order, a description)."""
-    m, n = shape
-    i, j = (a.ravel() for a in np.meshgrid(np.arange(m), np.arange(n), indexing="ij"))
+    """Every way corners at grid positions (``i``, ``j``) (integers, one row or column apart
+    per square) can lie on the board with the board's handedness: (board indices of the
+    corners in their order, a description)."""
     sign = _handedness(board)
     out = []
     for swap in (False, True):
@@ -670,6 +766,40 @@ def _placements(shape: tuple[int, int], board: Any, px: np.ndarray
                                     f"rows {dr}-{dr + int(r0.max())}, columns "
                                     f"{dc}-{dc + int(c0.max())}, first corner r{r[0]}c{c[0]}"))
     return out
+
+
+def _place(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any, expected: np.ndarray,
+           spacing: float, ratio: float, max_error: float, what: str) -> np.ndarray:
+    """Board indices of corners ``px`` found at grid positions (``i``, ``j``) whose place on
+    the board is not known: every placement (:func:`_placements`) is scored by the RMS
+    distance of the corners from the ``expected`` pixels of the board corners it assigns.
+    The best is taken only within ``max_error`` corner spacings and when the second best is
+    at least ``ratio`` times farther; otherwise :class:`NumberingError` says why. ``what``
+    names the corners in the messages (e.g. "the 2 x 4 corners found")."""
+    scored = []
+    for idx, desc in _placements(i, j, board, px):
+        e = expected[idx]
+        if not np.isfinite(e).all():
+            continue
+        scored.append((float(np.sqrt(np.mean(np.sum((px - e) ** 2, axis=1)))), desc, idx))
+    if not scored:
+        raise NumberingError(f"{what} cannot be placed on the {board.rows} x {board.cols} "
+                             "board where the prediction sees it")
+    scored.sort(key=lambda x: x[0])
+    best, desc, idx = scored[0]
+    second = scored[1][0] if len(scored) > 1 else np.inf
+    if best > max_error * spacing:
+        raise NumberingError(
+            f"partly visible board: {what} lie {best:.1f} px RMS from the nearest placement "
+            f"of the predicted board ({desc}), more than {max_error:g} of the corner spacing "
+            f"({spacing:.0f} px): the prediction (robot pose, approximate parameters) is too "
+            "far off to number them")
+    if second < ratio * best:
+        raise NumberingError(
+            f"partly visible board: its numbering is ambiguous: {what} lie {best:.1f} px "
+            f"RMS from the predicted board as {desc} and {second:.1f} px as {scored[1][1]} "
+            f"(the best must be {ratio:g} x closer)")
+    return idx
 
 
 def number_grid(image: np.ndarray, grid: CornerGrid, board: Any, expected: np.ndarray,
@@ -696,30 +826,9 @@ def number_grid(image: np.ndarray, grid: CornerGrid, board: Any, expected: np.nd
     m, n = grid.shape
     px = grid.pixels.reshape(-1, 2)
     spacing = grid.spacing
-    scored = []
-    for idx, what in _placements((m, n), board, px):
-        e = exp[idx]
-        if not np.isfinite(e).all():
-            continue
-        scored.append((float(np.sqrt(np.mean(np.sum((px - e) ** 2, axis=1)))), what, idx))
-    if not scored:
-        raise NumberingError(f"the {m} x {n} corners found cannot be placed on the "
-                             f"{board.rows} x {board.cols} board where the prediction sees it")
-    scored.sort(key=lambda x: x[0])
-    best, what, idx = scored[0]
-    second = scored[1][0] if len(scored) > 1 else np.inf
-    limit = options.max_error * spacing
-    if best > limit:
-        raise NumberingError(
-            f"partly visible board: the {m} x {n} corners found lie {best:.1f} px RMS from "
-            f"the nearest placement of the predicted board ({what}), more than "
-            f"{options.max_error:g} of the corner spacing ({spacing:.0f} px): the prediction "
-            "(robot pose, first calibration) is too far off to number them")
-    if second < ratio * best:
-        raise NumberingError(
-            f"partly visible board: its numbering is ambiguous: the {m} x {n} corners found "
-            f"lie {best:.1f} px RMS from the predicted board as {what} and {second:.1f} px "
-            f"as {scored[1][1]} (the best must be {ratio:g} x closer)")
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(m), np.arange(n), indexing="ij"))
+    idx = _place(px, i, j, board, exp, spacing, ratio, options.max_error,
+                 f"the {m} x {n} corners found")
     return _refine_and_extend(gray, px, idx, board, spacing, options.extend, "predicted",
                               x_check=True)
 

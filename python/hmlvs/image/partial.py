@@ -17,7 +17,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..data.views import ViewData
-from .corners import CornerGrid, Corners, detect_grid, number_grid
+from .corners import CornerGrid, Corners, detect_grid, find_corners, number_grid
 from .session import ImageReport
 
 
@@ -62,7 +62,9 @@ def number_partial_views(full: Sequence[ViewData], partial: Sequence[PartialView
                          image_size: tuple[int, int], detector_board: Any,
                          base_from_board: np.ndarray | None = None, min_corners: int = 6
                          ) -> tuple[list[Corners | None], list[str]]:
-    """Number each partial view's corners from a first calibration on the ``full`` views.
+    """Number each partial view's corners from a first calibration on the ``full`` views:
+    its grid (:func:`number_grid`), or for a view without one (``grid`` None) the image's
+    X-junctions near the predicted board (:func:`find_corners` with ``expected``).
 
     Returns per partial view its :class:`Corners` (``rule == "predicted"``) or None, and the
     reason ("" when numbered). ``detector_board`` is the :class:`hmlvs.Checkerboard` the
@@ -90,9 +92,14 @@ def number_partial_views(full: Sequence[ViewData], partial: Sequence[PartialView
             continue
         expected = predicted_board_pixels(first.sensor, p.base_from_hand, board)
         try:
-            corners = number_grid(p.image, p.grid, detector_board, expected)
+            if p.grid is not None:
+                corners = number_grid(p.image, p.grid, detector_board, expected)
+            else:
+                # no grid OpenCV could follow (a close view of the board's edge): the
+                # X-junctions where the first calibration predicts the board
+                corners = find_corners(p.image, detector_board, expected=expected)
         except ValueError as e:
-            reasons[k] = str(e)
+            reasons[k] = str(e) if p.grid is not None else p.reason
             continue
         if len(corners) < min_corners:
             reasons[k] = (f"partly visible board: only {len(corners)} corners numbered; a view "
@@ -122,14 +129,13 @@ def add_partial_views(partial: list[tuple[int, PartialView, Any]], views: list[V
     :func:`hmlvs.image.views.views_from_images` and put them in session order among
     ``views``; fill their reports (``reports[slot]`` is None for each (slot, view, pair))."""
     full = list(views)
-    found = [p for _, p, _ in partial if p.grid is not None]
-    numbered, reasons = number_partial_views(full, found, board, size, detector_board,
-                                             board_pose, min_corners)
+    numbered, reasons = number_partial_views(full, [p for _, p, _ in partial], board, size,
+                                             detector_board, board_pose, min_corners)
     result = iter(zip(numbered, reasons))
     # the whole-board views' places in the session: the reports accepted so far, in order
     keyed = list(zip([k for k, r in enumerate(reports) if r is not None and r.ok], full))
     for slot, p, pair in partial:
-        corners, why = next(result) if p.grid is not None else (None, p.reason)
+        corners, why = next(result)
         if corners is None:
             reports[slot] = ImageReport(p.id, slot, pair.on_name, pair.off_name, False, why)
             continue

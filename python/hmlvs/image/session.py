@@ -132,8 +132,9 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     robot : the arm (default: SCORBOT ER-VII); poses are ``robot.poses(joints)``
     board : the board (default: the manifest's, else the paper's)
     params : approximate sensor parameters, to predict where the corners are (default: the
-        nominal Table 2 values). They need to place the corners within about a third of a
-        square.
+        nominal Table 2 values). They need to place the corners within about a quarter of
+        a square (:func:`find_corners`); a view predicted farther off is reported, not
+        numbered wrong.
     mode : "corners" or "homography", see :func:`calibration_points`
     tolerance, step : passed to :func:`calibration_points`
     min_stripe : fewest scan lines with a stripe for a usable pair

@@ -4,9 +4,11 @@ Per view one PNG: the laser-on frame (gray) with the numbered board corners, the
 centres and the scan lines whose stripe was rejected, coloured by
 :class:`~hmlvs.image.stripe.StripeStatus`; and one line of text: used or rejected (and why),
 corners found, scan lines per stripe status. Used / rejected and the reason are those of the
-general model's pipeline (:func:`hmlvs.image.views.views_from_images`); the drawing repeats its
-stripe extraction and corner detection on each readable pair, also on the pairs it rejected,
-so a view without a board still shows its stripe and a view without a stripe its corners.
+general model's pipeline (:func:`hmlvs.image.views.views_from_images`), and so are the corners
+drawn on a used view (also a partly visible board's, numbered from its robot pose); the
+drawing repeats the stripe extraction on each readable pair and the corner detection on the
+pairs the pipeline rejected, so a view without a board still shows its stripe and a view
+without a stripe its corners.
 """
 
 from __future__ import annotations
@@ -115,9 +117,13 @@ def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = Non
     from ..image.session import stripe_from_pair
     from ..image.views import detect_corners, views_from_images
 
-    _, spec, _, _, reports = views_from_images(source, robot=robot, board=board,
-                                               channel=channel, normalize=normalize,
-                                               **stripe_options)
+    used, spec, _, _, reports = views_from_images(source, robot=robot, board=board,
+                                                  channel=channel, normalize=normalize,
+                                                  **stripe_options)
+    # the corners the pipeline numbered: a partly visible board's come from its robot pose
+    # and a first calibration, which detecting this image alone cannot repeat
+    numbered = {v.id: _Numbered(np.asarray(v.corner_pixels), np.asarray(v.corner_index))
+                for v in used}
     entries, _, folder = read_manifest(source)
     from ..geometry.board import Checkerboard
 
@@ -151,10 +157,12 @@ def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = Non
                 stripe = stripe_from_pair(on_g, off_g, normalize=normalize, **stripe_options)
             except ValueError:
                 stripe = None
-        try:
-            corners = detect_corners(off_g, detector_board)
-        except ValueError:
-            corners = None
+        corners = numbered.get(rep.id) if rep.ok else None
+        if corners is None:
+            try:
+                corners = detect_corners(off_g, detector_board)
+            except ValueError:
+                corners = None
         if not rep.ok:  # the pipeline stopped early: report what the images show
             view.corners = 0 if corners is None else len(corners)
             view.stripe = {} if stripe is None else stripe.counts()
@@ -164,6 +172,17 @@ def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = Non
         view.image = out / f"{_safe(rep.id)}.png"
         _write_png(view.image, picture)
     return result
+
+
+@dataclass(frozen=True)
+class _Numbered:
+    """Corners as :func:`draw_view` draws them: pixels (k, 2) and board indices (k,)."""
+
+    pixels: np.ndarray
+    index: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.index)
 
 
 def _safe(name: str) -> str:
