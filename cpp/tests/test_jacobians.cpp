@@ -12,6 +12,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <memory>
@@ -304,6 +305,55 @@ TEST(Jacobians, ModernBatchCostStacksThePointCostsBitForBit) {
     EXPECT_EQ(std::memcmp(b, j1.data() + 12 * i, sizeof(b)), 0) << "point " << i;
     EXPECT_EQ(std::memcmp(c, j2.data() + 9 * i, sizeof(c)), 0) << "point " << i;
   }
+}
+
+TEST(Jacobians, ModernBatchCostPackedBlocksAreTheFreeColumns) {
+  // With parameters held, the batch cost's intrinsics and translation blocks hold the free ones
+  // only: its residuals and Jacobian columns must be the full cost's (the columns a SubsetManifold
+  // would keep), to the last bit, and the held values those of `held`.
+  const Vector14d q = Generic();
+  const OffsetScene s = MakeOffsetScene(q, 12);
+  const FitnessData data(s.scene.pixels, s.scene.poses, s.references);
+  const Eigen::Quaterniond rot(RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]));
+  const double quat[4] = {rot.x(), rot.y(), rot.z(), rot.w()};
+  std::array<bool, kNumParams> held{};
+  held[kSu] = held[kK] = held[kTy] = true;
+  const std::vector<int> free0 = {0, 2, 3, 4, 6, 7}, free2 = {0, 2};  // within each group
+  std::vector<double> x0, x2;
+  for (int i : free0) x0.push_back(q[kF + i]);
+  for (int i : free2) x2.push_back(q[kTx + i]);
+  const double* full_params[] = {q.data() + kF, quat, q.data() + kTx};
+  const double* packed_params[] = {x0.data(), quat, x2.data()};
+  const std::unique_ptr<ceres::CostFunction> full(NewModernBatchCost(data));
+  const std::unique_ptr<ceres::CostFunction> packed(NewModernBatchCost(data, q, held));
+  ASSERT_EQ(packed->parameter_block_sizes(), (std::vector<int32_t>{6, 4, 2}));
+  const int rows = 36;
+  std::vector<double> r(rows), j0(rows * 8), j1(rows * 4), j2(rows * 3);
+  std::vector<double> pr(rows), p0(rows * 6), p1(rows * 4), p2(rows * 2);
+  double* jac[] = {j0.data(), j1.data(), j2.data()};
+  double* pjac[] = {p0.data(), p1.data(), p2.data()};
+  ASSERT_TRUE(full->Evaluate(full_params, r.data(), jac));
+  for (int pass = 0; pass < 2; ++pass) {  // the second evaluation is the kept one
+    ASSERT_TRUE(packed->Evaluate(packed_params, pr.data(), pjac));
+    EXPECT_EQ(std::memcmp(r.data(), pr.data(), rows * sizeof(double)), 0);
+    EXPECT_EQ(std::memcmp(j1.data(), p1.data(), rows * 4 * sizeof(double)), 0);
+    for (int row = 0; row < rows; ++row) {
+      for (std::size_t c = 0; c < free0.size(); ++c) {
+        EXPECT_EQ(std::memcmp(&j0[8 * row + free0[c]], &p0[6 * row + c], sizeof(double)), 0);
+      }
+      for (std::size_t c = 0; c < free2.size(); ++c) {
+        EXPECT_EQ(std::memcmp(&j2[3 * row + free2[c]], &p2[2 * row + c], sizeof(double)), 0);
+      }
+    }
+    std::fill(pr.begin(), pr.end(), 0.0);
+    std::fill(p0.begin(), p0.end(), 0.0);
+  }
+  // Residuals alone at the same point, then at another: the kept evaluation only where it is one.
+  ASSERT_TRUE(packed->Evaluate(packed_params, pr.data(), nullptr));
+  EXPECT_EQ(std::memcmp(r.data(), pr.data(), rows * sizeof(double)), 0);
+  x0[0] += 0.01;
+  ASSERT_TRUE(packed->Evaluate(packed_params, pr.data(), nullptr));
+  EXPECT_NE(std::memcmp(r.data(), pr.data(), rows * sizeof(double)), 0);
 }
 
 }  // namespace

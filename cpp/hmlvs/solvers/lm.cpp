@@ -186,6 +186,24 @@ void HoldAndBound(ceres::Problem* problem, double* block, int first, int size, c
   }
 }
 
+// HoldAndBound for a block that holds the group's parameters `entries` (0-based within the group
+// that starts at `first`) only: constant when they are all held, else their bounds.
+void PackedHoldAndBound(ceres::Problem* problem, double* block, int first,
+                        const std::vector<int>& entries, const LmOptions& o) {
+  bool all_held = true;
+  for (int e : entries) all_held = all_held && o.fixed[first + e];
+  if (all_held) {
+    problem->SetParameterBlockConstant(block);
+    return;
+  }
+  if (!o.use_bounds) return;
+  for (std::size_t k = 0; k < entries.size(); ++k) {
+    const int i = first + entries[k];
+    problem->SetParameterLowerBound(block, static_cast<int>(k), o.lower[i]);
+    problem->SetParameterUpperBound(block, static_cast<int>(k), o.upper[i]);
+  }
+}
+
 }  // namespace
 
 ceres::CostFunction* NewPaperCost(double u, double v, const Eigen::Vector3d& reference_in_hand,
@@ -215,14 +233,17 @@ class ModernCost final : public ceres::SizedCostFunction<3, 8, 4, 3> {
     double tan_theta;
   };
 
-  static Shared Prepare(double const* const* p) {
+  static Shared Prepare(double const* const* p) { return Prepare(p[0], p[1], p[2]); }
+
+  // The same from the 8 intrinsics, the quaternion and the 3 translations.
+  static Shared Prepare(const double* intrinsics, const double* quat, const double* translation) {
     Shared sh;
-    for (int i = 0; i <= kTheta; ++i) sh.q[i] = p[0][i];
+    for (int i = 0; i <= kTheta; ++i) sh.q[i] = intrinsics[i];
     sh.q[kOmega] = sh.q[kPhi] = sh.q[kVarphi] = 0.0;
-    sh.q[kTx] = p[2][0];
-    sh.q[kTy] = p[2][1];
-    sh.q[kTz] = p[2][2];
-    sh.quat = p[1];
+    sh.q[kTx] = translation[0];
+    sh.q[kTy] = translation[1];
+    sh.q[kTz] = translation[2];
+    sh.quat = quat;
     const Eigen::Quaterniond rot(sh.quat[3], sh.quat[0], sh.quat[1], sh.quat[2]);
     for (int c = 0; c < 3; ++c) sh.m.col(c) = rot * Eigen::Vector3d::Unit(c);
     sh.tan_theta = std::tan(sh.q[kTheta]);
@@ -312,41 +333,125 @@ namespace {
 // All points' ModernCost in one residual block (3 m residuals over the same three blocks): the
 // same residuals and Jacobian rows, without Ceres' per-block bookkeeping. Only without a robust
 // loss, which Ceres applies per residual block.
+//
+// The intrinsics and translation blocks may hold only the free parameters of their group (the
+// held ones are constants of the cost): the Jacobian columns of those are the full cost's, so the
+// solve is the one with a SubsetManifold, without Ceres multiplying every Jacobian by the
+// manifold's selection matrix.
+//
+// The last evaluation is kept: Ceres' bounded LM evaluates the Jacobian at the trial point in its
+// projected line search and again once the step is accepted (and the residuals in between), at
+// the same parameter values; those repeats are copies. Not thread-safe: one cost per problem,
+// solved on one thread.
 class ModernBatchCost final : public ceres::CostFunction {
  public:
-  explicit ModernBatchCost(const FitnessData& data) {
+  ModernBatchCost(const FitnessData& data, const Vector14d& held,
+                  const std::array<bool, kNumParams>& held_mask)
+      : held_(held) {
     for (Eigen::Index i = 0; i < data.size(); ++i) {
       points_.push_back(
           std::make_unique<ModernCost>(data.u(i), data.v(i), data.ReferenceInHand(i)));
     }
+    // A group with no free parameter keeps all of them (its block is then held constant).
+    auto block_entries = [&](int first, int size, std::vector<int>* entries) {
+      for (int i = 0; i < size; ++i)
+        if (!held_mask[first + i]) entries->push_back(i);
+      if (entries->empty())
+        for (int i = 0; i < size; ++i) entries->push_back(i);
+    };
+    block_entries(kF, kTheta + 1, &intrinsics_);
+    block_entries(kTx, 3, &translation_);
     set_num_residuals(3 * static_cast<int>(points_.size()));
-    *mutable_parameter_block_sizes() = {kTheta + 1, 4, 3};
+    *mutable_parameter_block_sizes() = {static_cast<int>(intrinsics_.size()), 4,
+                                        static_cast<int>(translation_.size())};
   }
 
+  /// Which parameters of a group (0-based within it) its block holds, in order.
+  const std::vector<int>& intrinsics() const { return intrinsics_; }
+  const std::vector<int>& translation() const { return translation_; }
+
   bool Evaluate(double const* const* p, double* residuals, double** jac) const override {
-    const ModernCost::Shared shared = ModernCost::Prepare(p);
-    for (std::size_t i = 0; i < points_.size(); ++i) {
-      double* rows[3] = {nullptr, nullptr, nullptr};
-      if (jac != nullptr) {  // rows 3i..3i+2 of each row-major block: contiguous
-        for (int b = 0; b < 3; ++b) {
-          if (jac[b] != nullptr) rows[b] = jac[b] + 3 * i * parameter_block_sizes()[b];
-        }
+    const int n0 = static_cast<int>(intrinsics_.size());
+    const int n2 = static_cast<int>(translation_.size());
+    const int sizes[3] = {n0, 4, n2};
+    const int rows = num_residuals();
+    // The parameter values, as the key of the kept evaluation.
+    key_.resize(n0 + 4 + n2);
+    std::copy(p[0], p[0] + n0, key_.begin());
+    std::copy(p[1], p[1] + 4, key_.begin() + n0);
+    std::copy(p[2], p[2] + n2, key_.begin() + n0 + 4);
+    bool wanted[3] = {false, false, false};
+    if (jac != nullptr)
+      for (int b = 0; b < 3; ++b) wanted[b] = jac[b] != nullptr;
+    const bool same_point =
+        has_kept_ && kept_key_.size() == key_.size() &&
+        std::memcmp(kept_key_.data(), key_.data(), key_.size() * sizeof(double)) == 0;
+    bool hit = same_point;
+    for (int b = 0; b < 3; ++b) hit = hit && (!wanted[b] || kept_jac_[b]);
+    if (hit) {
+      std::copy(kept_residuals_.begin(), kept_residuals_.end(), residuals);
+      for (int b = 0; b < 3; ++b) {
+        if (wanted[b]) std::copy(kept_[b].begin(), kept_[b].end(), jac[b]);
       }
-      if (!points_[i]->EvaluateWith(shared, residuals + 3 * i, jac != nullptr ? rows : nullptr)) {
+      return true;
+    }
+
+    double intrinsics[kTheta + 1], translation[3];
+    for (int i = 0; i <= kTheta; ++i) intrinsics[i] = held_[kF + i];
+    for (int i = 0; i < 3; ++i) translation[i] = held_[kTx + i];
+    for (int k = 0; k < n0; ++k) intrinsics[intrinsics_[k]] = p[0][k];
+    for (int k = 0; k < n2; ++k) translation[translation_[k]] = p[2][k];
+    const ModernCost::Shared shared = ModernCost::Prepare(intrinsics, p[1], translation);
+    double j0[3 * (kTheta + 1)], j2[9];
+    for (std::size_t i = 0; i < points_.size(); ++i) {
+      double* rows_of[3] = {wanted[0] ? j0 : nullptr, wanted[1] ? jac[1] + 3 * i * 4 : nullptr,
+                            wanted[2] ? j2 : nullptr};
+      if (!points_[i]->EvaluateWith(shared, residuals + 3 * i,
+                                    jac != nullptr ? rows_of : nullptr)) {
+        has_kept_ = false;
         return false;
       }
+      for (int r = 0; r < 3; ++r) {
+        if (wanted[0]) {
+          double* out = jac[0] + (3 * i + r) * n0;
+          for (int k = 0; k < n0; ++k) out[k] = j0[(kTheta + 1) * r + intrinsics_[k]];
+        }
+        if (wanted[2]) {
+          double* out = jac[2] + (3 * i + r) * n2;
+          for (int k = 0; k < n2; ++k) out[k] = j2[3 * r + translation_[k]];
+        }
+      }
+    }
+    has_kept_ = true;
+    kept_key_.swap(key_);
+    kept_residuals_.assign(residuals, residuals + rows);
+    for (int b = 0; b < 3; ++b) {
+      kept_jac_[b] = wanted[b];
+      if (wanted[b]) kept_[b].assign(jac[b], jac[b] + static_cast<std::size_t>(rows) * sizes[b]);
     }
     return true;
   }
 
  private:
   std::vector<std::unique_ptr<ModernCost>> points_;
+  Vector14d held_;
+  std::vector<int> intrinsics_, translation_;
+  // The kept evaluation.
+  mutable std::vector<double> key_, kept_key_, kept_residuals_;
+  mutable std::array<std::vector<double>, 3> kept_;
+  mutable std::array<bool, 3> kept_jac_{};
+  mutable bool has_kept_ = false;
 };
 
 }  // namespace
 
 ceres::CostFunction* NewModernBatchCost(const FitnessData& data) {
-  return new ModernBatchCost(data);
+  return new ModernBatchCost(data, Vector14d::Zero(), {});
+}
+
+ceres::CostFunction* NewModernBatchCost(const FitnessData& data, const Vector14d& held,
+                                        const std::array<bool, kNumParams>& held_mask) {
+  return new ModernBatchCost(data, held, held_mask);
 }
 
 ceres::CostFunction* NewModernEulerCost(double u, double v,
@@ -430,7 +535,10 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
   ceres::Problem::Options popt;
   popt.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(popt);
-  std::array<double, 4> quat{};  // Eigen order x, y, z, w
+  std::array<double, 4> quat{};                 // Eigen order x, y, z, w
+  std::array<double, kTheta + 1> intrinsics{};  // modern mode without a loss: the packed blocks
+  std::array<double, 3> translation{};
+  const ModernBatchCost* packed = nullptr;
   const bool use_quaternion = !paper && !o.fixed[kOmega] && !o.fixed[kPhi] && !o.fixed[kVarphi];
 
   if (paper) {
@@ -449,17 +557,27 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
     const Eigen::Quaterniond rq(RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]));
     quat = {rq.x(), rq.y(), rq.z(), rq.w()};
     if (loss == nullptr) {
-      problem.AddResidualBlock(NewModernBatchCost(data), nullptr, &q[kF], quat.data(), &q[kTx]);
+      // The intrinsics and translation blocks hold their free parameters only (packed in
+      // `intrinsics` and `translation`); the held ones are the cost's constants.
+      auto* cost = new ModernBatchCost(data, q, o.fixed);
+      for (std::size_t k = 0; k < cost->intrinsics().size(); ++k)
+        intrinsics[k] = q[kF + cost->intrinsics()[k]];
+      for (std::size_t k = 0; k < cost->translation().size(); ++k)
+        translation[k] = q[kTx + cost->translation()[k]];
+      problem.AddResidualBlock(cost, nullptr, intrinsics.data(), quat.data(), translation.data());
+      PackedHoldAndBound(&problem, intrinsics.data(), kF, cost->intrinsics(), o);
+      PackedHoldAndBound(&problem, translation.data(), kTx, cost->translation(), o);
+      packed = cost;
     } else {  // the robust loss applies per point: one residual block each
       for (Eigen::Index i = 0; i < data.size(); ++i) {
         ceres::CostFunction* cost =
             NewModernQuaternionCost(data.u(i), data.v(i), data.ReferenceInHand(i));
         problem.AddResidualBlock(cost, loss.get(), &q[kF], quat.data(), &q[kTx]);
       }
+      HoldAndBound(&problem, &q[kF], kF, kTheta + 1, o);
+      HoldAndBound(&problem, &q[kTx], kTx, 3, o);
     }
     problem.SetManifold(quat.data(), new ceres::EigenQuaternionManifold());
-    HoldAndBound(&problem, &q[kF], kF, kTheta + 1, o);
-    HoldAndBound(&problem, &q[kTx], kTx, 3, o);
   } else {
     for (Eigen::Index i = 0; i < data.size(); ++i) {
       std::vector<double*> blocks;
@@ -493,6 +611,12 @@ LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOption
   ceres::Solver::Summary summary;
   ceres::Solve(sopt, &problem, &summary);
 
+  if (packed != nullptr) {
+    for (std::size_t k = 0; k < packed->intrinsics().size(); ++k)
+      q[kF + packed->intrinsics()[k]] = intrinsics[k];
+    for (std::size_t k = 0; k < packed->translation().size(); ++k)
+      q[kTx + packed->translation()[k]] = translation[k];
+  }
   if (use_quaternion) {
     const Eigen::Quaterniond rq(quat[3], quat[0], quat[1], quat[2]);
     const Eigen::Vector3d euler =

@@ -65,6 +65,12 @@ ceres::CostFunction* NewModernQuaternionCost(double u, double v,
 /// order), used when no robust loss is set.
 ceres::CostFunction* NewModernBatchCost(const FitnessData& data);
 
+/// The same with the intrinsics and translation blocks holding only the parameters of their group
+/// that `held_mask` leaves free (all of the group when none is), in paper order; the held ones
+/// take their values from `held`. The Jacobian columns are the full cost's free columns.
+ceres::CostFunction* NewModernBatchCost(const FitnessData& data, const Vector14d& held,
+                                        const std::array<bool, kNumParams>& held_mask);
+
 /// Modern mode when an Euler angle is held fixed: the three components of E_h over 14 scalar
 /// blocks (paper order), Jacobian by automatic differentiation.
 ceres::CostFunction* NewModernEulerCost(double u, double v,
