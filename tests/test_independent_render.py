@@ -39,8 +39,16 @@ Not reached, and why:
   speckle); removing those means alone took seed 2's map error from 0.015 to 0.0056 mm.
 - all 16 views: ``findChessboardCornersSB`` finds no 3 x 3 grid in 1-4 of 16 views, close
   views (230-250 mm, squares of ~130 px) near the board's border, some of which show only
-  two rows of inner corners; with ``CALIB_CB_EXHAUSTIVE`` it finds 2 of the 7 dropped views
-  of seeds 0-2. The corner detector (``hmlvs.image.corners``) is outside this change.
+  two rows of inner corners. Their corners are now found as X-junctions where the robot
+  pose predicts them (``find_corners``; ``test_predicted_numbering.py``): every view's
+  corners are found and numbered right (within 0.16 px of the truth on the 48 views of
+  seeds 0-2). All 16 views are used on seeds 1 and 2; on seed 0 one view shows only 8
+  corners, too few for the one-homography mapping (9, with the distortion fit), and its
+  stripe crosses no square with all four corners: it gives no point. Letting it give
+  points through a homography of its 8 corners without the distortion fit made seed 0's
+  map error 2.4 x worse (0.0025 -> 0.0061 mm), so it stays out. With the close views in,
+  the map error is 0.0025, 0.0055, 0.0092 mm (1.44, 2.28, 2.63 x the baseline): more
+  views, but close views' stripes are the noisiest (0.08-0.09 px RMS against 0.06).
 """
 
 from __future__ import annotations
@@ -81,11 +89,13 @@ def test_stripe_centres_on_accepted_columns(measured):
 
 def test_views_and_map_error(measured):
     m, _ = measured
-    assert len(m["used"]) >= 11
-    # dropped views: the corner detector's (not the stripe's)
-    assert all(r.startswith("checkerboard") for r in m["dropped"].values())
-    assert m["map"]["rms"] < 3.0 * m["baseline"]["rms"]  # measured 1.44 and 1.96
-    assert m["map"]["rms"] < 0.008  # mm on held-out true stripes (measured 0.0025, 0.0047)
+    # every board is found (measured: 16 of 16 views used on seed 1, 15 on seed 0)
+    assert len(m["used"]) >= 15
+    # a dropped view: its stripe crosses no square the homography mapping can use (seed 0,
+    # p000: 8 corners), never a board not found
+    assert all(r.startswith("no calibration points") for r in m["dropped"].values())
+    assert m["map"]["rms"] < 3.0 * m["baseline"]["rms"]  # measured 1.44 and 2.28
+    assert m["map"]["rms"] < 0.008  # mm on held-out true stripes (measured 0.0025, 0.0055)
 
 
 def test_albedo_offset_recovers_an_affine_laser_return():

@@ -2,9 +2,10 @@
 //  - kPaper: the paper's NLSO: one scalar residual ||E_i|| per point, forward-difference
 //    Jacobian, the 14 parameters with ZYZ Euler angles, no bounds, at most 300 x (free parameters)
 //    iterations.
-//  - kModern: the three components of E_i, Jacobian by automatic differentiation, the hand-eye
-//    rotation on SO(3) (unit quaternion manifold; converted back to ZYZ Euler angles), bounds
-//    on the other parameters, any subset held fixed, optional robust loss.
+//  - kModern: the three components of E_i, analytic Jacobian (automatic differentiation when an
+//    Euler angle is held fixed), the hand-eye rotation on SO(3) (unit quaternion manifold;
+//    converted back to ZYZ Euler angles), bounds on the other parameters, any subset held
+//    fixed, optional robust loss.
 #pragma once
 
 #include <Eigen/Core>
