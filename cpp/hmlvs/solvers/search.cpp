@@ -62,6 +62,51 @@ struct Swarm {
   explicit Swarm(int size) : n(size), p(size) {}
 };
 
+// What moving a particle needs besides the particle: the generation's inertia and the options.
+struct Motion {
+  double w, c1, c2;
+  const double *lower, *upper, *vmax, *neg_vmax, *gbest;
+};
+
+// Moves one particle (Eq. 19, 21): velocity towards its own and the swarm's best, limited to
+// +-vmax, then the position, held at a bound with zero velocity where it would leave the box.
+// The random draws come first, in the order r1, r2 of each dimension in turn (the particle's
+// stream); the update is element-wise, so it vectorises without reordering any floating-point
+// operation of an element. On x86-64 an AVX2 clone is chosen at load time when the CPU has it
+// (not FMA, which would fuse the multiply-adds and change the results); both give the same bits.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__AVX2__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void Move(const Motion& m, Particle& p) {
+  double r1[kNumParams], r2[kNumParams];
+  for (int d = 0; d < kNumParams; ++d) {
+    r1[d] = p.rng.Uniform();
+    r2[d] = p.rng.Uniform();
+  }
+  double* x = p.x.data();
+  double* v = p.v.data();
+  const double* pbest = p.pbest.data();
+  const double w = m.w, c1 = m.c1, c2 = m.c2;
+  const double *lower = m.lower, *upper = m.upper, *g = m.gbest;
+#pragma omp simd
+  for (int d = 0; d < kNumParams; ++d) {
+    double vd = w * v[d] + c1 * r1[d] * (pbest[d] - x[d]) + c2 * r2[d] * (g[d] - x[d]);
+    // std::clamp(vd, -vmax, vmax): the same comparisons, as selects (no branches).
+    const double hi = m.vmax[d], lo = m.neg_vmax[d];
+    vd = hi < vd ? hi : vd;
+    vd = vd < lo ? lo : vd;
+    const double xd = x[d] + vd;
+    // Held at a bound, with zero velocity (lower <= upper: at most one of the two holds). The
+    // quiet comparisons answer as < and > do but cannot trap, so both may be evaluated
+    // unconditionally.
+    const bool below = std::isless(xd, lower[d]);
+    const bool above = std::isgreater(xd, upper[d]);
+    const double xb = below ? lower[d] : xd;
+    x[d] = above ? upper[d] : xb;
+    v[d] = (below | above) ? 0.0 : vd;
+  }
+}
+
 class PsoRunner {
  public:
   PsoRunner(const FitnessData& data, const PsoOptions& o) : data_(data), o_(o) {
@@ -98,41 +143,19 @@ class PsoRunner {
   }
 
   void Step(Swarm& s, int t, int first, int last, const Vector14d& gbest) const {
-    const double w = o_.w_max - (o_.w_max - o_.w_min) * t / o_.iterations;  // Eq. 20
-    const double c1 = o_.c1, c2 = o_.c2;
-    const double* lower = o_.lower.data();
-    const double* upper = o_.upper.data();
-    const double* vmax = vmax_.data();
-    const double* neg_vmax = neg_vmax_.data();
-    const double* g = gbest.data();
+    Motion m;
+    m.w = o_.w_max - (o_.w_max - o_.w_min) * t / o_.iterations;  // Eq. 20
+    m.c1 = o_.c1;
+    m.c2 = o_.c2;
+    m.lower = o_.lower.data();
+    m.upper = o_.upper.data();
+    m.vmax = vmax_.data();
+    m.neg_vmax = neg_vmax_.data();
+    m.gbest = gbest.data();
     for (int i = first; i < last; ++i) {
       Particle& p = s.p[i];
-      // r1 and r2 of each dimension in turn, as drawn one by one: r1[0], r2[0], r1[1], ...
-      double r1[kNumParams], r2[kNumParams];
-      p.rng.UniformPairs<kNumParams>(r1, r2);
-      double* x = p.x.data();
-      double* v = p.v.data();
-      const double* pbest = p.pbest.data();
-      // Element-wise, so vectorised without reordering any operation of an element.
-#pragma omp simd
-      for (int d = 0; d < kNumParams; ++d) {
-        double vd =
-            w * v[d] + c1 * r1[d] * (pbest[d] - x[d]) + c2 * r2[d] * (g[d] - x[d]);  // Eq. 19
-        // std::clamp(vd, -vmax, vmax): the same comparisons, as selects (no branches).
-        const double hi = vmax[d], lo = neg_vmax[d];
-        vd = hi < vd ? hi : vd;
-        vd = vd < lo ? lo : vd;
-        const double xd = x[d] + vd;  // Eq. 21
-        // Held at a bound, with zero velocity (lower <= upper: at most one of the two holds).
-        // The quiet comparisons answer as < and > do but cannot trap, so both may be evaluated
-        // unconditionally.
-        const bool below = std::isless(xd, lower[d]);
-        const bool above = std::isgreater(xd, upper[d]);
-        const double xb = below ? lower[d] : xd;
-        x[d] = above ? upper[d] : xb;
-        v[d] = (below | above) ? 0.0 : vd;
-      }
-      p.fit = data_.Evaluate(x);
+      Move(m, p);
+      p.fit = data_.Evaluate(p.x.data());
       if (p.fit < p.pbest_fit) {
         p.pbest_fit = p.fit;
         p.pbest = p.x;
