@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <random>
 #include <stdexcept>
@@ -67,6 +68,74 @@ TEST(Solvers, PsoSameSeedSameResultForAnyThreadCount) {
   o.seed = 12;
   EXPECT_FALSE(
       BitIdentical(RunPso(data, o).runs[0].best, RunPso(data, SmallPso(1, 2)).runs[0].best));
+}
+
+// Frozen reference: the results below were printed by the PSO as it stood before its swarm
+// update was rewritten for speed (batched random draws, branch-free clamping), and are kept so
+// that any later change to the PSO must reproduce its trajectory to the last bit (the same
+// random stream, the same floating-point operations per element). They depend on the fitness
+// kernel's vector width and on libm, so they are checked only where they were recorded: GCC on
+// x86-64 without -march flags (the kernel's AVX2 clone), on a CPU with AVX2.
+TEST(Solvers, PsoMatchesFrozenReference) {
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__AVX2__) && \
+    !defined(__FMA__)
+  if (!__builtin_cpu_supports("avx2")) GTEST_SKIP() << "reference recorded with AVX2";
+#else
+  GTEST_SKIP() << "reference recorded with GCC on x86-64 without -march flags";
+#endif
+  const test::Scene s = MakeScene(Generic(), 50, 1);
+  const FitnessData data(s.pixels, s.poses, s.points);
+  struct Case {
+    int variant;  // 0: Table 2 bounds; 1: k and Su fixed, initial box around the nominal vector
+    std::uint64_t seed;
+    int runs;
+    int run;                      // the run whose best vector is frozen
+    std::vector<double> fitness;  // best fitness of every run
+    Vector14d best;
+  };
+  std::vector<Case> cases(2);
+  cases[0] = {0, 11, 1, 0, {0x1.8dc165289fe04p+5}, Vector14d::Zero()};
+  cases[0].best << 0x1.078250352304cp+3, 0x1.e84d4b3d86fdfp-8, 0x1.cd8ee4af6388ep-8,
+      0x1.41a52cfaa8544p+8, 0x1.e8f2e8d7746cep+7, 0x1.403bf9da95bb2p-7, 0x1.0cca1258d8bdp+7,
+      0x1.a8b3e9d9b68d3p-2, -0x1.29539cd8134c3p-5, 0x1.9e664b13b1622p-4, 0x1.cc9ff0e2cade6p-5,
+      0x1.dad5dabcc380ap+5, 0x1.50ae90bb8f259p+2, -0x1.a3e5a0489d605p+5;
+  cases[1] = {1,
+              12345,
+              3,
+              2,
+              {0x1.6c1c9e1ccd921p+6, 0x1.9e2d624f9fa7dp+6, 0x1.7e268cd533982p+6},
+              Vector14d::Zero()};
+  cases[1].best << 0x1.05943898950d3p+3, 0x1.e4f765fd8adacp-8, 0x1.e640b3ce2d2adp-8,
+      0x1.3862491fe00cdp+8, 0x1.e00f0417798c4p+7, 0x0p+0, 0x1.133f72eccf5c6p+7,
+      0x1.bfa3d93d44171p-2, 0x1.05afd43ed8fd8p-4, 0x1.7e77010adadb3p-4, -0x1.68d09ab3231f8p-5,
+      0x1.e50790a521ff6p+5, 0x1.c9fc0f3dfde0bp+0, -0x1.3bd5f70cd750ep+5;
+  for (const Case& c : cases) {
+    for (int threads : {1, 2}) {
+      PsoOptions o;
+      test::Table2Bounds(&o.lower, &o.upper);
+      o.swarm_size = 20;
+      o.iterations = 300;
+      o.runs = c.runs;
+      o.threads = threads;
+      o.seed = c.seed;
+      if (c.variant == 1) {
+        o.lower[kK] = o.upper[kK] = 0.0;
+        o.lower[kSu] = o.upper[kSu] = 0.0074;
+        const Vector14d nominal = test::Nominal();
+        o.init_lower = nominal.array() - 0.01 * nominal.array().abs() - 1e-3;
+        o.init_upper = nominal.array() + 0.01 * nominal.array().abs() + 1e-3;
+      }
+      const PsoResult result = RunPso(data, o);
+      ASSERT_EQ(static_cast<int>(result.runs.size()), c.runs);
+      for (int r = 0; r < c.runs; ++r) {
+        EXPECT_EQ(result.runs[r].iterations, 300);
+        EXPECT_EQ(result.runs[r].best_fitness, c.fitness[r])
+            << "seed " << c.seed << ", threads " << threads << ", run " << r;
+      }
+      EXPECT_TRUE(BitIdentical(result.runs[c.run].best, c.best))
+          << "seed " << c.seed << ", threads " << threads;
+    }
+  }
 }
 
 TEST(Solvers, RandomSearchSameSeedSameResultForAnyThreadCount) {

@@ -34,32 +34,85 @@ void CheckBounds(const Vector14d& lower, const Vector14d& upper, const char* wha
   }
 }
 
-// The best personal best among one team member's particles after a generation.
-struct MemberBest {
+// The best personal best among one team member's particles after a generation. Cache-line
+// aligned: each member writes its own entry every generation.
+struct alignas(64) MemberBest {
   double fit = std::numeric_limits<double>::infinity();
   Vector14d best = Vector14d::Zero();
   bool stop = false;  // member 0: cancellation requested before this generation
 };
 
-// One swarm: positions, velocities and personal bests of all particles.
+// One particle: position, velocity, personal best and random stream. Cache-line aligned, so
+// that team members updating neighbouring particles never write to the same line.
+struct alignas(64) Particle {
+  Vector14d x, v, pbest;
+  double fit = 0.0, pbest_fit = 0.0;
+  Rng rng{0};
+};
+
+// One swarm: its particles and the global best.
 struct Swarm {
   int n;
-  std::vector<Vector14d> x, v, pbest;
-  std::vector<double> fit, pbest_fit;
-  std::vector<Rng> rng;
+  std::vector<Particle> p;
   Vector14d gbest;
   double gbest_fit = std::numeric_limits<double>::infinity();
   // Per team member, double-buffered by generation parity: a member may write generation
   // t + 1's entry while the others still read generation t's.
   std::array<std::vector<MemberBest>, 2> member_best;
-  explicit Swarm(int size) : n(size), x(size), v(size), pbest(size), fit(size), pbest_fit(size) {}
+  explicit Swarm(int size) : n(size), p(size) {}
 };
+
+// What moving a particle needs besides the particle: the generation's inertia and the options.
+struct Motion {
+  double w, c1, c2;
+  const double *lower, *upper, *vmax, *neg_vmax, *gbest;
+};
+
+// Moves one particle (Eq. 19, 21): velocity towards its own and the swarm's best, limited to
+// +-vmax, then the position, held at a bound with zero velocity where it would leave the box.
+// The random draws come first, in the order r1, r2 of each dimension in turn (the particle's
+// stream); the update is element-wise, so it vectorises without reordering any floating-point
+// operation of an element. On x86-64 an AVX2 clone is chosen at load time when the CPU has it
+// (not FMA, which would fuse the multiply-adds and change the results); both give the same bits.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__AVX2__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void Move(const Motion& m, Particle& p) {
+  double r1[kNumParams], r2[kNumParams];
+  for (int d = 0; d < kNumParams; ++d) {
+    r1[d] = p.rng.Uniform();
+    r2[d] = p.rng.Uniform();
+  }
+  double* x = p.x.data();
+  double* v = p.v.data();
+  const double* pbest = p.pbest.data();
+  const double w = m.w, c1 = m.c1, c2 = m.c2;
+  const double *lower = m.lower, *upper = m.upper, *g = m.gbest;
+#pragma omp simd
+  for (int d = 0; d < kNumParams; ++d) {
+    double vd = w * v[d] + c1 * r1[d] * (pbest[d] - x[d]) + c2 * r2[d] * (g[d] - x[d]);
+    // std::clamp(vd, -vmax, vmax): the same comparisons, as selects (no branches).
+    const double hi = m.vmax[d], lo = m.neg_vmax[d];
+    vd = hi < vd ? hi : vd;
+    vd = vd < lo ? lo : vd;
+    const double xd = x[d] + vd;
+    // Held at a bound, with zero velocity (lower <= upper: at most one of the two holds). The
+    // quiet comparisons answer as < and > do but cannot trap, so both may be evaluated
+    // unconditionally.
+    const bool below = std::isless(xd, lower[d]);
+    const bool above = std::isgreater(xd, upper[d]);
+    const double xb = below ? lower[d] : xd;
+    x[d] = above ? upper[d] : xb;
+    v[d] = (below | above) ? 0.0 : vd;
+  }
+}
 
 class PsoRunner {
  public:
   PsoRunner(const FitnessData& data, const PsoOptions& o) : data_(data), o_(o) {
     range_ = o.upper - o.lower;
     vmax_ = o.vmax * range_;
+    neg_vmax_ = -vmax_;
     init_lo_ = o.lower;
     init_hi_ = o.upper;
     if ((o.init_lower.array() <= o.init_upper.array()).all()) {
@@ -76,45 +129,36 @@ class PsoRunner {
 
   void Init(Swarm& s, int run, int first, int last) const {
     for (int i = first; i < last; ++i) {
-      s.rng[i] =
+      Particle& p = s.p[i];
+      p.rng =
           Rng(StreamKey(o_.seed, static_cast<std::uint64_t>(run), static_cast<std::uint64_t>(i)));
-      Rng& r = s.rng[i];
       for (int d = 0; d < kNumParams; ++d) {
-        s.x[i][d] = init_lo_[d] + r.Uniform() * (init_hi_[d] - init_lo_[d]);
-        s.v[i][d] = (2.0 * r.Uniform() - 1.0) * vmax_[d];
+        p.x[d] = init_lo_[d] + p.rng.Uniform() * (init_hi_[d] - init_lo_[d]);
+        p.v[d] = (2.0 * p.rng.Uniform() - 1.0) * vmax_[d];
       }
-      s.fit[i] = data_.Evaluate(s.x[i].data());
-      s.pbest[i] = s.x[i];
-      s.pbest_fit[i] = s.fit[i];
+      p.fit = data_.Evaluate(p.x.data());
+      p.pbest = p.x;
+      p.pbest_fit = p.fit;
     }
   }
 
   void Step(Swarm& s, int t, int first, int last, const Vector14d& gbest) const {
-    const double w = o_.w_max - (o_.w_max - o_.w_min) * t / o_.iterations;  // Eq. 20
+    Motion m;
+    m.w = o_.w_max - (o_.w_max - o_.w_min) * t / o_.iterations;  // Eq. 20
+    m.c1 = o_.c1;
+    m.c2 = o_.c2;
+    m.lower = o_.lower.data();
+    m.upper = o_.upper.data();
+    m.vmax = vmax_.data();
+    m.neg_vmax = neg_vmax_.data();
+    m.gbest = gbest.data();
     for (int i = first; i < last; ++i) {
-      Rng& r = s.rng[i];
-      Vector14d& x = s.x[i];
-      Vector14d& v = s.v[i];
-      for (int d = 0; d < kNumParams; ++d) {
-        const double r1 = r.Uniform(), r2 = r.Uniform();
-        double vd = w * v[d] + o_.c1 * r1 * (s.pbest[i][d] - x[d]) +
-                    o_.c2 * r2 * (gbest[d] - x[d]);  // Eq. 19
-        vd = std::clamp(vd, -vmax_[d], vmax_[d]);
-        double xd = x[d] + vd;  // Eq. 21
-        if (xd < o_.lower[d]) {
-          xd = o_.lower[d];
-          vd = 0.0;
-        } else if (xd > o_.upper[d]) {
-          xd = o_.upper[d];
-          vd = 0.0;
-        }
-        x[d] = xd;
-        v[d] = vd;
-      }
-      s.fit[i] = data_.Evaluate(x.data());
-      if (s.fit[i] < s.pbest_fit[i]) {
-        s.pbest_fit[i] = s.fit[i];
-        s.pbest[i] = x;
+      Particle& p = s.p[i];
+      Move(m, p);
+      p.fit = data_.Evaluate(p.x.data());
+      if (p.fit < p.pbest_fit) {
+        p.pbest_fit = p.fit;
+        p.pbest = p.x;
       }
     }
   }
@@ -122,9 +166,9 @@ class PsoRunner {
   // Global best over personal bests in particle order (ties: lowest index): deterministic.
   static void UpdateGlobal(Swarm& s) {
     for (int i = 0; i < s.n; ++i) {
-      if (s.pbest_fit[i] < s.gbest_fit) {
-        s.gbest_fit = s.pbest_fit[i];
-        s.gbest = s.pbest[i];
+      if (s.p[i].pbest_fit < s.gbest_fit) {
+        s.gbest_fit = s.p[i].pbest_fit;
+        s.gbest = s.p[i].pbest;
       }
     }
   }
@@ -169,12 +213,12 @@ class PsoRunner {
         mine.fit = std::numeric_limits<double>::infinity();
         int best = -1;
         for (int i = first; i < last; ++i) {
-          if (s.pbest_fit[i] < mine.fit) {
-            mine.fit = s.pbest_fit[i];
+          if (s.p[i].pbest_fit < mine.fit) {
+            mine.fit = s.p[i].pbest_fit;
             best = i;
           }
         }
-        if (best >= 0) mine.best = s.pbest[best];
+        if (best >= 0) mine.best = s.p[best].pbest;
         mine.stop = stop;
         barrier->Wait();
         const std::vector<MemberBest>& all = s.member_best[t & 1];
@@ -211,7 +255,7 @@ class PsoRunner {
  private:
   const FitnessData& data_;
   const PsoOptions& o_;
-  Vector14d range_, vmax_, init_lo_, init_hi_;
+  Vector14d range_, vmax_, neg_vmax_, init_lo_, init_hi_;
 };
 
 }  // namespace
@@ -231,7 +275,6 @@ PsoResult RunPso(const FitnessData& data, const PsoOptions& o, const ProgressCal
   result.runs.resize(o.runs);
   for (int r = 0; r < o.runs; ++r) {
     runner.swarms_.push_back(std::make_unique<Swarm>(o.swarm_size));
-    runner.swarms_.back()->rng.assign(o.swarm_size, Rng(0));
     for (auto& buffer : runner.swarms_.back()->member_best) buffer.assign(threads, MemberBest());
     result.runs[r].history.reserve(o.iterations);
   }
