@@ -78,14 +78,17 @@ def number_partial_views(full: Sequence[ViewData], partial: Sequence[PartialView
             "from at least 3 views of the whole board")
     if not partial:
         return out, reasons
+    def unnumbered(why: str) -> list[str]:
+        # a view in which no grid was found says so first: it was not only left unnumbered
+        return [f"{p.reason}; {why}" if p.grid is None and p.reason else why for p in partial]
+
     if len(full) < 3 or any(v.base_from_hand is None for v in full):
-        why = (f"{need}; the session has {len(full)}" if len(full) < 3
-               else f"{need}, all with robot poses")
-        return out, [why] * len(partial)
+        return out, unnumbered(f"{need}; the session has {len(full)}" if len(full) < 3
+                               else f"{need}, all with robot poses")
     try:
         first = calibrate_joint(list(full), board, image_size, base_from_board=base_from_board)
     except ValueError as e:
-        return out, [f"{need}; that calibration failed: {e}"] * len(partial)
+        return out, unnumbered(f"{need}; that calibration failed: {e}")
     for k, p in enumerate(partial):
         if p.base_from_hand is None:
             reasons[k] = "a partly visible board needs the view's robot pose to be numbered"
