@@ -588,12 +588,38 @@ template <typename T>
 double EstimateDifferenceNoise(const ImageView<T>& image, int row_step) {
   RequireImage(image, "the image");
   row_step = std::max(1, row_step);
-  std::vector<std::uint64_t> hist(static_cast<size_t>(std::numeric_limits<T>::max()) + 1, 0);
-  std::uint64_t n = 0;
+  const size_t bins = static_cast<size_t>(std::numeric_limits<T>::max()) + 1;
+  // four interleaved histograms: a background of a few grey levels increments the same bins
+  // over and over, and one histogram would wait on each increment's store
+  std::vector<std::uint32_t> part(4 * bins, 0);
+  std::vector<std::uint64_t> hist(bins, 0);
+  std::uint64_t n = 0, since = 0;
+  std::uint32_t* h0 = part.data();
+  std::uint32_t* h1 = h0 + bins;
+  std::uint32_t* h2 = h1 + bins;
+  std::uint32_t* h3 = h2 + bins;
   for (int r = 0; r < image.rows; r += row_step) {
-    for (int c = 0; c < image.cols; ++c) ++hist[image(r, c)];
-    n += image.cols;
+    const T* a = image.data + r * image.row_stride;
+    const std::ptrdiff_t cs = image.col_stride;
+    int c = 0;
+    for (; c + 4 <= image.cols; c += 4) {
+      ++h0[a[c * cs]];
+      ++h1[a[(c + 1) * cs]];
+      ++h2[a[(c + 2) * cs]];
+      ++h3[a[(c + 3) * cs]];
+    }
+    for (; c < image.cols; ++c) ++h0[a[c * cs]];
+    n += static_cast<std::uint64_t>(image.cols);
+    since += static_cast<std::uint64_t>(image.cols);
+    if (since >= (std::uint64_t{1} << 31)) {  // before a 32-bit count could overflow
+      for (size_t i = 0; i < bins; ++i) {
+        hist[i] += std::uint64_t{h0[i]} + h1[i] + h2[i] + h3[i];
+        h0[i] = h1[i] = h2[i] = h3[i] = 0;
+      }
+      since = 0;
+    }
   }
+  for (size_t i = 0; i < bins; ++i) hist[i] += std::uint64_t{h0[i]} + h1[i] + h2[i] + h3[i];
   // first guess: for X ~ N(0, s^2), P(max(0, X) <= s) = 0.8413
   const double target = 0.8413 * static_cast<double>(n);
   std::uint64_t cum = 0;
