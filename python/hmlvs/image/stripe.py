@@ -201,10 +201,11 @@ def _level_at(off: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     The 15 x 15 pixel window of ``off`` around each (m[c], c) (mirrored at the image border
     as GaussianBlur's BORDER_REFLECT_101) holds every pixel the 9-tap kernel reads for the
     central 7 x 7: the windows side by side make one 15-row image for GaussianBlur, whose
-    value at a pixel depends only on its neighbours, except in OpenCV's scalar loop over the
-    last (width mod 8) columns of an image, which rounds differently from its vector loop:
-    windows reaching those columns are taken from a blur of the image's last 24..87 columns,
-    started at a multiple of 64 so that the same columns fall in its scalar loop.
+    value at a pixel depends only on its neighbours, except in OpenCV's scalar loop over an
+    image's last (width mod vector width, 8 here) columns, which rounds differently from its
+    vector loop: windows reaching those columns are taken from a blur of the image's last
+    24..87 columns, started at a multiple of 64 so that the same columns fall in its scalar
+    loop. (That these are OpenCV's values to the bit is a test, run on this OpenCV build.)
     """
     import cv2
     from numpy.lib.stride_tricks import sliding_window_view
