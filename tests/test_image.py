@@ -89,6 +89,81 @@ def test_difference_image_is_eq23(rng, dtype):
     assert np.abs(dn - dr).max() <= 1 and np.count_nonzero(dn != dr) <= 2
 
 
+def _normalised_numpy(on, off, offset, scale=None, floor=None):
+    """The albedo-offset normalisation as a NumPy expression: the independent reference."""
+    fb = off.astype(np.float64)
+    mean = float(fb.mean())
+    s = mean + offset if scale is None else scale
+    fl = max(1.0, 0.1 * mean) if floor is None else floor
+    d = np.maximum(on.astype(np.float64) - fb, 0.0) * s / np.maximum(fb + offset, fl)
+    return np.clip(np.rint(d), 0, np.iinfo(on.dtype).max).astype(on.dtype)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_difference_image_offset_is_the_numpy_formula(rng, dtype):
+    """With an albedo offset the normalisation runs in C++, in double precision, rounded
+    half to even: the NumPy expression's value to the bit, whatever the offset's sign, with
+    scale and floor automatic or given, on strided views too."""
+    top = np.iinfo(dtype).max
+    for shape in ((37, 53), (240, 320)):
+        on = rng.integers(0, top, shape, endpoint=True).astype(dtype)
+        off = rng.integers(0, top, shape, endpoint=True).astype(dtype)
+        off[:, : shape[1] // 3] //= 50  # dark pixels: the floor acts
+        for offset in (-40.5, -3.7, 0.3, 2.5, 37.25, 1e4):
+            for scale, floor in ((None, None), (123.4, None), (None, 7.5), (3e3, 2.0)):
+                got = hmlvs.difference_image(on, off, normalize=True, scale=scale,
+                                             floor=floor, offset=offset)
+                assert got.dtype == dtype
+                np.testing.assert_array_equal(
+                    got, _normalised_numpy(on, off, offset, scale, floor))
+        np.testing.assert_array_equal(
+            hmlvs.difference_image(on.T, off.T, normalize=True, offset=5.5),
+            _normalised_numpy(on.T, off.T, 5.5))
+    # exact half-integers round to even: (on - off) x 1 / (1 + 1) = 0.5, 1.5, 2.5, 3.5, 4.5
+    off = np.ones((1, 5), dtype)
+    on = (off + np.array([1, 3, 5, 7, 9])).astype(dtype)
+    np.testing.assert_array_equal(
+        hmlvs.difference_image(on, off, normalize=True, scale=1.0, offset=1.0), [[0, 2, 2, 4, 4]])
+
+
+def test_albedo_offset_local_filters_are_the_whole_image_ones(rng):
+    """albedo_offset reads, per column, the peak of the 5-px box-filtered difference and the
+    Gaussian-smoothed laser-off level and its 7 x 7 min / max at that peak: computed on a
+    window around the peak, they equal OpenCV's filters of the whole image to the bit
+    (image borders, widths that are not a multiple of 8, 8- and 16-bit, small images)."""
+    from hmlvs import _core
+    from hmlvs.image.stripe import _level_at
+
+    box = np.ones((7, 7), np.uint8)
+    for h, w, dtype in ((480, 640, np.uint8), (97, 203, np.uint16), (150, 1001, np.uint8),
+                        (16, 130, np.uint16), (40, 77, np.uint8), (9, 12, np.uint8),
+                        (3, 2, np.uint16), (300, 129, np.uint8)):
+        top = np.iinfo(dtype).max
+        diff = rng.integers(0, top // 5, (h, w), endpoint=True).astype(dtype)
+        diff[rng.integers(0, h, 3)] = 0  # ties: the first row wins
+        # squares of 11 x 13 px at random levels with noise: flat windows and edges
+        sq = rng.uniform(0.02, 0.9, (h // 11 + 1, w // 13 + 1)) * top
+        off = np.kron(sq, np.ones((11, 13)))[:h, :w] + rng.normal(0, 0.01 * top, (h, w))
+        off = np.clip(np.rint(off), 0, top).astype(dtype)
+        sm = cv2.blur(diff.astype(np.float32), (5, 1))
+        cols = np.arange(w)
+        m, total = _core._column_peaks(diff, 2)
+        np.testing.assert_array_equal(m, np.argmax(sm, axis=0))
+        np.testing.assert_array_equal((np.asarray(total) * 0.2).astype(np.float32),
+                                      sm[m, cols])
+        m = rng.integers(0, h, w)
+        m[:3], m[-3:] = 0, h - 1  # corners
+        if w >= 8:
+            m[w // 2:w // 2 + 3] = (1, 2, h - 2) if h >= 3 else 1
+        offs = cv2.GaussianBlur(off.astype(np.float32), (0, 0), 1.0)
+        flat = cv2.dilate(offs, box) <= 1.2 * np.maximum(cv2.erode(offs, box), 1.0)
+        level, ok = _level_at(off, m)
+        assert level.dtype == np.float32
+        np.testing.assert_array_equal(level, offs[m, cols])
+        np.testing.assert_array_equal(ok, flat[m, cols])
+        assert h < 15 or 0 < np.count_nonzero(ok) < w  # both cases tested
+
+
 def test_difference_image_colour(rng):
     on = rng.integers(0, 256, (20, 30, 3)).astype(np.uint8)
     off = rng.integers(0, 256, (20, 30, 3)).astype(np.uint8)

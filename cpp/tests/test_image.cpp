@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <random>
 #include <stdexcept>
 #include <vector>
@@ -95,6 +96,79 @@ TEST(Stripe, AssessStripeStatuses) {
   EXPECT_THROW(AssessStripe(d.View(), small.View(), off.View(), StripeDirection::kColumns,
                             StripeQualityOptions(), &res),
                std::invalid_argument);
+}
+
+template <typename T>
+void CheckOffsetNormalisation(std::mt19937* gen) {
+  const int rows = 31, cols = 45;
+  const int top = std::numeric_limits<T>::max();
+  std::uniform_int_distribution<int> pix(0, top);
+  std::vector<T> on(static_cast<size_t>(rows) * cols), off(on.size()), out(on.size());
+  double sum = 0.0;
+  for (size_t i = 0; i < on.size(); ++i) {
+    on[i] = static_cast<T>(pix(*gen));
+    off[i] = static_cast<T>(i % 3 == 0 ? pix(*gen) / 40 : pix(*gen));  // the floor acts
+    sum += off[i];
+  }
+  const ImageView<T> a{on.data(), rows, cols, cols, 1}, b{off.data(), rows, cols, cols, 1};
+  const double mean = sum / static_cast<double>(on.size());
+  for (const double offset : {-25.5, -2.0, 0.7, 19.25, 3000.0}) {
+    DifferenceOptions o;
+    o.normalize = true;
+    o.offset = offset;
+    DifferenceImage(a, b, out.data(), o);
+    const double scale = mean + offset, floor = std::max(1.0, 0.1 * mean);
+    for (size_t i = 0; i < on.size(); ++i) {
+      const double x = on[i], y = off[i];
+      const double d = std::max(x - y, 0.0) * scale / std::max(y + offset, floor);
+      const double want = std::clamp(std::nearbyint(d), 0.0, static_cast<double>(top));
+      ASSERT_EQ(out[i], static_cast<T>(want)) << "offset " << offset << " pixel " << i;
+    }
+  }
+}
+
+TEST(Difference, OffsetNormalisationInDoubleRoundedHalfToEven) {
+  std::mt19937 gen(7);
+  CheckOffsetNormalisation<std::uint8_t>(&gen);
+  CheckOffsetNormalisation<std::uint16_t>(&gen);
+  // (on - off) x 1 / (off + 1) = 0.5, 1.5, 2.5, 3.5, 4.5 round to even; 300 clips at 255
+  const std::vector<std::uint8_t> off(6, 1), on = {2, 4, 6, 8, 10, 255};
+  std::vector<std::uint8_t> out(6);
+  DifferenceOptions o;
+  o.normalize = true;
+  o.scale = 1.0;
+  o.offset = 1.0;
+  DifferenceImage<std::uint8_t>({on.data(), 1, 6, 6, 1}, {off.data(), 1, 6, 6, 1}, out.data(), o);
+  EXPECT_EQ(out, (std::vector<std::uint8_t>{0, 2, 2, 4, 4, 127}));
+  o.scale = 3.0;
+  DifferenceImage<std::uint8_t>({on.data(), 1, 6, 6, 1}, {off.data(), 1, 6, 6, 1}, out.data(), o);
+  EXPECT_EQ(out[5], 255);  // 381 clipped
+  o.offset = std::numeric_limits<double>::infinity();
+  EXPECT_THROW(DifferenceImage<std::uint8_t>({on.data(), 1, 6, 6, 1}, {off.data(), 1, 6, 6, 1},
+                                             out.data(), o),
+               std::invalid_argument);
+}
+
+TEST(Difference, ColumnPeaksOfTheBoxSum) {
+  // 4 x 6 image; the box sum over columns c - 1 .. c + 1 mirrors at the borders (column -1
+  // reads column 1, column 6 reads column 4)
+  const std::vector<std::uint16_t> im = {
+      0, 9, 0, 0, 0, 0,  //
+      5, 0, 0, 0, 0, 7,  //
+      0, 0, 3, 3, 0, 0,  //
+      0, 0, 0, 0, 4, 0,  //
+  };
+  const ColumnPeaks p = FindColumnPeaks<std::uint16_t>({im.data(), 4, 6, 6, 1}, 1);
+  // column sums per row: row 0: 18 9 9 0 0 0; row 1: 5 5 0 0 7 7; row 2: 0 3 6 6 3 0;
+  // row 3: 0 0 0 4 4 8
+  EXPECT_EQ(p.row, (Eigen::VectorXi(6) << 0, 0, 0, 2, 1, 3).finished());
+  EXPECT_EQ(p.sum, (Eigen::VectorXd(6) << 18, 9, 9, 6, 7, 8).finished());
+  // ties keep the first row; an all-zero column gives row 0
+  const std::vector<std::uint8_t> flat = {0, 2, 0, 2, 0, 2};
+  const ColumnPeaks q = FindColumnPeaks<std::uint8_t>({flat.data(), 3, 2, 2, 1}, 0);
+  EXPECT_EQ(q.row, (Eigen::VectorXi(2) << 0, 0).finished());
+  EXPECT_EQ(q.sum, (Eigen::VectorXd(2) << 0, 2).finished());
+  EXPECT_THROW(FindColumnPeaks<std::uint8_t>({flat.data(), 3, 2, 2, 1}, -1), std::invalid_argument);
 }
 
 }  // namespace

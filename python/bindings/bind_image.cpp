@@ -104,12 +104,13 @@ void BindImage(py::module_& m) {
 
   m.def(
       "_difference_image",
-      [](const py::array& on, const py::array& off, bool normalize, double scale,
-         double floor) -> py::array {
+      [](const py::array& on, const py::array& off, bool normalize, double scale, double floor,
+         double offset) -> py::array {
         DifferenceOptions o;
         o.normalize = normalize;
         o.scale = scale;
         o.floor = floor;
+        o.offset = offset;
         const Depth d = DepthOf(on, "the laser-on image");
         if (DepthOf(off, "the laser-off image") != d) {
           throw std::invalid_argument(
@@ -120,7 +121,23 @@ void BindImage(py::module_& m) {
                                : Difference<std::uint16_t>(on, off, o);
       },
       py::arg("on"), py::arg("off"), py::arg("normalize") = false, py::arg("scale") = -1.0,
-      py::arg("floor") = -1.0);
+      py::arg("floor") = -1.0, py::arg("offset") = 0.0);
+  m.def(
+      "_column_peaks",
+      [](const py::array& image, int half_width) {
+        ColumnPeaks p;
+        if (DepthOf(image, "the image") == Depth::kU8) {
+          const auto v = ViewOf<std::uint8_t>(image, "the image");
+          py::gil_scoped_release release;
+          p = FindColumnPeaks(v, half_width);
+        } else {
+          const auto v = ViewOf<std::uint16_t>(image, "the image");
+          py::gil_scoped_release release;
+          p = FindColumnPeaks(v, half_width);
+        }
+        return py::make_tuple(p.row, p.sum);
+      },
+      py::arg("image"), py::arg("half_width"));
   m.def(
       "_extract_stripe",
       [](const py::array& image, const StripeOptions& options) {

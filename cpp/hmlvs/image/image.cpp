@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
+#include <string>
 #include <type_traits>
 #include <vector>
 
@@ -406,6 +408,11 @@ void DifferenceImage(const ImageView<T>& on, const ImageView<T>& off, T* out,
         << o.scale << " and floor " << o.floor;
     throw std::invalid_argument(msg.str());
   }
+  if (!std::isfinite(o.offset)) {
+    std::ostringstream msg;
+    msg << "the normalisation offset must be a finite number, got " << o.offset;
+    throw std::invalid_argument(msg.str());
+  }
   // Loop bounds and strides in locals: writes through a uint8_t pointer may alias anything,
   // so struct members read in the loop would be reloaded every pixel and block vectorising.
   const int rows = on.rows, cols = on.cols;
@@ -437,8 +444,52 @@ void DifferenceImage(const ImageView<T>& on, const ImageView<T>& off, T* out,
     sum += row;
   }
   const double mean = static_cast<double>(sum) / (static_cast<double>(rows) * cols);
-  const double scale = o.scale > 0.0 ? o.scale : mean;
   const double floor = o.floor > 0.0 ? o.floor : std::max(1.0, 0.1 * mean);
+  if (o.offset != 0.0) {
+    // Double precision, one pass, the operations in NumPy's order (so the result is the
+    // same to the bit): d = max(x - y, 0) * s / max(y + offset, floor), clipped to the
+    // pixel range, then rounded half to even by adding and subtracting 2^52 (exact for
+    // 0 <= d < 2^51 under the default rounding mode; clipping before rounding gives
+    // NumPy's rint-then-clip, the bounds being integers).
+    const double s = o.scale > 0.0 ? o.scale : mean + o.offset;
+    const double offset = o.offset;
+    const double top = static_cast<double>(std::numeric_limits<T>::max());
+    constexpr double kRound = 0x1p52;
+    auto value = [s, offset, floor, top](T on_value, T off_value) {
+      const double x = on_value, y = off_value;
+      const double d = std::max(x - y, 0.0) * s / std::max(y + offset, floor);
+      return static_cast<T>(static_cast<int>((std::min(std::max(d, 0.0), top) + kRound) - kRound));
+    };
+    if constexpr (sizeof(T) == 1) {
+      // 8-bit: the value of every (laser-off, laser-on) pair once (a loop that vectorises,
+      // see cpp/CMakeLists.txt), then one table look-up per pixel
+      std::vector<T> table(256 * 256);
+      for (int y = 0; y < 256; ++y) {
+        T* row = table.data() + y * 256;
+        for (int x = 0; x < 256; ++x) row[x] = value(static_cast<T>(x), static_cast<T>(y));
+      }
+      const T* t = table.data();
+      for (int r = 0; r < rows; ++r) {
+        const T* a = on.data + r * on_rs;
+        const T* b = off.data + r * off_rs;
+        T* dst = out + static_cast<std::ptrdiff_t>(r) * cols;
+        for (int c = 0; c < cols; ++c) dst[c] = t[(b[c * off_cs] << 8) | a[c * on_cs]];
+      }
+    } else {
+      for (int r = 0; r < rows; ++r) {
+        const T* a = on.data + r * on_rs;
+        const T* b = off.data + r * off_rs;
+        T* dst = out + static_cast<std::ptrdiff_t>(r) * cols;
+        if (contiguous) {  // unit strides: the loop vectorises (see cpp/CMakeLists.txt)
+          for (int c = 0; c < cols; ++c) dst[c] = value(a[c], b[c]);
+        } else {
+          for (int c = 0; c < cols; ++c) dst[c] = value(a[c * on_cs], b[c * off_cs]);
+        }
+      }
+    }
+    return;
+  }
+  const double scale = o.scale > 0.0 ? o.scale : mean;
   // Single precision for 8-bit images (exact enough: values below 2^12, and ~10x faster
   // here than double), double for 16-bit.
   using Acc = std::conditional_t<sizeof(T) == 1, float, double>;
@@ -463,16 +514,112 @@ void DifferenceImage(const ImageView<T>& on, const ImageView<T>& off, T* out,
   }
 }
 
+namespace {
+
+// FindColumnPeaks' row loop with sums of type Acc (wide enough for k pixels of type T).
+template <typename Acc, typename T>
+void ColumnPeakRows(const ImageView<T>& image, int h, const std::vector<int>& src,
+                    std::vector<int>* arg, std::vector<double>* best_sum) {
+  const int rows = image.rows, cols = image.cols, k = 2 * h + 1;
+  const int n = cols + k - 1;
+  std::vector<Acc> padded(static_cast<size_t>(n)), sum(static_cast<size_t>(cols));
+  std::vector<Acc> best(static_cast<size_t>(cols), 0);
+  const std::ptrdiff_t rs = image.row_stride, cs = image.col_stride;
+  Acc* pad = padded.data();
+  Acc* sm = sum.data();
+  Acc* bst = best.data();
+  int* ag = arg->data();
+  for (int r = 0; r < rows; ++r) {
+    const T* a = image.data + r * rs;
+    for (int i = 0; i < h && i < n; ++i) pad[i] = a[src[static_cast<size_t>(i)] * cs];
+    if (cs == 1) {
+      for (int c = 0; c < cols; ++c) pad[h + c] = a[c];
+    } else {
+      for (int c = 0; c < cols; ++c) pad[h + c] = a[c * cs];
+    }
+    for (int i = h + cols; i < n; ++i) pad[i] = a[src[static_cast<size_t>(i)] * cs];
+    for (int c = 0; c < cols; ++c) sm[c] = pad[c];
+    for (int j = 1; j < k; ++j) {
+      for (int c = 0; c < cols; ++c) sm[c] = static_cast<Acc>(sm[c] + pad[c + j]);
+    }
+    // strictly greater: a tie keeps the first row (np.argmax); an all-zero column row 0
+    for (int c = 0; c < cols; ++c) {
+      const bool gt = sm[c] > bst[c];
+      bst[c] = gt ? sm[c] : bst[c];
+      ag[c] = gt ? r : ag[c];
+    }
+  }
+  for (int c = 0; c < cols; ++c) (*best_sum)[static_cast<size_t>(c)] = bst[c];
+}
+
+}  // namespace
+
+template <typename T>
+ColumnPeaks FindColumnPeaks(const ImageView<T>& image, int half_width) {
+  RequireImage(image, "the image");
+  if (half_width < 0 || half_width > 1000) {
+    throw std::invalid_argument("half_width must lie in 0..1000, got " +
+                                std::to_string(half_width));
+  }
+  const int cols = image.cols, h = half_width, k = 2 * half_width + 1;
+  // OpenCV's borderInterpolate for BORDER_REFLECT_101: the column read at padded index i
+  std::vector<int> src(static_cast<size_t>(cols + k - 1));
+  for (size_t i = 0; i < src.size(); ++i) {
+    int p = static_cast<int>(i) - h;
+    while (cols > 1 && (p < 0 || p >= cols)) p = p < 0 ? -p : 2 * (cols - 1) - p;
+    src[i] = cols > 1 ? p : 0;
+  }
+  std::vector<int> arg(static_cast<size_t>(cols), 0);
+  std::vector<double> sum(static_cast<size_t>(cols), 0.0);
+  // the narrowest sums that hold k pixels (more lanes per vector): 16 bits for 8-bit
+  // images and up to 257 pixels, else 32 (k <= 2001 pixels below 2^16 each)
+  if (sizeof(T) == 1 && k <= 257) {
+    ColumnPeakRows<std::uint16_t>(image, h, src, &arg, &sum);
+  } else {
+    ColumnPeakRows<std::uint32_t>(image, h, src, &arg, &sum);
+  }
+  ColumnPeaks out;
+  out.row = Eigen::Map<const Eigen::VectorXi>(arg.data(), cols);
+  out.sum = Eigen::Map<const Eigen::VectorXd>(sum.data(), cols);
+  return out;
+}
+
 template <typename T>
 double EstimateDifferenceNoise(const ImageView<T>& image, int row_step) {
   RequireImage(image, "the image");
   row_step = std::max(1, row_step);
-  std::vector<std::uint64_t> hist(static_cast<size_t>(std::numeric_limits<T>::max()) + 1, 0);
-  std::uint64_t n = 0;
+  const size_t bins = static_cast<size_t>(std::numeric_limits<T>::max()) + 1;
+  // four interleaved histograms: a background of a few grey levels increments the same bins
+  // over and over, and one histogram would wait on each increment's store
+  std::vector<std::uint32_t> part(4 * bins, 0);
+  std::vector<std::uint64_t> hist(bins, 0);
+  std::uint64_t n = 0, since = 0;
+  std::uint32_t* h0 = part.data();
+  std::uint32_t* h1 = h0 + bins;
+  std::uint32_t* h2 = h1 + bins;
+  std::uint32_t* h3 = h2 + bins;
   for (int r = 0; r < image.rows; r += row_step) {
-    for (int c = 0; c < image.cols; ++c) ++hist[image(r, c)];
-    n += image.cols;
+    const T* a = image.data + r * image.row_stride;
+    const std::ptrdiff_t cs = image.col_stride;
+    int c = 0;
+    for (; c + 4 <= image.cols; c += 4) {
+      ++h0[a[c * cs]];
+      ++h1[a[(c + 1) * cs]];
+      ++h2[a[(c + 2) * cs]];
+      ++h3[a[(c + 3) * cs]];
+    }
+    for (; c < image.cols; ++c) ++h0[a[c * cs]];
+    n += static_cast<std::uint64_t>(image.cols);
+    since += static_cast<std::uint64_t>(image.cols);
+    if (since >= (std::uint64_t{1} << 31)) {  // before a 32-bit count could overflow
+      for (size_t i = 0; i < bins; ++i) {
+        hist[i] += std::uint64_t{h0[i]} + h1[i] + h2[i] + h3[i];
+        h0[i] = h1[i] = h2[i] = h3[i] = 0;
+      }
+      since = 0;
+    }
   }
+  for (size_t i = 0; i < bins; ++i) hist[i] += std::uint64_t{h0[i]} + h1[i] + h2[i] + h3[i];
   // first guess: for X ~ N(0, s^2), P(max(0, X) <= s) = 0.8413
   const double target = 0.8413 * static_cast<double>(n);
   std::uint64_t cum = 0;
@@ -739,6 +886,8 @@ template void AssessStripe<std::uint16_t>(const ImageView<std::uint16_t>&,
                                           const ImageView<std::uint16_t>&,
                                           const ImageView<std::uint16_t>&, StripeDirection,
                                           const StripeQualityOptions&, StripeResult*);
+template ColumnPeaks FindColumnPeaks<std::uint8_t>(const ImageView<std::uint8_t>&, int);
+template ColumnPeaks FindColumnPeaks<std::uint16_t>(const ImageView<std::uint16_t>&, int);
 template double EstimateDifferenceNoise<std::uint8_t>(const ImageView<std::uint8_t>&, int);
 template double EstimateDifferenceNoise<std::uint16_t>(const ImageView<std::uint16_t>&, int);
 

@@ -35,6 +35,15 @@ struct DifferenceOptions {
   double scale = -1.0;
   /// Smallest divisor; negative: 0.1 x the mean of the laser-off image (at least 1).
   double floor = -1.0;
+  /// With `normalize`, the laser's return taken as proportional to off + offset rather than
+  /// to off (a finite number; 0: plain normalisation). A non-zero offset computes, in double
+  /// precision per pixel,
+  ///   D = rint(clip((on - off)^+ * scale / max(off + offset, floor), 0, max of T))
+  /// rounded half to even, with scale defaulting to mean(off) + offset: the same value as
+  /// the NumPy expression of hmlvs.difference_image. (offset 0 keeps the faster rule of the
+  /// plain normalisation: a gain per laser-off value, in single precision for 8-bit images,
+  /// rounded half up.)
+  double offset = 0.0;
 };
 
 /// D = on - off where on > off, else 0 (paper Eq. 23), optionally albedo-normalised, written
@@ -43,6 +52,19 @@ struct DifferenceOptions {
 template <typename T>
 void DifferenceImage(const ImageView<T>& on, const ImageView<T>& off, T* out,
                      const DifferenceOptions& options = DifferenceOptions());
+
+/// Per image column c, the row of the largest sum of `image` over the columns
+/// c - half_width .. c + half_width (mirrored beyond the image as OpenCV's BORDER_REFLECT_101
+/// does) and that sum: the peak of a box filter along the rows (cv2.blur with a kernel of
+/// (2 half_width + 1) x 1 gives sum / (2 half_width + 1)) without filtering the whole image.
+/// On ties the first (smallest) row. Throws std::invalid_argument for an empty image or a
+/// negative half_width.
+struct ColumnPeaks {
+  Eigen::VectorXi row;  // per column: the row of the largest sum
+  Eigen::VectorXd sum;  // per column: that sum (an integer)
+};
+template <typename T>
+ColumnPeaks FindColumnPeaks(const ImageView<T>& image, int half_width);
 
 /// Which way the stripe is scanned: one centre per image column (a roughly horizontal
 /// stripe; the centre is a row coordinate v) or one per image row (a roughly vertical stripe;

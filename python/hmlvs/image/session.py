@@ -12,9 +12,9 @@ from .corners import find_corners
 from .points import Mode, calibration_points
 from .stripe import (
     StripeResult,
+    _albedo_offset,
     _as_gray,
     _normalized_threshold,
-    albedo_offset,
     assess_stripe,
     difference_image,
     extract_stripe,
@@ -501,15 +501,20 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
             albedo_offset=albedo_offset_))[0]
     off_g = _as_gray(off, "the laser-off image", channel)
     opts = dict(stripe_options)
-    offset = 0.0
+    offset, noise = 0.0, None
     if normalize:
-        offset = albedo_offset(on_g, off_g, opts.get("direction", "columns")) \
-            if albedo_offset_ is None else float(albedo_offset_)
+        if albedo_offset_ is None:
+            direction = opts.get("direction", "columns")
+            offset, noise = _albedo_offset(on_g, off_g, direction)
+            if direction != "columns":
+                noise = None  # estimated on the transposed images: not the threshold's
+        else:
+            offset = float(albedo_offset_)
         normalize = not np.isinf(offset)
     d = difference_image(on_g, off_g, normalize=normalize, offset=offset if normalize else 0.0)
     automatic = opts.get("threshold") is None
     if normalize and automatic:
-        opts["threshold"] = _normalized_threshold(on_g, off_g, d, offset)
+        opts["threshold"] = _normalized_threshold(on_g, off_g, d, offset, noise)
     if opts.get("method") is None:
         # The pipeline's default centre: Steger's line detector at a scale fitted to the
         # stripe (half its median FWHM, at least 3 px). Its smoothing along the stripe
