@@ -17,7 +17,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..data.views import ViewData
-from .corners import CornerGrid, Corners, detect_grid, find_corners, number_grid
+from .corners import BoardNotFoundError, CornerGrid, Corners, detect_grid, find_corners, number_grid
 from .session import ImageReport
 
 
@@ -78,6 +78,7 @@ def number_partial_views(full: Sequence[ViewData], partial: Sequence[PartialView
             "from at least 3 views of the whole board")
     if not partial:
         return out, reasons
+
     def unnumbered(why: str) -> list[str]:
         # a view in which no grid was found says so first: it was not only left unnumbered
         return [f"{p.reason}; {why}" if p.grid is None and p.reason else why for p in partial]
@@ -102,7 +103,10 @@ def number_partial_views(full: Sequence[ViewData], partial: Sequence[PartialView
                 # X-junctions where the first calibration predicts the board
                 corners = find_corners(p.image, detector_board, expected=expected)
         except ValueError as e:
-            reasons[k] = str(e) if p.grid is not None else p.reason
+            # without a grid, a view in which no junction lattice was found either says
+            # that no board was found; an ambiguous numbering says so
+            reasons[k] = p.reason if p.grid is None and isinstance(e, BoardNotFoundError) \
+                else str(e)
             continue
         if len(corners) < min_corners:
             reasons[k] = (f"partly visible board: only {len(corners)} corners numbered; a view "
