@@ -24,10 +24,11 @@ import independent_render as R  # noqa: E402
 GAUGE = ("Su", "Sv", "Cu", "Cv")  # what `hmlvs calibrate` holds fixed by default
 
 
-def stripe_errors(folder: Path, truth: dict, **options) -> dict:
+def stripe_errors(folder: Path, truth: dict, meta: dict | None = None, **options) -> dict:
     """Centre error (px) of the pipeline's stripe (``stripe_from_pair`` as the session runs
     it, or with ``options``) against the exact centre, per status class, over the rendered
-    views."""
+    views. ``meta``: the session data set's, whose views that took the session's albedo
+    offset (their own could not be fitted) are extracted with it, as the session did."""
     from hmlvs.image.session import stripe_from_pair
     from hmlvs.image.stripe import StripeStatus
 
@@ -36,7 +37,10 @@ def stripe_errors(folder: Path, truth: dict, **options) -> dict:
     for i in range(int(truth["views"])):
         on = cv2.imread(str(folder / f"p{i:03d}_on.png"), cv2.IMREAD_UNCHANGED)
         off = cv2.imread(str(folder / f"p{i:03d}_off.png"), cv2.IMREAD_UNCHANGED)
-        s = stripe_from_pair(on, off, **options)
+        o = dict(options)
+        if meta and f"p{i:03d}" in meta.get("albedo_offset_taken_by", []):
+            o.setdefault("albedo_offset", meta["albedo_offset_session"])
+        s = stripe_from_pair(on, off, **o)
         e = s.centre - truth["centres"][i]
         for st in StripeStatus:
             m = (s.status == st) & np.isfinite(e)
@@ -119,8 +123,8 @@ def measure(seed: int = 0, method: str = "pso+lm", folder: str | Path | None = N
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp if folder is None else folder)
         truth = R.render_session(folder, seed=seed, **render_options)
-        stripe = stripe_errors(folder, truth, **(stripe_options or {}))
         ds, reports = dataset_from_images(folder, mode="homography", **(stripe_options or {}))
+        stripe = stripe_errors(folder, truth, ds.meta, **(stripe_options or {}))
     res = calibrate(ds, method, seed)
     used = [r.index for r in reports if r.ok]
     return {"seed": seed, "views": int(truth["views"]),

@@ -666,12 +666,18 @@ def test_dataset_from_images_reports_bad_pairs(written, tmp_path):
         hmlvs.dataset_from_images(good, method="moments")
 
 
-def test_pipeline_with_radial_distortion():
-    """k = 0.003 / mm^2 moves the image corners by ~2.6 % (10 px): corners and stripe still
-    within 0.1 px, and the homography mode takes the distortion out before mapping."""
+@pytest.fixture(scope="module")
+def distorted():
+    """6 poses of a lens with k = 0.003 / mm^2, sensor noise."""
     q = hmlvs.Parameters.nominal().replace(k=0.003)
     s = hmlvs.simulate.session(q, num_poses=6, seed=0)
-    r = hmlvs.simulate.render_session(s, options=RenderOptions(noise=1.0), seed=4)
+    return q, s, hmlvs.simulate.render_session(s, options=RenderOptions(noise=1.0), seed=4)
+
+
+def test_pipeline_with_radial_distortion(distorted):
+    """k = 0.003 / mm^2 moves the image corners by ~2.6 % (10 px): corners and stripe still
+    within 0.1 px, and the homography mode takes the distortion out before mapping."""
+    q, s, r = distorted
     e, _ = stripe_errors(r, "steger")
     assert rms(e) < 0.1
     records = [{"id": f"p{i:03d}", "on": r.on[i], "off": r.off[i], "joints": s.joints[i]}
@@ -686,3 +692,98 @@ def test_pipeline_with_radial_distortion():
         assert all(x.ok for x, v in zip(report, clear) if v), [x.reason for x in report]
         exact, _ = hmlvs.project(q, ds.points, ds.poses)
         assert rms(np.linalg.norm(ds.pixels - exact, axis=1)) < 0.1
+
+
+def _view_corners(q, s, r):
+    poses = s.robot.poses(s.joints)
+    out = []
+    for i in range(len(poses)):
+        try:
+            out.append((i, hmlvs.find_corners(r.off[i], s.board,
+                                              expected=predicted_corners(q, poses[i], s.board))))
+        except ValueError:
+            continue
+    return out
+
+
+def test_session_distortion_is_fitted_to_all_views(distorted):
+    """One lens for the whole session: its division coefficient fitted to the corners of
+    every view, recorded in the data set, and close to the true one (k Su^2 in 1/px^2)."""
+    from hmlvs.image.points import fit_division_distortion
+
+    q, s, r = distorted
+    views = [c for _, c in _view_corners(q, s, r)]
+    assert len(views) >= 3
+    true_k = q.k * q.Su ** 2
+    centre, k = fit_division_distortion(views)
+    np.testing.assert_array_equal(centre, [319.5, 239.5])
+    assert k == pytest.approx(true_k, rel=0.05)
+    # one view alone: what calibration_points fits without a given distortion
+    for c in views:
+        if len(c) >= 9:
+            assert fit_division_distortion([c])[1] == pytest.approx(true_k, rel=0.5)
+    records = [{"id": f"p{i:03d}", "on": r.on[i], "off": r.off[i], "joints": s.joints[i]}
+               for i in range(len(r.on))]
+    ds, _ = hmlvs.dataset_from_images(records, mode="homography")
+    got = ds.meta["division_distortion"]
+    assert got["centre_px"] == [319.5, 239.5] and got["k_per_px2"] == pytest.approx(k, rel=1e-9)
+    ds_c, _ = hmlvs.dataset_from_images(records, mode="corners")
+    assert "division_distortion" not in ds_c.meta
+
+
+def test_a_view_with_few_corners_is_mapped_with_the_session_distortion(distorted):
+    """A view showing 8 corners (2 x 4) cannot fit the distortion alone, so without the
+    session's only the squares with all four corners give points; with it, the one
+    homography of the 8 corners maps the stripe in the squares around them too, as
+    accurately."""
+    from hmlvs.image.corners import Corners
+    from hmlvs.image.points import fit_division_distortion
+
+    q, s, r = distorted
+    views = _view_corners(q, s, r)
+    dist = fit_division_distortion([c for _, c in views])
+    poses = s.robot.poses(s.joints)
+    gained = blocks = 0
+    for i, c in views:
+        st = hmlvs.extract_stripe(hmlvs.difference_image(r.on[i], r.off[i], normalize=True))
+        have = set(c.index.tolist())
+        for row in range(s.board.rows - 1):
+            for col in range(s.board.cols - 3):
+                ids = [(row + a) * s.board.cols + col + b for a in (0, 1) for b in range(4)]
+                if not have.issuperset(ids):
+                    continue
+                keep = np.isin(c.index, ids)
+                few = Corners(c.pixels[keep], c.index[keep], c.anchor[keep], c.board, c.rule,
+                              c.image_size)
+                alone = hmlvs.calibration_points(st, few, mode="homography", step=4)
+                shared = hmlvs.calibration_points(st, few, mode="homography", step=4,
+                                                  distortion=dist)
+                assert len(shared) >= len(alone)
+                if len(shared) == 0:
+                    continue
+                blocks += 1
+                gained += len(shared) - len(alone)
+                rep = np.repeat(poses[i][None], len(shared), axis=0)
+                exact, _ = hmlvs.project(q, shared.points, rep)
+                err = np.linalg.norm(shared.pixels - exact, axis=1)
+                assert rms(err) < 0.1 and err.max() < 0.3, (i, row, col)
+    assert blocks >= 3 and gained > 100  # measured: 8 blocks, 627 points gained
+    assert gained > 20
+
+
+def test_session_distortion_bad_input(distorted):
+    from hmlvs.image.corners import Corners
+    from hmlvs.image.points import fit_division_distortion
+
+    q, s, r = distorted
+    (_, c), *_ = _view_corners(q, s, r)
+    with pytest.raises(ValueError, match="non-empty sequence"):
+        fit_division_distortion([])
+    with pytest.raises(ValueError, match="non-empty sequence"):
+        fit_division_distortion([c.pixels])
+    other = Corners(c.pixels, c.index, c.anchor, c.board, c.rule, (800, 600))
+    with pytest.raises(ValueError, match="different sizes"):
+        fit_division_distortion([c, other])
+    st = hmlvs.extract_stripe(hmlvs.difference_image(r.on[0], r.off[0]))
+    with pytest.raises(ValueError, match="distortion must be a finite"):
+        hmlvs.calibration_points(st, c, mode="homography", distortion=(np.zeros(2), np.nan))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -14,6 +15,8 @@ from .stripe import StripeResult
 # Calibration points
 
 Mode = Literal["corners", "homography"]
+#: the division distortion model: (image centre (2,), k in 1/px^2)
+Distortion = tuple[np.ndarray, float]
 
 #: homography mode: largest RMS corner residual (px) of the one-homography board model for
 #: which it maps the stripe points (else each square's own homography does)
@@ -64,7 +67,8 @@ def _scan_coords(stripe: StripeResult, pts: np.ndarray) -> np.ndarray:
 
 def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None,
                        mode: Mode = "corners", tolerance: float = 0.5, window: int = 4,
-                       step: int = 8) -> CalibrationPoints:
+                       step: int = 8, distortion: Distortion | None = None
+                       ) -> CalibrationPoints:
     """Pair the stripe's pixels with reference points on the board.
 
     Parameters
@@ -88,7 +92,12 @@ def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None
         with at least one found corner), then to the base frame; the reference
         points are points of the board plane where the stripe is, many per image. Radial
         distortion is taken out first: the division model of MODEL.md about the image
-        centre, its coefficient fitted so that all corners obey one homography.
+        centre, its coefficient fitted so that all corners obey one homography, or
+        ``distortion``.
+    distortion : homography mode: the division model (centre, k in 1/px^2) to take out
+        instead of the one fitted to this image's corners, e.g. fitted to all views of a
+        session (:func:`fit_division_distortion`). Then the one homography of the corners
+        needs 6 of them (9 when it is fitted here, with the distortion).
     """
     if mode not in ("corners", "homography"):
         raise ValueError(f"mode must be 'corners' or 'homography', got {mode!r}")
@@ -160,7 +169,14 @@ def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None
     # Radial distortion bends the board's lines, which a homography cannot follow. Fit the
     # model's division distortion p_u = c + (p - c) / (1 + k |p - c|^2) about the image
     # centre so that the corners best fit one homography, and map undistorted pixels.
-    centre, k_px = _fit_division_distortion(corners)
+    if distortion is None:
+        centre, k_px = fit_division_distortion([corners])
+        min_global = 9
+    else:
+        centre, k_px = np.asarray(distortion[0], float).reshape(2), float(distortion[1])
+        if not (np.isfinite(centre).all() and np.isfinite(k_px)):
+            raise ValueError(f"distortion must be a finite (centre, k), got {distortion!r}")
+        min_global = 6
     cpx = _undistort(corners.pixels, centre, k_px)
     spx_u = _undistort(spx, centre, k_px)
     lookup = {int(i): cpx[j] for j, i in enumerate(corners.index)}
@@ -176,7 +192,7 @@ def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None
     # division model does not fit, a board that is not flat) each square's own.
     back = cv2.perspectiveTransform(corners.board_xy.reshape(-1, 1, 2).astype(float),
                                     np.linalg.inv(hmat)).reshape(-1, 2)
-    use_global = len(corners) >= 9 and \
+    use_global = len(corners) >= min_global and \
         float(np.sqrt(np.mean(np.sum((back - cpx) ** 2, axis=1)))) <= GLOBAL_RESIDUAL
     out_px, out_xy, out_ids, out_sig = [], [], [], []
     cache: dict[tuple[int, int], np.ndarray | None] = {}
@@ -241,28 +257,40 @@ def _undistort(px: np.ndarray, centre: np.ndarray, k: float) -> np.ndarray:
     return centre + d / (1.0 + k * np.sum(d * d, axis=1, keepdims=True))
 
 
-def _fit_division_distortion(corners: Corners) -> tuple[np.ndarray, float]:
-    """(centre, k) of the division model (MODEL.md step 2, in pixels: k_px = k Su^2) that
-    makes the corners fit one homography best; k = 0 with fewer than 9 corners."""
+def fit_division_distortion(views: Sequence[Corners]) -> Distortion:
+    """The division model (MODEL.md step 2, in pixels: k_px = k Su^2) about the image
+    centre, (centre, k_px), that makes the numbered corners of each view fit that view's own
+    homography best. One lens serves every view of a session: fitted to all of them, the
+    coefficient holds for views with too few corners to fit it alone. Views with fewer than
+    9 corners do not take part; with none left, k_px = 0."""
     import cv2
     from scipy.optimize import minimize_scalar
-    if corners.image_size is not None:
-        w, h = corners.image_size
+    views = list(views)
+    if not views or not all(isinstance(c, Corners) for c in views):
+        raise ValueError("views must be a non-empty sequence of the Corners of find_corners")
+    sizes = {c.image_size for c in views if c.image_size is not None}
+    if len(sizes) > 1:
+        raise ValueError(f"the views come from images of different sizes: {sorted(sizes)}")
+    if sizes:
+        w, h = sizes.pop()
         centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
     else:
-        centre = corners.pixels.mean(axis=0)
-    if len(corners) < 9:
+        centre = np.vstack([c.pixels for c in views]).mean(axis=0)
+    use = [c for c in views if len(c) >= 9]
+    if not use:
         return centre, 0.0
-    r2max = float(np.max(np.sum((corners.pixels - centre) ** 2, axis=1)))
-    xy = corners.board_xy
+    r2max = max(float(np.max(np.sum((c.pixels - centre) ** 2, axis=1))) for c in use)
 
     def cost(kn: float) -> float:
-        u = _undistort(corners.pixels, centre, kn / r2max)
-        hm, _ = cv2.findHomography(xy, u, 0)
-        if hm is None:
-            return np.inf
-        return float(np.sum((cv2.perspectiveTransform(xy.reshape(-1, 1, 2), hm).reshape(-1, 2)
-                             - u) ** 2))
+        total = 0.0
+        for c in use:
+            u = _undistort(c.pixels, centre, kn / r2max)
+            hm, _ = cv2.findHomography(c.board_xy, u, 0)
+            if hm is None:
+                return np.inf
+            total += float(np.sum((cv2.perspectiveTransform(
+                c.board_xy.reshape(-1, 1, 2), hm).reshape(-1, 2) - u) ** 2))
+        return total
 
     # |k r^2| up to 10 % at the farthest corner
     res = minimize_scalar(cost, bounds=(-0.1, 0.1), method="bounded",

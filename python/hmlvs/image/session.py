@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from .corners import find_corners
-from .points import Mode, calibration_points
+from .points import Mode, calibration_points, fit_division_distortion
 from .stripe import (
     StripeResult,
     _albedo_offset,
@@ -121,8 +121,11 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     For every pair: difference image (albedo-normalised unless ``normalize=False``), stripe
     centres (:func:`extract_stripe` with ``stripe_options``), corners of the laser-off image
     numbered with the corners predicted from ``params`` and the pose
-    (:func:`find_corners`), then :func:`calibration_points` in ``mode``. A pair that fails
-    is reported and skipped; the rest of the session goes through.
+    (:func:`find_corners`), then :func:`calibration_points` in ``mode`` (in "homography"
+    mode with the lens distortion fitted to the corners of all views,
+    :func:`~hmlvs.image.points.fit_division_distortion`, and recorded in the data set's
+    ``meta``). A pair that fails is reported and skipped; the rest of the session goes
+    through.
 
     Parameters
     ----------
@@ -180,29 +183,74 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     # Check the stripe options once, up front: a typo is the caller's error, not the image's.
     extract_stripe(np.zeros((4, 4), np.uint8), **_core_options(stripe_options))
 
-    reports: list[ImageReport] = []
-    px_all, pt_all, ids_all, joints_all, pidx_all, poses_all = [], [], [], [], [], []
+    # First every pair's stripe and corners; then, in homography mode, the lens distortion
+    # fitted to the corners of all views (one lens: views with few corners need it), and the
+    # calibration points.
+    found: list[ImageReport | tuple[Any, ...]] = []
     for index, rec in enumerate(records):
         pid = _record_id(rec, index)
         on_name, off_name = _record_names(rec)
         info: dict[str, Any] = {}
         try:
             pair = _read_pair(rec, index, folder, unit, robot, size, channel, normalize,
-                              stripe_options, min_stripe)
-            on_name, off_name, size, joints = pair.on_name, pair.off_name, pair.size, pair.joints
-            stripe, off_g, pose = pair.stripe, pair.off, pair.pose
-            info["stripe"] = stripe.counts()
+                              stripe_options, min_stripe, defer=True)
+            on_name, off_name, size = pair.on_name, pair.off_name, pair.size
+            info["stripe"] = pair.stripe.counts()
             try:
-                corners = find_corners(off_g, board, expected=predicted_corners(approx, pose,
-                                                                                board))
+                corners = find_corners(pair.off, board, expected=predicted_corners(
+                    approx, pair.pose, board))
             except ValueError as e:
                 raise _Reject(f"checkerboard: {e}") from None
             except cv2.error as e:
                 raise _opencv_failure(e, "checkerboard") from None
-            info["corners"] = len(corners)
+        except _Reject as e:
+            found.append(ImageReport(pid, index, str(on_name), str(off_name), False, str(e),
+                                     info.get("stripe", {}), info.get("corners", 0)))
+            continue
+        if not _pending(pair):
+            pair = replace(pair, on=None, off=None)  # the images are no longer needed
+        found.append((pid, index, pair, corners, info))
+    # One board print and one laser: a pair whose stripe lies on one level of the board only
+    # (along a row of light squares) cannot fit the albedo offset; it takes the session's,
+    # the median of the other pairs' (with 0 instead, its stripe would be lost on the
+    # light squares and pulled towards the dark ones where it touches them).
+    offsets = [f[2].offset for f in found if not isinstance(f, ImageReport)
+               and f[2].offset is not None and np.isfinite(f[2].offset)]
+    session_offset = float(np.median(offsets)) if offsets else 0.0
+    taken: set[int] = set()
+    for n, item in enumerate(found):
+        if isinstance(item, ImageReport) or not _pending(item[2]):
+            continue
+        pid, index, pair, corners, info = item
+        try:
+            pair = (_restripe(pair, session_offset, normalize, stripe_options, min_stripe)
+                    if offsets else _checked(pair, min_stripe))
+        except _Reject as e:
+            found[n] = ImageReport(pid, index, pair.on_name, pair.off_name, False, str(e),
+                                   pair.stripe.counts(), 0)
+            continue
+        if offsets:
+            taken.add(index)
+        info["stripe"] = pair.stripe.counts()
+        found[n] = (pid, index, replace(pair, on=None, off=None), corners, info)
+    distortion = None
+    if mode == "homography":
+        views = [f[3] for f in found if not isinstance(f, ImageReport)]
+        distortion = fit_division_distortion(views) if views else None
+
+    reports: list[ImageReport] = []
+    px_all, pt_all, ids_all, joints_all, pidx_all, poses_all = [], [], [], [], [], []
+    for item in found:
+        if isinstance(item, ImageReport):
+            reports.append(item)
+            continue
+        pid, index, pair, corners, info = item
+        on_name, off_name, joints, pose = pair.on_name, pair.off_name, pair.joints, pair.pose
+        info["corners"] = len(corners)
+        try:
             try:
-                cp = calibration_points(stripe, corners, board, mode=mode, tolerance=tolerance,
-                                        step=step)
+                cp = calibration_points(pair.stripe, corners, board, mode=mode,
+                                        tolerance=tolerance, step=step, distortion=distortion)
             except cv2.error as e:
                 raise _opencv_failure(e, "calibration points") from None
             info["rejected"] = dict(cp.rejected)
@@ -232,7 +280,13 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                  ids=np.array(ids_all), joints=joints_arr, pose_index=np.concatenate(pidx_all),
                  meta={"source": "images", "mode": mode, "normalize": normalize,
                        "pairs": len(records), "pairs_used": sum(r.ok for r in reports),
-                       "image_size": list(size) if size else None})
+                       "image_size": list(size) if size else None,
+                       **({"albedo_offset_session": session_offset,
+                           "albedo_offset_taken_by": [r.id for r in reports if r.index in
+                                                      taken]} if taken else {}),
+                       **({} if distortion is None else {"division_distortion": {
+                           "centre_px": [float(x) for x in distortion[0]],
+                           "k_per_px2": float(distortion[1])}})})
     return ds, reports
 
 
@@ -324,20 +378,26 @@ class _Pair:
     off_name: str
     joints: np.ndarray | None  # rad; None when the entry gives a pose
     pose: np.ndarray  # base_from_hand (4, 4)
-    on: np.ndarray
-    off: np.ndarray  # the laser-off frame, or the background estimated from the laser-on one
+    on: np.ndarray | None  # None once the stripe and corners are found
+    off: np.ndarray | None  # the laser-off frame, or the background estimated from the
+    # laser-on one
     stripe: StripeResult
     size: tuple[int, int]
+    offset: float | None = None  # the albedo offset fitted (see _pair_stripe)
 
 
 def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
                size: tuple[int, int] | None, channel: int | None, normalize: bool,
-               stripe_options: dict[str, Any], min_stripe: int) -> _Pair:
+               stripe_options: dict[str, Any], min_stripe: int,
+               defer: bool = False) -> _Pair:
     """Load, check and extract the stripe of one manifest record; raises _Reject.
 
     A record without ``off`` is a laser-on image alone: its background (the board under
     ambient light) is estimated from it (:func:`estimate_background`) and stands in for the
-    laser-off frame, and the report's laser-off name says so."""
+    laser-off frame, and the report's laser-off name says so. With ``defer``, a pair whose
+    albedo offset could not be fitted (``offset`` NaN) is returned without the check of
+    ``min_stripe``: its stripe is to be extracted again with the session's offset
+    (:func:`_restripe`)."""
     if not isinstance(rec, dict):
         raise _Reject(f"record {index} is not a mapping with on, off and joints")
     if "on" not in rec:
@@ -379,13 +439,43 @@ def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
                           f"{100 * diff_big.mean():.0f}% of the pixels, far more than a "
                           "stripe: they are not a pair taken at the same pose")
     try:
-        stripe, off_g = _stripe_and_background(on_g, off_g, normalize, stripe_options)
+        stripe, off_g, offset = _stripe_and_background(on_g, off_g, normalize, stripe_options)
     except ValueError as e:  # the threshold leaves no pixel
         raise _Reject(f"no laser stripe found in {on_name}: {e}") from None
-    if stripe.found.sum() < min_stripe:
-        raise _Reject(f"no laser stripe found in {on_name}: only {int(stripe.found.sum())} "
-                      f"scan lines have one ({_counts_text(stripe.counts())})")
-    return _Pair(str(on_name), str(off_name), joints, pose, on_g, off_g, stripe, size)
+    pair = _Pair(str(on_name), str(off_name), joints, pose, on_g, off_g, stripe, size, offset)
+    if not (defer and offset is not None and np.isnan(offset)):
+        _check_stripe(pair, min_stripe)
+    return pair
+
+
+def _pending(pair: _Pair) -> bool:
+    """Whether the pair's stripe waits for the session's albedo offset (see _read_pair)."""
+    return pair.offset is not None and bool(np.isnan(pair.offset))
+
+
+def _checked(pair: _Pair, min_stripe: int) -> _Pair:
+    _check_stripe(pair, min_stripe)
+    return pair
+
+
+def _check_stripe(pair: _Pair, min_stripe: int) -> None:
+    if pair.stripe.found.sum() < min_stripe:
+        raise _Reject(f"no laser stripe found in {pair.on_name}: only "
+                      f"{int(pair.stripe.found.sum())} scan lines have one "
+                      f"({_counts_text(pair.stripe.counts())})")
+
+
+def _restripe(pair: _Pair, offset: float, normalize: bool, stripe_options: dict[str, Any],
+              min_stripe: int) -> _Pair:
+    """The pair's stripe extracted again with the albedo offset ``offset``; raises _Reject."""
+    try:
+        stripe = _stripe_and_background(pair.on, pair.off, normalize,
+                                        dict(stripe_options, albedo_offset=offset))[0]
+    except ValueError as e:
+        raise _Reject(f"no laser stripe found in {pair.on_name}: {e}") from None
+    pair = replace(pair, stripe=stripe)
+    _check_stripe(pair, min_stripe)
+    return pair
 
 
 def laser_channel(on: np.ndarray, off: np.ndarray | None = None) -> int | None:
@@ -425,10 +515,16 @@ def estimate_background(on: np.ndarray, width: float = 8.0) -> np.ndarray:
 
 
 def _stripe_and_background(on_g: np.ndarray, off_g: np.ndarray | None, normalize: bool,
-                           stripe_options: dict[str, Any]) -> tuple[StripeResult, np.ndarray]:
-    """The stripe of a pair, and its laser-off frame (estimated when None)."""
+                           stripe_options: dict[str, Any]
+                           ) -> tuple[StripeResult, np.ndarray, float | None]:
+    """The stripe of a pair, its laser-off frame (estimated when None) and the albedo offset
+    fitted to a given laser-off frame (see :func:`_pair_stripe`)."""
     if off_g is not None:
-        return stripe_from_pair(on_g, off_g, normalize=normalize, **stripe_options), off_g
+        o = dict(stripe_options)
+        assess = o.pop("assess", True)
+        step, offset = o.pop("albedo_step", None), o.pop("albedo_offset", None)
+        stripe, fitted = _pair_stripe(on_g, off_g, normalize, assess, step, offset, o)
+        return stripe, off_g, fitted
     if stripe_options.get("direction", "columns") != "columns":
         raise ValueError("a laser-on image without a laser-off frame needs a roughly "
                          "horizontal stripe (direction='columns')")
@@ -444,7 +540,7 @@ def _stripe_and_background(on_g: np.ndarray, off_g: np.ndarray | None, normalize
     if w.size:
         bg = estimate_background(on_g, float(np.median(w)))
     stripe = stripe_from_pair(on_g, bg, normalize=normalize, **stripe_options)
-    return _drop_jumps(stripe), bg
+    return _drop_jumps(stripe), bg, None
 
 
 def _drop_jumps(stripe: StripeResult, window: int = 41, jump: float = 1.0) -> StripeResult:
@@ -500,12 +596,25 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
             stripe_options, assess=assess, albedo_step=albedo_step,
             albedo_offset=albedo_offset_))[0]
     off_g = _as_gray(off, "the laser-off image", channel)
+    return _pair_stripe(on_g, off_g, normalize, assess, albedo_step, albedo_offset_,
+                        stripe_options)[0]
+
+
+def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: bool,
+                 albedo_step: float | None, albedo_offset_: float | None,
+                 stripe_options: dict[str, Any]) -> tuple[StripeResult, float | None]:
+    """:func:`stripe_from_pair` of gray frames, and the albedo offset it fitted: NaN when
+    the stripe does not lie on two clearly different levels (0 is used), None when none was
+    fitted (given, or no normalisation)."""
     opts = dict(stripe_options)
     offset, noise = 0.0, None
+    fitted = None
     if normalize:
         if albedo_offset_ is None:
             direction = opts.get("direction", "columns")
             offset, noise = _albedo_offset(on_g, off_g, direction)
+            fitted = offset
+            offset = 0.0 if np.isnan(offset) else offset
             if direction != "columns":
                 noise = None  # estimated on the transposed images: not the threshold's
         else:
@@ -539,7 +648,7 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
         if albedo_step is None:
             albedo_step = 0.0 if normalize else 1.5
         stripe = assess_stripe(stripe, d, on_g, off_g, albedo_step=albedo_step)
-    return stripe
+    return stripe, fitted
 
 
 def _manifest_robot(doc: dict[str, Any], robot: Any, source: Any) -> Any:

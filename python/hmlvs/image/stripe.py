@@ -134,13 +134,15 @@ def albedo_offset(on: np.ndarray, off: np.ndarray, direction: Direction = "colum
     surface (each away from edges, unsaturated, well above the noise). Returns 0 when the
     stripe does not cross two clearly different levels (fewer than 10 scan lines on either).
     """
-    return _albedo_offset(on, off, direction)[0]
+    a = _albedo_offset(on, off, direction)[0]
+    return 0.0 if np.isnan(a) else a
 
 
 def _albedo_offset(on: np.ndarray, off: np.ndarray,
                    direction: Direction = "columns") -> tuple[float, float]:
-    """:func:`albedo_offset` and the noise estimate of the plain difference image it used
-    (``_estimate_difference_noise``; for ``direction="rows"`` of the transposed images)."""
+    """:func:`albedo_offset` (NaN where it returns 0 for want of two levels) and the noise
+    estimate of the plain difference image it used (``_estimate_difference_noise``; for
+    ``direction="rows"`` of the transposed images)."""
     a = _as_gray(on, "the laser-on image", None)
     b = _as_gray(off, "the laser-off image", None)
     if direction == "rows":
@@ -167,16 +169,17 @@ def _albedo_offset(on: np.ndarray, off: np.ndarray,
 
 
 def _affine_offset(peak: np.ndarray, level: np.ndarray) -> float:
-    """The offset a of the peaks' fit as proportional to level + a (see albedo_offset)."""
+    """The offset a of the peaks' fit as proportional to level + a (see albedo_offset); NaN
+    when the peaks do not lie on two clearly different levels."""
     if peak.size < 20:
-        return 0.0
+        return float("nan")
     p2, p98 = np.percentile(level, [2, 98])
     if not p98 > 2.0 * max(p2, 1.0):
-        return 0.0
+        return float("nan")
     split = np.sqrt(max(p2, 1.0) * p98)
     dark = level < split
     if dark.sum() < 10 or (~dark).sum() < 10:
-        return 0.0
+        return float("nan")
     pd, pl = float(np.median(peak[dark])), float(np.median(peak[~dark]))
     od, ol = float(np.median(level[dark])), float(np.median(level[~dark]))
     if pl <= pd:
