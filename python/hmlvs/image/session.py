@@ -223,8 +223,10 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
             continue
         pid, index, pair, corners, info = item
         try:
-            pair = (_restripe(pair, session_offset, normalize, stripe_options, min_stripe)
-                    if offsets else _checked(pair, min_stripe))
+            if offsets:
+                pair = _restripe(pair, session_offset, normalize, stripe_options, min_stripe)
+            else:
+                _check_stripe(pair, min_stripe)
         except _Reject as e:
             found[n] = ImageReport(pid, index, pair.on_name, pair.off_name, False, str(e),
                                    pair.stripe.counts(), 0)
@@ -443,7 +445,7 @@ def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
     except ValueError as e:  # the threshold leaves no pixel
         raise _Reject(f"no laser stripe found in {on_name}: {e}") from None
     pair = _Pair(str(on_name), str(off_name), joints, pose, on_g, off_g, stripe, size, offset)
-    if not (defer and offset is not None and np.isnan(offset)):
+    if not (defer and _pending(pair)):
         _check_stripe(pair, min_stripe)
     return pair
 
@@ -451,11 +453,6 @@ def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
 def _pending(pair: _Pair) -> bool:
     """Whether the pair's stripe waits for the session's albedo offset (see _read_pair)."""
     return pair.offset is not None and bool(np.isnan(pair.offset))
-
-
-def _checked(pair: _Pair, min_stripe: int) -> _Pair:
-    _check_stripe(pair, min_stripe)
-    return pair
 
 
 def _check_stripe(pair: _Pair, min_stripe: int) -> None:
