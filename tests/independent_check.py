@@ -28,7 +28,8 @@ def stripe_errors(folder: Path, truth: dict, meta: dict | None = None, **options
     """Centre error (px) of the pipeline's stripe (``stripe_from_pair`` as the session runs
     it, or with ``options``) against the exact centre, per status class, over the rendered
     views. ``meta``: the session data set's, whose views that took the session's albedo
-    offset (their own could not be fitted) are extracted with it, as the session did."""
+    offset (their own could not be fitted) are extracted with it, and with its smoothing
+    along the stripe, as the session did."""
     from hmlvs.image.session import stripe_from_pair
     from hmlvs.image.stripe import StripeStatus
 
@@ -38,6 +39,8 @@ def stripe_errors(folder: Path, truth: dict, meta: dict | None = None, **options
         on = cv2.imread(str(folder / f"p{i:03d}_on.png"), cv2.IMREAD_UNCHANGED)
         off = cv2.imread(str(folder / f"p{i:03d}_off.png"), cv2.IMREAD_UNCHANGED)
         o = dict(options)
+        if meta and "smooth_along" in meta:
+            o.setdefault("smooth_along", meta["smooth_along"])
         if meta and f"p{i:03d}" in meta.get("albedo_offset_taken_by", []):
             o.setdefault("albedo_offset", meta["albedo_offset_session"])
         s = stripe_from_pair(on, off, **o)

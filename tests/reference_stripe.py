@@ -37,11 +37,15 @@ def noise_estimate(img: np.ndarray) -> float:
     return float(np.sqrt(var + 1.0 / 6.0))
 
 
-def kernels(sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    r = int(np.ceil(3.5 * sigma))
+def kernels(sigma: float, r: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gaussian derivative kernels of radius ``r`` (default ceil(3.5 sigma)); radius 0 has
+    no derivatives."""
+    r = int(np.ceil(3.5 * sigma)) if r is None else r
     x = np.arange(-r, r + 1, dtype=float)
     g0 = np.exp(-x ** 2 / (2 * sigma ** 2))
     g0 /= g0.sum()
+    if r == 0:
+        return g0, np.zeros(1), np.zeros(1)
     g1 = x * g0 / np.sum(x ** 2 * g0)
     g2 = (x ** 2 - sigma ** 2) * g0
     g2 = g2 - g2.sum() * g0
@@ -51,8 +55,8 @@ def kernels(sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def extract(image: np.ndarray, direction: str = "columns", method: str = "centroid",
             threshold: float | None = None, min_width: float = 2.0, max_width: float = 40.0,
-            noise: float | None = None, steger_sigma: float = 1.5, dominance: float = 0.0
-            ) -> dict[str, np.ndarray]:
+            noise: float | None = None, steger_sigma: float = 1.5, dominance: float = 0.0,
+            steger_sigma_along: float | None = None) -> dict[str, np.ndarray]:
     """Same contract as ``hmlvs.extract_stripe``; returns a dict of arrays."""
     img = image if direction == "columns" else image.T
     noise_v = noise_estimate(image) if noise is None else float(noise)
@@ -213,19 +217,34 @@ def extract(image: np.ndarray, direction: str = "columns", method: str = "centro
     elif method == "steger":
         import cv2
         g0, g1, g2 = kernels(steger_sigma)
+        sa = steger_sigma if steger_sigma_along is None else steger_sigma_along
         src = d.astype(np.float64)
+        full = int(np.ceil(3.5 * sa))
+        # along the stripe (x), the kernel is cut short symmetrically at the image's edges:
+        # column c uses radius min(full, c, w - 1 - c)
+        radius = np.minimum(full, np.minimum(np.arange(w), w - 1 - np.arange(w)))
+        gs, gp, gss, gpp, gsp = (np.empty_like(src) for _ in range(5))
+        k0 = np.empty(w)
 
-        def filt(kx: np.ndarray, ky: np.ndarray) -> np.ndarray:
-            return cv2.sepFilter2D(src, cv2.CV_64F, kx, ky, borderType=cv2.BORDER_REPLICATE)
+        def filt(kx: np.ndarray, ky: np.ndarray, at: np.ndarray) -> np.ndarray:
+            return cv2.sepFilter2D(src, cv2.CV_64F, kx, ky,
+                                   borderType=cv2.BORDER_REPLICATE)[:, at]
 
-        gs, gp = filt(g1, g0), filt(g0, g1)
-        gss, gpp, gsp = filt(g2, g0), filt(g0, g2), filt(g1, g1)
+        for r in np.unique(radius):
+            a0, a1, a2 = kernels(sa, int(r))
+            at = radius == r
+            gs[:, at], gp[:, at] = filt(a1, g0, at), filt(a0, g1, at)
+            gss[:, at], gpp[:, at], gsp[:, at] = filt(a2, g0, at), filt(a0, g2, at), \
+                filt(a1, g1, at)
+            k0[at] = np.sum(a0 ** 2)
+        k1 = np.sum(g1 ** 2)
+        # a kernel cut below ceil(steger_sigma) is not fitted
+        near_edge = radius[cols] < min(full, int(np.ceil(steger_sigma)))
         mm = m[best].copy()
-        ok = np.ones(cols.size, bool)
+        ok = ~near_edge
         done = np.zeros(cols.size, bool)
         cen = np.full(cols.size, np.nan)
         sig = np.full(cols.size, np.nan)
-        k0, k1 = np.sum(g0 ** 2), np.sum(g1 ** 2)
         for step in range(3):
             act = ok & ~done
             if not act.any():
@@ -253,7 +272,8 @@ def extract(image: np.ndarray, direction: str = "columns", method: str = "centro
             fail |= good & ~(close | last) & ((nxt < 0) | (nxt >= h))
             ia = np.nonzero(act)[0]
             cen[ia[accept]] = c_new[accept]
-            sig[ia[accept]] = (noise_v * np.sqrt(k0 * k1) / np.abs(lam) / np.abs(np_))[accept]
+            sig[ia[accept]] = (noise_v * np.sqrt(k0[c_] * k1) / np.abs(lam)
+                               / np.abs(np_))[accept]
             done[ia[accept]] = True
             ok[ia[fail]] = False
             move = good & ~(close | last) & ~fail

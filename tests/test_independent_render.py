@@ -64,6 +64,15 @@ Not reached, and why:
   the centre estimator (Steger, centroid, Gaussian or log-parabola fits over the profile:
   0.0071-0.0101 px on the same views), against 0.0065 px for the baseline's independent
   0.05 px per point.
+- Steger's smoothing along the stripe twice its scale across it in calibration sessions
+  (``hmlvs.image.session.BOARD_SMOOTH_ALONG``: the stripe lies on the board's plane), and
+  its kernel cut short symmetrically at the image's first and last columns instead of a
+  replicated border (which bent slanted stripes there): FOUND 0.044, 0.052, 0.046, 0.047,
+  0.048, 0.044, 0.046, 0.046, 0.045 px RMS on seeds 0-8 (0.059-0.069 before), at most
+  0.16-0.25 px (0.26-0.36 before); the 0.06 px / 0.3 px targets hold on every seed. The
+  per-view mean errors, and so the map error, do not change: 0.0026, 0.0053, 0.0083,
+  0.0027, 0.0031, 0.0036, 0.0071, 0.0053, 0.0040 mm; 1.52, 2.20, 2.35, 0.99, 1.54, 1.43,
+  1.37, 1.82, 1.33 x the baseline (median 1.53; RMS over the seeds 1.66 x).
 """
 
 from __future__ import annotations
@@ -96,7 +105,8 @@ def test_stripe_centres_on_accepted_columns(measured):
     s = m["stripe"]
     columns = sum(v["n"] for k, v in s.items() if k != "per_view_found_rms")
     assert s["FOUND"]["n"] > 9000 and s["FOUND"]["n"] > 0.95 * columns  # of 16 x 640
-    assert s["FOUND"]["rms"] < 0.08 and s["FOUND"]["max"] < 0.4
+    # the issue's targets (measured 0.044 / 0.179 and 0.052 / 0.246 px on seeds 0 and 1)
+    assert s["FOUND"]["rms"] < 0.06 and s["FOUND"]["max"] < 0.3
     # before: the stripe lost on the light squares, and the rest 3 x worse, over 1 px at worst
     assert before["FOUND"]["n"] < 0.7 * s["FOUND"]["n"]
     assert before["FOUND"]["rms"] > 2.5 * s["FOUND"]["rms"]
@@ -107,8 +117,8 @@ def test_views_and_map_error(measured):
     m, _ = measured
     # every view is used (seed 0's p000, 8 corners, through the session's lens distortion)
     assert len(m["used"]) == 16 and not m["dropped"]
-    assert m["map"]["rms"] < 3.0 * m["baseline"]["rms"]  # measured 1.63 and 2.06
-    assert m["map"]["rms"] < 0.008  # mm on held-out true stripes (measured 0.0028, 0.0050)
+    assert m["map"]["rms"] < 3.0 * m["baseline"]["rms"]  # measured 1.52 and 2.20
+    assert m["map"]["rms"] < 0.008  # mm on held-out true stripes (measured 0.0026, 0.0053)
 
 
 def test_albedo_offset_recovers_an_affine_laser_return():

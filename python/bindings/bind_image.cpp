@@ -90,6 +90,7 @@ void BindImage(py::module_& m) {
       .def_readwrite("max_width", &StripeOptions::max_width)
       .def_readwrite("noise", &StripeOptions::noise)
       .def_readwrite("steger_sigma", &StripeOptions::steger_sigma)
+      .def_readwrite("steger_sigma_along", &StripeOptions::steger_sigma_along)
       .def_readwrite("dominance", &StripeOptions::dominance);
   py::class_<StripeResult>(m, "_StripeResult")
       .def_readonly("centre", &StripeResult::centre)

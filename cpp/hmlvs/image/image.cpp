@@ -189,15 +189,16 @@ struct Kernels {
   double sum_sq0 = 0.0, sum_sq1 = 0.0;
 };
 
-// Sampled Gaussian derivative kernels of scale sigma, radius ceil(3.5 sigma), normalised so
-// that they are exact on constants (g0), ramps (g1) and parabolas (g2).
-Kernels MakeKernels(double sigma) {
+// Sampled Gaussian derivative kernels of scale sigma and the given radius (default
+// ceil(3.5 sigma)), normalised so that they are exact on constants (g0), ramps (g1) and
+// parabolas (g2). Radius 0 is the sample itself, with no derivatives.
+Kernels MakeKernels(double sigma, int radius = -1) {
   Kernels k;
-  k.radius = static_cast<int>(std::ceil(3.5 * sigma));
+  k.radius = radius >= 0 ? radius : static_cast<int>(std::ceil(3.5 * sigma));
   const int n = 2 * k.radius + 1;
   k.g0.resize(n);
-  k.g1.resize(n);
-  k.g2.resize(n);
+  k.g1.assign(n, 0.0);
+  k.g2.assign(n, 0.0);
   double s0 = 0.0;
   for (int i = 0; i < n; ++i) {
     const double x = i - k.radius;
@@ -205,6 +206,8 @@ Kernels MakeKernels(double sigma) {
     s0 += k.g0[i];
   }
   for (double& g : k.g0) g /= s0;
+  for (const double g : k.g0) k.sum_sq0 += g * g;
+  if (k.radius == 0) return k;
   double m2 = 0.0, mean2 = 0.0;
   for (int i = 0; i < n; ++i) {
     const double x = i - k.radius;
@@ -222,9 +225,32 @@ Kernels MakeKernels(double sigma) {
   }
   for (int i = 0; i < n; ++i) {
     k.g2[i] *= 2.0 / q2;
-    k.sum_sq0 += k.g0[i] * k.g0[i];
     k.sum_sq1 += k.g1[i] * k.g1[i];
   }
+  return k;
+}
+
+// Steger's kernels: across the scan line (along the profile) at steger_sigma; along the stripe
+// (across scan lines) at steger_sigma_along, cut short symmetrically near the first and last
+// scan lines (radius = the distance to the image's edge), so that a slanted stripe is not bent
+// by a replicated border. A kernel cut below ceil(steger_sigma) does not measure the line's
+// direction: those scan lines are not fitted.
+struct StegerKernels {
+  Kernels across;
+  int min_along = 0;
+  std::vector<Kernels> along;  // by radius 0 .. full
+  const Kernels& Along(int s, int n_scan) const {
+    const int r = std::min({static_cast<int>(along.size()) - 1, s, n_scan - 1 - s});
+    return along[static_cast<size_t>(r)];
+  }
+};
+
+StegerKernels MakeStegerKernels(double sigma, double sigma_along) {
+  StegerKernels k;
+  k.across = MakeKernels(sigma);
+  const int full = static_cast<int>(std::ceil(3.5 * sigma_along));
+  for (int r = 0; r <= full; ++r) k.along.push_back(MakeKernels(sigma_along, r));
+  k.min_along = std::min(full, static_cast<int>(std::ceil(sigma)));
   return k;
 }
 
@@ -232,23 +258,25 @@ struct Derivatives {
   double gs, gp, gss, gsp, gpp;
 };
 
+// Gaussian derivatives at (s, p): ks along s (across scan lines), kp along p (the profile).
 template <typename T>
-Derivatives SmoothedDerivatives(const ScanView<T>& v, const Kernels& k, int s, int p) {
+Derivatives SmoothedDerivatives(const ScanView<T>& v, const Kernels& ks, const Kernels& kp, int s,
+                                int p) {
   Derivatives d{0, 0, 0, 0, 0};
-  const int r = k.radius;
-  for (int dp = -r; dp <= r; ++dp) {
+  const int rs = ks.radius, rp = kp.radius;
+  for (int dp = -rp; dp <= rp; ++dp) {
     double h0 = 0.0, h1 = 0.0, h2 = 0.0;
-    for (int ds = -r; ds <= r; ++ds) {
+    for (int ds = -rs; ds <= rs; ++ds) {
       const double x = v.clamped(s + ds, p + dp);
-      h0 += k.g0[ds + r] * x;
-      h1 += k.g1[ds + r] * x;
-      h2 += k.g2[ds + r] * x;
+      h0 += ks.g0[ds + rs] * x;
+      h1 += ks.g1[ds + rs] * x;
+      h2 += ks.g2[ds + rs] * x;
     }
-    d.gs += k.g0[dp + r] * h1;
-    d.gp += k.g1[dp + r] * h0;
-    d.gss += k.g0[dp + r] * h2;
-    d.gpp += k.g2[dp + r] * h0;
-    d.gsp += k.g1[dp + r] * h1;
+    d.gs += kp.g0[dp + rp] * h1;
+    d.gp += kp.g1[dp + rp] * h0;
+    d.gss += kp.g0[dp + rp] * h2;
+    d.gpp += kp.g2[dp + rp] * h0;
+    d.gsp += kp.g1[dp + rp] * h1;
   }
   return d;
 }
@@ -303,11 +331,14 @@ Centre GaussianCentre(const ScanView<T>& v, int s, const Peak& pk, double noise)
 }
 
 template <typename T>
-Centre StegerCentre(const ScanView<T>& v, int s, const Peak& pk, const Kernels& k, double noise) {
+Centre StegerCentre(const ScanView<T>& v, int s, const Peak& pk, const StegerKernels& k,
+                    double noise) {
   Centre c;
   int m = pk.m;
+  const Kernels& ks = k.Along(s, v.n_scan);
+  if (ks.radius < k.min_along) return c;  // too close to the image's first or last scan line
   for (int step = 0; step < kMaxStegerSteps; ++step) {
-    const Derivatives d = SmoothedDerivatives(v, k, s, m);
+    const Derivatives d = SmoothedDerivatives(v, ks, k.across, s, m);
     const double mean = 0.5 * (d.gss + d.gpp);
     const double rad = std::sqrt(0.25 * (d.gss - d.gpp) * (d.gss - d.gpp) + d.gsp * d.gsp);
     const double lambda = mean - rad;  // most negative eigenvalue: across a bright line
@@ -328,7 +359,8 @@ Centre StegerCentre(const ScanView<T>& v, int s, const Peak& pk, const Kernels& 
     if (std::abs(centre - m) <= 0.5 || step == kMaxStegerSteps - 1) {
       if (!(std::abs(centre - m) <= 1.0)) return c;
       c.centre = centre;
-      c.sigma = noise * std::sqrt(k.sum_sq0 * k.sum_sq1) / std::abs(lambda) / std::abs(np);
+      // the noise of gp, the derivative across the line that places the centre
+      c.sigma = noise * std::sqrt(ks.sum_sq0 * k.across.sum_sq1) / std::abs(lambda) / std::abs(np);
       c.ok = true;
       return c;
     }
@@ -380,6 +412,10 @@ void ValidateOptions(const StripeOptions& o) {
     msg << "noise must be a finite number (negative to estimate it), got " << o.noise;
   } else if (!(o.steger_sigma >= 0.5 && o.steger_sigma <= 20.0)) {
     msg << "steger_sigma must lie in [0.5, 20] px, got " << o.steger_sigma;
+  } else if (!(o.steger_sigma_along <= 0.0 ||
+               (o.steger_sigma_along >= 0.5 && o.steger_sigma_along <= 40.0))) {
+    msg << "steger_sigma_along must be 0 (= steger_sigma) or lie in [0.5, 40] px, got "
+        << o.steger_sigma_along;
   } else if (!(o.dominance == 0.0 || (o.dominance >= 1.0 && std::isfinite(o.dominance)))) {
     msg << "dominance must be 0 (off) or a finite ratio >= 1, got " << o.dominance;
   } else {
@@ -680,8 +716,11 @@ StripeResult ExtractStripe(const ImageView<T>& image, const StripeOptions& o) {
   res.residual.setConstant(n, kNaN);
   res.status.setConstant(n, static_cast<std::uint8_t>(StripeStatus::kNone));
   res.num_peaks.setZero(n);
-  const Kernels kernels =
-      o.method == StripeMethod::kSteger ? MakeKernels(o.steger_sigma) : Kernels();
+  const StegerKernels kernels =
+      o.method == StripeMethod::kSteger
+          ? MakeStegerKernels(o.steger_sigma,
+                              o.steger_sigma_along > 0.0 ? o.steger_sigma_along : o.steger_sigma)
+          : StegerKernels();
   const int limit = static_cast<int>(std::ceil(o.max_width)) + 2;
 
   for (int s = 0; s < n; ++s) {

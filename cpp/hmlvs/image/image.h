@@ -89,7 +89,8 @@ enum class StripeStatus : std::uint8_t {
   kTooNarrow = 3,  // only peaks narrower than min_width (noise, hot pixels)
   kTooWide = 4,    // only peaks wider than max_width (glare, out-of-focus blobs)
   kFitFailed = 5,  // a peak was found but the chosen method could not fit it (e.g. a
-                   // saturated flat top for the Gaussian fit, or a Hessian that is not a line)
+                   // saturated flat top for the Gaussian fit, a Hessian that is not a line, or
+                   // for Steger a scan line within ceil(steger_sigma) of the image's edge)
   // Set only by AssessStripe, on scan lines ExtractStripe found (the centre is kept):
   kSaturated = 6,   // the laser-on image reaches its pixel type's maximum under the peak
   kClipped = 7,     // the profile (centre +- one FWHM) runs off the image border
@@ -110,8 +111,12 @@ struct StripeOptions {
   /// Negative: estimated from the image as a zero-clipped difference of two noisy frames
   /// (see EstimateDifferenceNoise).
   double noise = -1.0;
-  /// Smoothing scale (px) of Steger's derivatives.
+  /// Smoothing scale (px) of Steger's derivatives across the stripe (along the scan line).
   double steger_sigma = 1.5;
+  /// Smoothing scale (px) of Steger's derivatives along the stripe (across scan lines); 0:
+  /// steger_sigma. A straight stripe stays unbiased at any scale (the kernel is symmetric);
+  /// a larger one averages more speckle but blurs where the stripe bends or jumps.
+  double steger_sigma_along = 0.0;
   /// 0: a second plausible peak makes the scan line kMultiple. A value d >= 1 accepts the
   /// strongest peak when its intensity is at least d times every other peak's.
   double dominance = 0.0;

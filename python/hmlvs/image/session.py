@@ -182,6 +182,11 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     approx = Parameters.nominal() if params is None else params
     # Check the stripe options once, up front: a typo is the caller's error, not the image's.
     extract_stripe(np.zeros((4, 4), np.uint8), **_core_options(stripe_options))
+    # The stripe on the board is one straight line (a curve of the lens's distortion):
+    # Steger's line detector may smooth along it over more than across it.
+    stripe_options = dict(stripe_options)
+    stripe_options["smooth_along"] = _smooth_along(stripe_options.get("smooth_along",
+                                                                      BOARD_SMOOTH_ALONG))
 
     # First every pair's stripe and corners; then, in homography mode, the lens distortion
     # fitted to the corners of all views (one lens: views with few corners need it), and the
@@ -281,7 +286,8 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     ds = Dataset(np.vstack(px_all), np.concatenate(poses_all), np.vstack(pt_all),
                  ids=np.array(ids_all), joints=joints_arr, pose_index=np.concatenate(pidx_all),
                  meta={"source": "images", "mode": mode, "normalize": normalize,
-                       "pairs": len(records), "pairs_used": sum(r.ok for r in reports),
+                       "smooth_along": stripe_options["smooth_along"], "pairs": len(records),
+                       "pairs_used": sum(r.ok for r in reports),
                        "image_size": list(size) if size else None,
                        **({"albedo_offset_session": session_offset,
                            "albedo_offset_taken_by": [r.id for r in reports if r.index in
@@ -572,10 +578,12 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
     0 divides by the laser-off frame itself) and :func:`extract_stripe`
     with ``stripe_options``; for a normalised image without a given threshold, a noise-aware
     one; without a given ``method``, Steger's at ``steger_sigma`` = half the stripe's median
-    FWHM (at least 3 px), robust to laser speckle. With ``assess`` the centres are checked
-    by :func:`assess_stripe` (saturation of the laser-on frame, clipping, double peaks, and
-    albedo steps of the laser-off frame under the profile by more than ``albedo_step``,
-    default 1.5 without ``normalize`` and no check with it). ``off``
+    FWHM (at least 3 px), robust to laser speckle, and along the stripe ``smooth_along``
+    (default 1; calibration sessions use :data:`BOARD_SMOOTH_ALONG`) times that. With
+    ``assess`` the centres are checked by :func:`assess_stripe` (saturation of the laser-on
+    frame, clipping, double peaks, and albedo steps of the laser-off frame under the profile
+    by more than ``albedo_step``, default 1.5 without ``normalize`` and no check with it).
+    ``off``
     None: a laser-on image alone, its background estimated (:func:`estimate_background`).
     Colour frames use ``channel``, by default the laser's (:func:`laser_channel`).
 
@@ -604,6 +612,7 @@ def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: b
     the stripe does not lie on two clearly different levels (0 is used), None when none was
     fitted (given, or no normalisation)."""
     opts = dict(stripe_options)
+    along = _smooth_along(opts.pop("smooth_along", None))
     offset, noise = 0.0, None
     fitted = None
     if normalize:
@@ -632,6 +641,8 @@ def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: b
         if opts.get("steger_sigma") is None:
             opts["steger_sigma"] = float(np.clip(0.5 * np.median(w), 3.0, 20.0)) if w.size \
                 else 3.0
+        if opts.get("steger_sigma_along") is None and along != 1.0:
+            opts["steger_sigma_along"] = min(along * opts["steger_sigma"], 40.0)
     stripe = extract_stripe(d, **opts)
     if automatic and not stripe.found.any() and stripe.threshold >= float(d.max()):
         raise ValueError(f"the automatic threshold {stripe.threshold:.4g} leaves no pixel of "
@@ -646,6 +657,29 @@ def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: b
             albedo_step = 0.0 if normalize else 1.5
         stripe = assess_stripe(stripe, d, on_g, off_g, albedo_step=albedo_step)
     return stripe, fitted
+
+
+#: Steger's default smoothing along the stripe, as a multiple of its scale across it, in
+#: calibration sessions (:func:`dataset_from_images`), where the stripe lies on the board's
+#: plane. Measured on 9 sessions of an independent renderer (16 views each, 10 % laser
+#: speckle): centre error 0.059-0.069 px RMS (at most 0.26-0.36 px) at 1, 0.044-0.052 px
+#: (at most 0.16-0.25 px) at 2; each view's mean error, which the calibration feels, is
+#: unchanged.
+BOARD_SMOOTH_ALONG = 2.0
+
+
+def _smooth_along(value: Any) -> float:
+    """The ``smooth_along`` stripe option, checked (None: 1, the same scale as across)."""
+    if value is None:
+        return 1.0
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = float("nan")
+    if not (np.isfinite(v) and 1.0 <= v <= 10.0):
+        raise ValueError(f"smooth_along must lie in [1, 10] (Steger's scale along the stripe "
+                         f"as a multiple of the scale across it), got {value!r}")
+    return v
 
 
 def _manifest_robot(doc: dict[str, Any], robot: Any, source: Any) -> Any:
@@ -701,4 +735,4 @@ def _counts_text(counts: dict[str, int]) -> str:
 def _core_options(stripe_options: dict[str, Any]) -> dict[str, Any]:
     """The options of :func:`extract_stripe` among the pipeline's stripe options."""
     return {k: v for k, v in stripe_options.items()
-            if k not in ("albedo_step", "albedo_offset")}
+            if k not in ("albedo_step", "albedo_offset", "smooth_along")}

@@ -35,7 +35,7 @@ class StripeStatus(enum.IntEnum):
     MULTIPLE = 2    #: two or more plausible peaks (reflections): no centre is guessed
     TOO_NARROW = 3  #: only peaks narrower than ``min_width`` (noise, hot pixels)
     TOO_WIDE = 4    #: only peaks wider than ``max_width`` (glare, blobs)
-    FIT_FAILED = 5  #: a peak, but the method could not fit it (e.g. saturated flat top)
+    FIT_FAILED = 5  #: a peak the method could not fit (saturated flat top; Steger: at the edge)
     # Set by :func:`assess_stripe` (the session pipeline's :func:`stripe_from_pair` runs it)
     # on scan lines that had a centre; ``centre`` keeps it, ``found`` no longer counts it.
     SATURATED = 6    #: the laser-on image is saturated under the peak
@@ -320,6 +320,7 @@ class StripeOptions:
     steger_sigma: float = 1.5
     dominance: float = 0.0
     channel: int | None = None
+    steger_sigma_along: float | None = None
 
     def __post_init__(self) -> None:
         if self.direction not in _DIRECTIONS:
@@ -327,7 +328,7 @@ class StripeOptions:
         if self.method not in _METHODS:
             raise ValueError("method must be 'centroid', 'gaussian' or 'steger', got "
                              f"{self.method!r}")
-        for name in ("threshold", "noise"):
+        for name in ("threshold", "noise", "steger_sigma_along"):
             v = getattr(self, name)
             if v is not None:
                 object.__setattr__(self, name, _nonneg(v, name))
@@ -346,6 +347,7 @@ class StripeOptions:
         o.noise = -1.0 if self.noise is None else self.noise
         o.min_width, o.max_width = self.min_width, self.max_width
         o.steger_sigma, o.dominance = self.steger_sigma, self.dominance
+        o.steger_sigma_along = 0.0 if self.steger_sigma_along is None else self.steger_sigma_along
         return o
 
 
@@ -354,6 +356,7 @@ def extract_stripe(image: np.ndarray, direction: Direction = "columns",
                    min_width: float = 2.0, max_width: float = 40.0,
                    noise: float | None = None, steger_sigma: float = 1.5,
                    dominance: float = 0.0, channel: int | None = None,
+                   steger_sigma_along: float | None = None,
                    options: StripeOptions | None = None) -> StripeResult:
     """Sub-pixel laser stripe centres, one per image column (or row), computed in C++.
 
@@ -366,6 +369,8 @@ def extract_stripe(image: np.ndarray, direction: Direction = "columns",
     method : "centroid" (gray centroid of ``I - threshold`` over the run of pixels above the
         threshold), "gaussian" (three-point Gaussian fit through the peak pixel) or "steger"
         (Hessian line detector at scale ``steger_sigma``; for curved or steep stripes).
+        Its kernel along the stripe is cut short symmetrically near the image's edges, so
+        that a slanted stripe is not bent by a replicated border.
     threshold : a pixel belongs to a peak when its value exceeds this. Default: automatic,
         ``max(5 * noise, 0.15 * image maximum)``.
     min_width, max_width : accepted full width at half maximum of a peak (px). Narrower
@@ -377,6 +382,9 @@ def extract_stripe(image: np.ndarray, direction: Direction = "columns",
     dominance : 0 (default) reports a scan line with two plausible peaks as MULTIPLE. A
         ratio d >= 1 instead accepts the strongest peak if it is d times brighter than any
         other.
+    steger_sigma_along : Steger's smoothing scale along the stripe (px), default
+        ``steger_sigma``. A straight stripe stays unbiased at any scale; a larger one
+        averages more laser speckle but blurs where the stripe bends or jumps.
     options : a :class:`StripeOptions` holding all of the above instead (then the keyword
         options are ignored)
 
@@ -388,7 +396,7 @@ def extract_stripe(image: np.ndarray, direction: Direction = "columns",
         options = StripeOptions(direction=direction, method=method, threshold=threshold,
                                 min_width=min_width, max_width=max_width, noise=noise,
                                 steger_sigma=steger_sigma, dominance=dominance,
-                                channel=channel)
+                                channel=channel, steger_sigma_along=steger_sigma_along)
     elif not isinstance(options, StripeOptions):
         raise ValueError(f"options must be a StripeOptions, got {options!r}")
     direction, method = options.direction, options.method
