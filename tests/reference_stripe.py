@@ -226,16 +226,20 @@ def extract(image: np.ndarray, direction: str = "columns", method: str = "centro
         gs, gp, gss, gpp, gsp = (np.empty_like(src) for _ in range(5))
         k0 = np.empty(w)
 
-        def filt(kx: np.ndarray, ky: np.ndarray, at: np.ndarray) -> np.ndarray:
-            return cv2.sepFilter2D(src, cv2.CV_64F, kx, ky,
-                                   borderType=cv2.BORDER_REPLICATE)[:, at]
+        def filt(kx: np.ndarray, ky: np.ndarray, c: int | None) -> np.ndarray:
+            """The whole image filtered (c None), or column c alone: filtered on the strip
+            its cut kernel covers, so that no column is replicated."""
+            r = kx.size // 2
+            part = src if c is None else src[:, c - r:c + r + 1]
+            out = cv2.sepFilter2D(part, cv2.CV_64F, kx, ky, borderType=cv2.BORDER_REPLICATE)
+            return out if c is None else out[:, r]
 
-        for r in np.unique(radius):
-            a0, a1, a2 = kernels(sa, int(r))
-            at = radius == r
-            gs[:, at], gp[:, at] = filt(a1, g0, at), filt(a0, g1, at)
-            gss[:, at], gpp[:, at], gsp[:, at] = filt(a2, g0, at), filt(a0, g2, at), \
-                filt(a1, g1, at)
+        for c in [None] + np.nonzero(radius < full)[0].tolist():
+            a0, a1, a2 = kernels(sa, full if c is None else int(radius[c]))
+            at = slice(None) if c is None else c
+            gs[:, at], gp[:, at] = filt(a1, g0, c), filt(a0, g1, c)
+            gss[:, at], gpp[:, at], gsp[:, at] = filt(a2, g0, c), filt(a0, g2, c), \
+                filt(a1, g1, c)
             k0[at] = np.sum(a0 ** 2)
         k1 = np.sum(g1 ** 2)
         # a kernel cut below ceil(steger_sigma) is not fitted
