@@ -13,6 +13,7 @@
 #include "hmlvs/model/model.h"
 #include "hmlvs/solvers/fitness.h"
 #include "hmlvs/solvers/lm.h"
+#include "hmlvs/solvers/random.h"
 #include "hmlvs/solvers/search.h"
 #include "test_util.h"
 
@@ -68,6 +69,27 @@ TEST(Solvers, PsoSameSeedSameResultForAnyThreadCount) {
   o.seed = 12;
   EXPECT_FALSE(
       BitIdentical(RunPso(data, o).runs[0].best, RunPso(data, SmallPso(1, 2)).runs[0].best));
+}
+
+// The PSO draws its random numbers in pairs (four at a time with AVX2): the same bits as drawing
+// them one by one, for any count (whole vectors and a scalar tail) and any stream.
+TEST(Solvers, UniformPairsAreTheSequentialDraws) {
+  for (int n : {1, 3, 4, 5, 8, 14, 17}) {
+    for (std::uint64_t key = 0; key < 300; ++key) {
+      Rng one(StreamKey(7, key)), pairs(StreamKey(7, key));
+      for (int round = 0; round < 4; ++round) {
+        std::vector<double> a1(n), a2(n), b1(n), b2(n);
+        for (int d = 0; d < n; ++d) {
+          a1[d] = one.Uniform();
+          a2[d] = one.Uniform();
+        }
+        UniformPairs(pairs, n, b1.data(), b2.data());
+        ASSERT_EQ(0, std::memcmp(a1.data(), b1.data(), sizeof(double) * n)) << n << " " << key;
+        ASSERT_EQ(0, std::memcmp(a2.data(), b2.data(), sizeof(double) * n)) << n << " " << key;
+        ASSERT_EQ(one.State(), pairs.State());
+      }
+    }
+  }
 }
 
 TEST(Solvers, RandomSearchSameSeedSameResultForAnyThreadCount) {

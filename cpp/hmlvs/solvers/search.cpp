@@ -51,14 +51,17 @@ struct alignas(64) Particle {
 };
 
 // One swarm: its particles and the global best.
-struct Swarm {
+// Cache-line aligned, its global best on lines of its own: team member 0 writes it every
+// generation, while every member reads the fields before it (the particles' and the member
+// bests' buffers), which so never share a line with that write.
+struct alignas(64) Swarm {
   int n;
   std::vector<Particle> p;
-  Vector14d gbest;
-  double gbest_fit = std::numeric_limits<double>::infinity();
   // Per team member, double-buffered by generation parity: a member may write generation
   // t + 1's entry while the others still read generation t's.
   std::array<std::vector<MemberBest>, 2> member_best;
+  alignas(64) Vector14d gbest;
+  double gbest_fit = std::numeric_limits<double>::infinity();
   explicit Swarm(int size) : n(size), p(size) {}
 };
 
@@ -79,10 +82,7 @@ __attribute__((target_clones("avx2", "default")))
 #endif
 void Move(const Motion& m, Particle& p) {
   double r1[kNumParams], r2[kNumParams];
-  for (int d = 0; d < kNumParams; ++d) {
-    r1[d] = p.rng.Uniform();
-    r2[d] = p.rng.Uniform();
-  }
+  UniformPairs(p.rng, kNumParams, r1, r2);
   double* x = p.x.data();
   double* v = p.v.data();
   const double* pbest = p.pbest.data();
