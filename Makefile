@@ -69,6 +69,8 @@ bench: deps
 	$(PYTHON) -m pip install $(PIP_FLAGS) ".[test]"
 	-$(PYTHON) -m pip install --quiet "vision-calibration>=0.9,<1" || \
 	  echo "vision-calibration not installed: bench/RESULTS.md will show hmlvs alone"
+	-$(PYTHON) -m pip install --quiet "pyswarms>=1.3,<2" || \
+	  echo "pyswarms not installed: bench/RESULTS.md will say so"
 	$(PYTHON) bench/run_bench.py
 
 clean:
