@@ -20,6 +20,7 @@ import platform
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -109,6 +110,17 @@ def _pyswarms_row(rows: list, u, v, h, b, args) -> float | None:
     zero velocity). Its velocity clamp takes one interval for all dimensions, so it runs
     without the paper's per-parameter vmax. The time scaled to 5000 iterations, or None when
     pyswarms is not installed (a row says so)."""
+    # pyswarms' reporter writes a report.log into the working directory: keep it out of ours
+    here = os.getcwd()
+    with tempfile.TemporaryDirectory() as tmp:
+        os.chdir(tmp)
+        try:
+            return _pyswarms_timed(rows, u, v, h, b, args)
+        finally:
+            os.chdir(here)
+
+
+def _pyswarms_timed(rows: list, u, v, h, b, args) -> float | None:
     try:
         import pyswarms
     except ImportError:
