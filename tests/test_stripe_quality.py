@@ -236,3 +236,89 @@ def test_vignetting_darkens_the_corners():
     assert ratio[:10, :10].mean() == pytest.approx(0.6, abs=0.05)
     with pytest.raises(ValueError, match="vignetting"):
         replace(default_options(), vignetting=1.0)
+
+
+def _slanted_stripe(rng, width=400, rows=120, slope=0.05, sigma=2.0, peak=90.0,
+                    speckle=0.0, noise=0.0, core=None):
+    """(float image, true centre per column) of a straight slanted stripe: a Gaussian
+    profile (plus a narrower core when ``core``), multiplicative speckle correlated over ~2
+    px, additive noise."""
+    u = np.arange(width)
+    c = 50.3 + slope * u
+    v = np.arange(rows)[:, None]
+    img = peak * np.exp(-0.5 * ((v - c) / sigma) ** 2)
+    if core:
+        img += core * np.exp(-0.5 * ((v - c) / (0.5 * sigma)) ** 2)
+    if speckle:
+        field = cv2.GaussianBlur(rng.standard_normal(img.shape), (0, 0), 1.0)
+        img *= np.clip(1.0 + speckle * field / field.std(), 0.0, None)
+    if noise:
+        img = img + noise * rng.standard_normal(img.shape)
+    return img, c
+
+
+def test_refined_centres_are_exact_on_symmetric_profiles():
+    """refine_centres' root is the centre of any symmetric profile (here a narrow core on a
+    wide base, not the Gaussian its weights assume), on a slanted stripe smoothed along it,
+    in both scan directions; the scan lines near the ends (where the smoothing would reach
+    past the image) keep Steger's centre."""
+    from hmlvs.image.stripe import extract_stripe, refine_centres
+
+    img, c = _slanted_stripe(None, core=60.0)
+    st = extract_stripe(np.clip(np.rint(img), 0, 255).astype(np.uint8), method="steger",
+                        steger_sigma=2.0)
+    ref = refine_centres(st, img, 1.0, sigma_along=4.0)
+    inner = np.arange(img.shape[1]) >= 12
+    inner &= np.arange(img.shape[1]) < img.shape[1] - 12
+    assert ref.method == "weighted" and np.all(ref.found[inner])
+    # exact but for the sampling of the weights at whole pixels: the weighted sum is odd about
+    # the centre only where the samples are (measured at most 0.0024 px, periodic in the
+    # centre's sub-pixel position, with this 1 px sigma core)
+    assert np.abs(ref.centre[inner] - c[inner]).max() < 0.005
+    assert np.array_equal(ref.centre[~inner], st.centre[~inner], equal_nan=True)
+    assert np.all(ref.sigma[inner] > 0)
+    # the same stripe transposed: one centre per image row
+    st_t = extract_stripe(np.clip(np.rint(img.T), 0, 255).astype(np.uint8), direction="rows",
+                          method="steger", steger_sigma=2.0)
+    ref_t = refine_centres(st_t, img.T, 1.0, sigma_along=4.0)
+    assert np.abs(ref_t.centre[inner] - c[inner]).max() < 0.005
+
+
+def test_refined_centres_average_speckle_better_than_steger():
+    """Over 24 noisy images of a straight stripe (10 % speckle, 1 grey level of noise), the
+    error of each image's mean centre, which a calibration feels, is smaller refined than
+    Steger's (measured: 0.0113 against 0.0136 px RMS), and so is the per-column error
+    (0.037 against 0.045 px RMS)."""
+    from hmlvs.image.stripe import extract_stripe, refine_centres
+
+    rng = np.random.default_rng(5)
+    mean_s, mean_w, col_s, col_w = [], [], [], []
+    for _ in range(24):
+        img, c = _slanted_stripe(rng, speckle=0.1, noise=1.0)
+        u8 = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+        st = extract_stripe(u8, method="steger", steger_sigma=3.0, steger_sigma_along=6.0)
+        ref = refine_centres(st, img, 1.0, sigma_along=6.0)
+        m = ref.found & st.found & (np.arange(img.shape[1]) >= 18) & \
+            (np.arange(img.shape[1]) < img.shape[1] - 18)
+        es, ew = (st.centre - c)[m], (ref.centre - c)[m]
+        mean_s.append(es.mean()), mean_w.append(ew.mean())
+        col_s.append(es), col_w.append(ew)
+    assert rms(mean_w) < 0.9 * rms(mean_s)
+    assert rms(np.concatenate(col_w)) < rms(np.concatenate(col_s))
+
+
+def test_refine_centres_bad_input():
+    from hmlvs.image.stripe import extract_stripe, refine_centres
+
+    img, _ = _slanted_stripe(None)
+    st = extract_stripe(np.clip(np.rint(img), 0, 255).astype(np.uint8), method="steger")
+    with pytest.raises(ValueError, match="stripe has 400 scan lines but the image 300"):
+        refine_centres(st, img[:, :300], 1.0)
+    with pytest.raises(ValueError, match="NaN or infinite"):
+        refine_centres(st, np.where(img > 80, np.nan, img), 1.0)
+    with pytest.raises(ValueError, match="2D numeric"):
+        refine_centres(st, img[None], 1.0)
+    with pytest.raises(ValueError, match="speckle"):
+        refine_centres(st, img, 1.0, speckle=-1.0)
+    with pytest.raises(ValueError, match="StripeResult"):
+        refine_centres(img, img, 1.0)

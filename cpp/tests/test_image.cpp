@@ -2,6 +2,7 @@
 // peak (its shoulders do not count), and AssessStripe's statuses.
 #include <gtest/gtest.h>
 
+#include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -125,6 +126,54 @@ void CheckOffsetNormalisation(std::mt19937* gen) {
       ASSERT_EQ(out[i], static_cast<T>(want)) << "offset " << offset << " pixel " << i;
     }
   }
+}
+
+TEST(Stripe, RefinedCentreIsExactOnSymmetricProfiles) {
+  // A profile symmetric about its centre, not Gaussian (a narrow core on a wide base): the
+  // odd weight puts the root at the centre, whatever the model's width, peak and noise.
+  const int cols = 6;
+  std::vector<float> data(static_cast<size_t>(kRows) * cols, 0.0f);
+  const double centres[cols] = {30.0, 30.25, 31.5, 40.71, 45.1, 20.93};
+  StripeResult r;
+  r.centre.resize(cols);
+  r.width = Eigen::VectorXd::Constant(cols, 5.0);
+  r.sigma = Eigen::VectorXd::Constant(cols, std::numeric_limits<double>::quiet_NaN());
+  r.status = Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1>::Zero(cols);
+  for (int c = 0; c < cols; ++c) {
+    for (int row = 0; row < kRows; ++row) {
+      const double x = row - centres[c];
+      data[static_cast<size_t>(row) * cols + c] = static_cast<float>(
+          80.0 * std::exp(-0.5 * x * x / 2.0) + 30.0 * std::exp(-0.5 * x * x / 16.0));
+    }
+    r.centre[c] = centres[c] + (c % 2 == 0 ? 0.3 : -0.25);  // a start off the centre
+  }
+  const ImageView<float> view{data.data(), kRows, cols, cols, 1};
+  Eigen::VectorXd noise = Eigen::VectorXd::Constant(cols, 1.0);
+  noise[cols - 1] = std::numeric_limits<double>::quiet_NaN();  // not refined
+  StripeRefineOptions o;
+  RefineStripeCentres(view, StripeDirection::kColumns, noise, o, &r);
+  for (int c = 0; c < cols - 1; ++c) {
+    EXPECT_EQ(r.status[c], static_cast<std::uint8_t>(StripeStatus::kFound)) << c;
+    // to the convergence tolerance (1e-4 px) plus the sampling at whole pixels, which makes the
+    // weighted sum odd only up to ~1e-4 px for this narrow core (1.4 px sigma)
+    EXPECT_NEAR(r.centre[c], centres[c], 3e-4) << c;
+    EXPECT_GT(r.sigma[c], 0.0) << c;
+  }
+  EXPECT_DOUBLE_EQ(r.centre[cols - 1], centres[cols - 1] - 0.25);
+
+  // a start farther than half a profile sigma from the root: the scan line fails
+  StripeResult far = r;
+  far.centre[0] = centres[0] + 3.0;
+  RefineStripeCentres(view, StripeDirection::kColumns, noise, o, &far);
+  EXPECT_EQ(far.status[0], static_cast<std::uint8_t>(StripeStatus::kFitFailed));
+  EXPECT_TRUE(std::isnan(far.centre[0]));
+
+  o.speckle = -0.1;
+  EXPECT_THROW(RefineStripeCentres(view, StripeDirection::kColumns, noise, o, &r),
+               std::invalid_argument);
+  o = StripeRefineOptions();
+  EXPECT_THROW(RefineStripeCentres(view, StripeDirection::kColumns, noise.head(3), o, &r),
+               std::invalid_argument);
 }
 
 TEST(Difference, OffsetNormalisationInDoubleRoundedHalfToEven) {

@@ -188,6 +188,35 @@ void BindImage(py::module_& m) {
       },
       py::arg("image"), py::arg("on"), py::arg("off"), py::arg("direction"), py::arg("options"),
       py::arg("centre"), py::arg("width"), py::arg("status"), py::arg("threshold"));
+  py::class_<StripeRefineOptions>(m, "_StripeRefineOptions")
+      .def(py::init<>())
+      .def_readwrite("speckle", &StripeRefineOptions::speckle)
+      .def_readwrite("noise_floor", &StripeRefineOptions::noise_floor)
+      .def_readwrite("max_iterations", &StripeRefineOptions::max_iterations)
+      .def_readwrite("tolerance", &StripeRefineOptions::tolerance);
+  m.def(
+      "_refine_stripe",
+      [](const py::array& image, StripeDirection direction, const Eigen::VectorXd& noise,
+         const StripeRefineOptions& options, const Eigen::VectorXd& centre,
+         const Eigen::VectorXd& width, const Eigen::VectorXd& sigma,
+         const Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1>& status) {
+        if (!py::isinstance<py::array_t<float>>(image)) {
+          throw std::invalid_argument("the image must be a float32 array");
+        }
+        StripeResult out;
+        out.centre = centre;
+        out.width = width;
+        out.sigma = sigma;
+        out.status = status;
+        const ImageView<float> v = ViewOf<float>(image, "the image");
+        {
+          py::gil_scoped_release release;
+          RefineStripeCentres(v, direction, noise, options, &out);
+        }
+        return py::make_tuple(out.centre, out.sigma, out.status);
+      },
+      py::arg("image"), py::arg("direction"), py::arg("noise"), py::arg("options"),
+      py::arg("centre"), py::arg("width"), py::arg("sigma"), py::arg("status"));
   m.def(
       "_estimate_difference_noise",
       [](const py::array& image) {

@@ -907,6 +907,93 @@ void AssessStripe(const ImageView<T>& image, const ImageView<T>& on, const Image
   }
 }
 
+void RefineStripeCentres(const ImageView<float>& image, StripeDirection direction,
+                         const Eigen::VectorXd& noise, const StripeRefineOptions& o,
+                         StripeResult* res) {
+  RequireImage(image, "the image");
+  if (!(o.speckle >= 0.0 && std::isfinite(o.speckle)) ||
+      !(o.noise_floor >= 0.0 && std::isfinite(o.noise_floor)) || o.max_iterations < 1 ||
+      !(o.tolerance > 0.0)) {
+    std::ostringstream msg;
+    msg << "refine options must satisfy speckle >= 0, noise_floor >= 0, max_iterations >= 1, "
+           "tolerance > 0; got "
+        << o.speckle << ", " << o.noise_floor << ", " << o.max_iterations << ", " << o.tolerance;
+    throw std::invalid_argument(msg.str());
+  }
+  const ScanView<float> v = MakeScanView(image, direction);
+  const int n = v.n_scan;
+  if (res == nullptr || res->centre.size() != n || res->status.size() != n ||
+      res->width.size() != n || noise.size() != n) {
+    std::ostringstream msg;
+    msg << "the stripe result and the noise must have one entry per scan line of the image (" << n
+        << "), got " << (res == nullptr ? 0 : res->status.size()) << " and " << noise.size();
+    throw std::invalid_argument(msg.str());
+  }
+  if (res->sigma.size() != n) res->sigma = Eigen::VectorXd::Constant(n, kNaN);
+  const double k2 = o.speckle * o.speckle;
+  for (int s = 0; s < n; ++s) {
+    if (res->status[s] != static_cast<std::uint8_t>(StripeStatus::kFound)) continue;
+    const double c0 = res->centre[s];
+    const double sp = std::max(0.5, res->width[s] / (2.0 * std::sqrt(2.0 * std::log(2.0))));
+    if (!std::isfinite(noise[s]) || noise[s] < 0.0 || !std::isfinite(c0) || !std::isfinite(sp)) {
+      continue;
+    }
+    const int hw = static_cast<int>(std::ceil(4.0 * sp));
+    if (c0 - hw - 1.0 < 0.0 || c0 + hw + 1.0 > v.n_prof - 1.0) continue;
+    // the profile's peak: the largest sample within one profile sigma of the centre
+    double peak = 0.0;
+    for (int p = static_cast<int>(std::ceil(c0 - sp)); p <= static_cast<int>(std::floor(c0 + sp));
+         ++p) {
+      peak = std::max(peak, v.at(s, p));
+    }
+    const double add = std::max(noise[s], o.noise_floor * peak);
+    const double a2 = add * add;
+    auto set_failed = [&] {
+      res->status[s] = static_cast<std::uint8_t>(StripeStatus::kFitFailed);
+      res->centre[s] = kNaN;
+      res->sigma[s] = kNaN;
+    };
+    if (!(peak > 0.0) || !(a2 > 0.0 || k2 > 0.0)) {
+      set_failed();
+      continue;
+    }
+    const double inv_s2 = 1.0 / (sp * sp);
+    double c = c0, f_sum = 0.0, df_sum = 0.0, var_sum = 0.0;
+    bool converged = false;
+    for (int it = 0; it < o.max_iterations; ++it) {
+      const int m = static_cast<int>(std::lround(c));
+      if (m - hw < 0 || m + hw > v.n_prof - 1) break;
+      f_sum = df_sum = var_sum = 0.0;
+      for (int p = m - hw; p <= m + hw; ++p) {
+        const double x = p - c;
+        const double pp = peak * std::exp(-0.5 * x * x * inv_s2);  // P(x)
+        const double dp = -x * inv_s2 * pp;                        // P'(x)
+        const double ddp = (x * x * inv_s2 - 1.0) * inv_s2 * pp;   // P''(x)
+        const double den = a2 + k2 * pp * pp;
+        const double w = dp / den;
+        const double dw = (ddp * den - dp * 2.0 * k2 * pp * dp) / (den * den);
+        const double y = v.at(s, p);
+        f_sum += w * y;
+        df_sum -= dw * y;  // d/dc of w(p - c) y
+        var_sum += w * w * den;
+      }
+      if (!(df_sum < 0.0 || df_sum > 0.0) || !std::isfinite(f_sum)) break;
+      const double step = std::clamp(-f_sum / df_sum, -0.5, 0.5);
+      c += step;
+      if (std::abs(step) < o.tolerance) {
+        converged = true;
+        break;
+      }
+    }
+    if (!converged || !(std::abs(c - c0) <= 0.5 * sp)) {
+      set_failed();
+      continue;
+    }
+    res->centre[s] = c;
+    res->sigma[s] = std::sqrt(var_sum) / std::abs(df_sum);
+  }
+}
+
 template void DifferenceImage<std::uint8_t>(const ImageView<std::uint8_t>&,
                                             const ImageView<std::uint8_t>&, std::uint8_t*,
                                             const DifferenceOptions&);

@@ -166,6 +166,36 @@ void AssessStripe(const ImageView<T>& image, const ImageView<T>& on, const Image
                   StripeDirection direction, const StripeQualityOptions& options,
                   StripeResult* result);
 
+/// Options of RefineStripeCentres.
+struct StripeRefineOptions {
+  /// Relative noise of the profile that grows with it, 1-sigma as a fraction of the
+  /// intensity (laser speckle), against the additive noise of each scan line.
+  double speckle = 0.1;
+  /// The additive noise is taken as at least this fraction of the peak, so that on a nearly
+  /// noise-free image the far tails of the profile do not take over the weights.
+  double noise_floor = 0.02;
+  int max_iterations = 20;
+  double tolerance = 1e-4;  // px: convergence of the centre
+};
+
+/// Noise-weighted symmetric centres of found scan lines: the root c of
+///   sum_p w(p - c) I(p) = 0,   w(x) = P'(x) / (n^2 + (speckle P(x))^2),
+/// P a Gaussian of the scan line's FWHM and peak, n its additive noise. w is odd, so the
+/// centre of any profile symmetric about its centre is exact, whatever its shape, but for the
+/// sampling at whole pixels (a few thousandths of a pixel for a 1 px sigma core); the weights
+/// are those of the best linear shift estimate under additive noise plus speckle, which
+/// weighs the flanks more than the speckled top (Steger's derivative of a Gaussian does
+/// not). Refines `result`'s kFound scan lines in place (centre and sigma) where `noise` (one
+/// additive noise standard deviation per scan line, intensity units of `image`) is finite
+/// and the window (centre +- 4 profile sigmas) lies inside the image; others keep their
+/// centre. A scan line whose root is not found, or lies more than half a profile sigma from
+/// the given centre, becomes kFitFailed. `image`: the stripe's image as floats (e.g. the
+/// albedo-normalised difference, smoothed along the stripe). Throws std::invalid_argument for
+/// an empty image, a result or noise of another length, or invalid options.
+void RefineStripeCentres(const ImageView<float>& image, StripeDirection direction,
+                         const Eigen::VectorXd& noise, const StripeRefineOptions& options,
+                         StripeResult* result);
+
 /// Noise standard deviation of a zero-clipped difference image D = max(0, X), X ~ N(0, s^2)
 /// in the background: s = sqrt(2 mean(D^2)) over pixels of every `row_step`-th row at or
 /// below a cut of four times a first, percentile-based estimate (so that the stripe does not

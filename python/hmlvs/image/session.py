@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _core
 from .corners import find_corners
 from .points import Mode, calibration_points, fit_division_distortion
 from .stripe import (
@@ -18,6 +19,7 @@ from .stripe import (
     assess_stripe,
     difference_image,
     extract_stripe,
+    refine_centres,
 )
 
 #: the laser-off name of a pair without a laser-off frame (shown in its report)
@@ -579,7 +581,9 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
     with ``stripe_options``; for a normalised image without a given threshold, a noise-aware
     one; without a given ``method``, Steger's at ``steger_sigma`` = half the stripe's median
     FWHM (at least 3 px), robust to laser speckle, and along the stripe ``smooth_along``
-    (default 1; calibration sessions use :data:`BOARD_SMOOTH_ALONG`) times that. With
+    (default 1; calibration sessions use :data:`BOARD_SMOOTH_ALONG`) times that, then refined
+    by :func:`~hmlvs.image.stripe.refine_centres` (noise-weighted symmetric centres, on the
+    unrounded difference with a denoised laser-off frame; ``method`` "weighted"). With
     ``assess`` the centres are checked by :func:`assess_stripe` (saturation of the laser-on
     frame, clipping, double peaks, and albedo steps of the laser-off frame under the profile
     by more than ``albedo_step``, default 1.5 without ``normalize`` and no check with it).
@@ -630,6 +634,7 @@ def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: b
     automatic = opts.get("threshold") is None
     if normalize and automatic:
         opts["threshold"] = _normalized_threshold(on_g, off_g, d, offset, noise)
+    weighted = opts.get("method") is None
     if opts.get("method") is None:
         # The pipeline's default centre: Steger's line detector at a scale fitted to the
         # stripe (half its median FWHM, at least 3 px). Its smoothing along the stripe
@@ -647,6 +652,9 @@ def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: b
     if automatic and not stripe.found.any() and stripe.threshold >= float(d.max()):
         raise ValueError(f"the automatic threshold {stripe.threshold:.4g} leaves no pixel of "
                          f"the difference image (its maximum is {int(d.max())}): no stripe")
+    if weighted:
+        stripe = _weighted_centres(stripe, on_g, off_g, normalize, offset, noise,
+                                   opts.get("steger_sigma_along") or opts["steger_sigma"])
     if assess:
         # An albedo step under the profile is corrected by the normalisation (measured on
         # the general renders: 0.09 px RMS at steps, against 0.05 px elsewhere, at most 0.2
@@ -657,6 +665,50 @@ def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: b
             albedo_step = 0.0 if normalize else 1.5
         stripe = assess_stripe(stripe, d, on_g, off_g, albedo_step=albedo_step)
     return stripe, fitted
+
+
+def _weighted_centres(stripe: StripeResult, on_g: np.ndarray, off_g: np.ndarray,
+                      normalize: bool, offset: float, noise: float | None,
+                      sigma_along: float) -> StripeResult:
+    """The pipeline's default centres: Steger's ``stripe`` refined by
+    :func:`~hmlvs.image.stripe.refine_centres` on the unrounded difference image, whose
+    laser-off frame is first denoised by an edge-preserving (bilateral) filter: the frame is
+    the board's print under steady light, flat but for the squares' edges, and its noise would
+    otherwise enter the difference a second time. Measured on 9 sessions of an independent
+    renderer (tests/independent_check.py): each view's mean centre error 0.0113 px RMS with
+    Steger's centre, 0.0104 px refined on the plain difference, 0.0095 px with the denoised
+    frame."""
+    import cv2
+
+    if noise is None:
+        noise = float(_core._estimate_difference_noise(
+            _core._difference_image(on_g, off_g, False, -1.0, -1.0)))
+    frame = noise / np.sqrt(2.0)  # one frame's noise, of the difference of two
+    off_f = off_g.astype(np.float32)
+    if frame > 0:
+        # 7 px across, 3 px scale; a step of 4 noise sigmas (the print's edges are tens) is
+        # kept
+        bg = cv2.bilateralFilter(off_f, 7, 4.0 * frame, 3.0)
+    else:
+        bg = off_f
+    diff = np.maximum(on_g.astype(np.float32) - bg, 0.0)
+    if normalize:
+        mean = float(off_g.mean())
+        gain = (mean + offset) / np.maximum(bg + np.float32(offset), max(1.0, 0.1 * mean))
+        diff *= gain.astype(np.float32)
+    else:
+        gain = np.ones(1, np.float32)
+    # each scan line's additive noise: the laser-on frame's, times the gain at its centre
+    pos = np.clip(np.nan_to_num(np.rint(stripe.centre)), 0, (
+        off_g.shape[0] if stripe.direction == "columns" else off_g.shape[1]) - 1).astype(int)
+    if gain.size == 1:
+        g = np.ones(pos.size)
+    elif stripe.direction == "columns":
+        g = gain[pos, np.arange(pos.size)]
+    else:
+        g = gain[np.arange(pos.size), pos]
+    line_noise = np.where(stripe.found, frame * g, np.nan)
+    return refine_centres(stripe, diff, line_noise, sigma_along=sigma_along)
 
 
 #: Steger's default smoothing along the stripe, as a multiple of its scale across it, in

@@ -450,6 +450,95 @@ def assess_stripe(stripe: StripeResult, image: np.ndarray, on: np.ndarray | None
     return replace(stripe, status=np.asarray(status, dtype=np.uint8))
 
 
+#: :func:`refine_centres`' default speckle: the profile's noise that grows with it, as a
+#: fraction of the intensity, set against the additive noise of one pixel. Measured on 9
+#: sessions of an independent renderer (10 % laser speckle, 1 grey level of noise): the
+#: per-view mean error, which the calibration feels, is about as small from 0.05 to 0.1
+#: (0.0099 and 0.0095 px RMS over 144 views, against 0.0113 px for Steger's centre) and
+#: grows again at 0.3 (flanks weighed so much that their asymmetries show).
+SPECKLE = 0.1
+
+
+def refine_centres(stripe: StripeResult, image: np.ndarray, noise: Any, *,
+                   speckle: float = SPECKLE, noise_floor: float = 0.02,
+                   sigma_along: float = 0.0) -> StripeResult:
+    """Noise-weighted symmetric centres of the stripe's found scan lines (computed in C++).
+
+    The centre c of a scan line is the root of ``sum_p w(p - c) I(p)``, with the odd weight
+    ``w(x) = P'(x) / (n^2 + (speckle P(x))^2)``, ``P`` a Gaussian of the scan line's FWHM
+    and peak and ``n`` its additive noise: exact for any profile symmetric about its centre
+    (whatever its shape) but for the sampling at whole pixels (measured: at most 0.0024 px on
+    a profile with a 1 px sigma core, periodic in the centre's sub-pixel position), and the
+    best linear shift estimate under additive noise plus
+    laser speckle, which weighs the flanks more than the speckled top. Measured on an
+    independent renderer's sessions (tests/independent_check.py), each view's mean error
+    drops from 0.0113 to 0.0095 px RMS against Steger's centre, which it starts from.
+
+    Parameters
+    ----------
+    stripe : the result of :func:`extract_stripe` on (an integer version of) ``image``
+    image : (rows, cols) the stripe's image as floats, e.g. the albedo-normalised difference
+        without rounding
+    noise : the additive noise (standard deviation of one pixel of ``image``, before any
+        smoothing), one number or one per scan line; NaN: the scan line keeps its centre
+    speckle : the profile's relative noise (see :data:`SPECKLE`); 0: additive noise only
+    noise_floor : the additive noise is taken as at least this fraction of the peak, so that
+        on a nearly noise-free image the far tails do not take over the weights
+    sigma_along : first smooth ``image`` along the stripe with a Gaussian of this scale (px;
+        0: not), as Steger's ``steger_sigma_along``; the scan lines within 3 x ``sigma_along``
+        of the image's ends, where the kernel would reach past them, keep their centre
+
+    Returns
+    -------
+    StripeResult : ``stripe`` with ``method="weighted"``, the refined centres and their
+    ``sigma`` (from the noise model; white noise reduced by the smoothing along); a found
+    scan line whose root is not found, or lies more than half a profile sigma from its
+    centre, becomes ``FIT_FAILED``. Scan lines whose window (centre +- 4 profile sigmas)
+    leaves the image keep their centre.
+    """
+    import cv2
+
+    if not isinstance(stripe, StripeResult):
+        raise ValueError(f"stripe must be a StripeResult, got {type(stripe).__name__}")
+    img = np.asarray(image)
+    if img.ndim != 2 or not np.issubdtype(img.dtype, np.number):
+        raise ValueError(f"image must be a 2D numeric array, got shape {img.shape} of "
+                         f"{img.dtype}")
+    img = np.ascontiguousarray(img, dtype=np.float32)
+    if not np.isfinite(img).all():
+        raise ValueError("image holds NaN or infinite values")
+    n_scan = img.shape[1] if stripe.direction == "columns" else img.shape[0]
+    if stripe.centre.shape[0] != n_scan:
+        raise ValueError(f"the stripe has {stripe.centre.shape[0]} scan lines but the image "
+                         f"{n_scan} ({stripe.direction})")
+    nz = np.broadcast_to(np.asarray(noise, dtype=float), (n_scan,)).copy()
+    sigma_along = _nonneg(sigma_along, "sigma_along")
+    factor = 1.0
+    if sigma_along > 0:
+        r = int(np.ceil(4 * sigma_along))
+        k = cv2.getGaussianKernel(2 * r + 1, sigma_along).astype(np.float32)
+        one = np.ones((1, 1), np.float32)
+        kx, ky = (k, one) if stripe.direction == "columns" else (one, k)
+        img = cv2.sepFilter2D(img, -1, kx, ky, borderType=cv2.BORDER_REFLECT_101)
+        edge = int(np.ceil(3 * sigma_along))
+        nz[:edge] = np.nan
+        nz[max(0, n_scan - edge):] = np.nan
+        # white noise through the kernel along: variance / (2 sqrt(pi) sigma_along)
+        factor = float(np.sqrt(1.0 / max(1.0, 2.0 * np.sqrt(np.pi) * sigma_along)))
+    o = _core._StripeRefineOptions()
+    o.speckle = _nonneg(speckle, "speckle")
+    o.noise_floor = _nonneg(noise_floor, "noise_floor")
+    centre, sig, status = _core._refine_stripe(
+        img, _DIRECTIONS[stripe.direction], nz, o, np.asarray(stripe.centre, float),
+        np.asarray(stripe.width, float), np.asarray(stripe.sigma, float),
+        np.asarray(stripe.status, np.uint8))
+    centre, sig = np.asarray(centre), np.asarray(sig)
+    done = np.isfinite(nz) & (stripe.status == StripeStatus.FOUND)
+    sig = np.where(done, sig * factor, stripe.sigma)
+    return replace(stripe, centre=centre, sigma=sig, status=np.asarray(status, np.uint8),
+                   method="weighted")
+
+
 def _real(x: Any, name: str) -> float:
     if isinstance(x, bool) or not isinstance(x, Real):
         raise ValueError(f"stripe.{name} must be a number, got {x!r}")
