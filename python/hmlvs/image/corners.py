@@ -254,13 +254,7 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
                              f"4 within {radius:.0f} px after removing the median offset "
                              f"{np.round(shift, 1).tolist()} px): the approximate parameters "
                              "or pose are too far off")
-        px = det[i_det]
-        hmat, _ = cv2.findHomography(bxy[idx], px, 0)
-        res = np.linalg.norm(cv2.perspectiveTransform(bxy[idx].reshape(-1, 1, 2), hmat)
-                             .reshape(-1, 2) - px, axis=1)
-        if res.max() > 0.1 * spacing:
-            raise ValueError(f"the matched corners do not form a board grid (homography "
-                             f"residual {res.max():.1f} px): numbering is unreliable")
+        px, idx = _on_grid(det[i_det], idx, bxy, 0.1 * spacing)
         # A mirror image of the board is a homography too, so a mirrored expectation can match
         # every corner with every label wrong (a small view of a symmetric grid): only the
         # board's handedness, as the camera sees it, tells.
@@ -291,6 +285,43 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
         px = grid.reshape(-1, 2)
         rule = "top-left"
     return _refine_and_extend(gray, px, idx, board, spacing, extend, rule)
+
+
+def _on_grid(px: np.ndarray, idx: np.ndarray, bxy: np.ndarray, tol: float
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """The matched corners ``px`` (board indices ``idx``) that lie on one board homography
+    within ``tol`` px. ``findChessboardCornersSB`` with ``CALIB_CB_LARGER`` can return a
+    corner next to the image border 10-26 px off the grid (seen on close views of the
+    independent renders): the corner farthest from the homography of the others is dropped,
+    one at a time, up to a quarter of them and keeping at least 6. Raises ``ValueError`` if
+    the rest still do not form a grid."""
+    import cv2
+
+    def res(keep: np.ndarray) -> np.ndarray:
+        hmat, _ = cv2.findHomography(bxy[idx[keep]], px[keep], 0)
+        if hmat is None:
+            return np.full(int(keep.sum()), np.inf)
+        return np.linalg.norm(cv2.perspectiveTransform(bxy[idx[keep]].reshape(-1, 1, 2), hmat)
+                              .reshape(-1, 2) - px[keep], axis=1)
+
+    keep = np.ones(len(idx), bool)
+    worst = float(res(keep).max())
+    while worst > tol and keep.sum() > 6 and (~keep).sum() < len(idx) // 4:
+        # each corner against the homography of the others, so that one far-off corner
+        # cannot pull the fit towards itself and hide among the good ones
+        left = []
+        for i in np.flatnonzero(keep):
+            others = keep.copy()
+            others[i] = False
+            hmat, _ = cv2.findHomography(bxy[idx[others]], px[others], 0)
+            left.append(np.inf if hmat is None else float(np.linalg.norm(
+                cv2.perspectiveTransform(bxy[idx[i]].reshape(1, 1, 2), hmat).ravel() - px[i])))
+        keep[np.flatnonzero(keep)[int(np.argmax(left))]] = False
+        worst = float(res(keep).max())
+    if worst > tol:
+        raise ValueError(f"the matched corners do not form a board grid (homography "
+                         f"residual {worst:.1f} px): numbering is unreliable")
+    return px[keep], idx[keep]
 
 
 #: a numbering from predicted pixels is taken only when the next best placement on the board

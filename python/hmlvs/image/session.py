@@ -684,6 +684,20 @@ def _weighted_centres(stripe: StripeResult, on_g: np.ndarray, off_g: np.ndarray,
         noise = float(_core._estimate_difference_noise(
             _core._difference_image(on_g, off_g, False, -1.0, -1.0)))
     frame = noise / np.sqrt(2.0)  # one frame's noise, of the difference of two
+    mean = float(off_g.mean())
+    # Only a band around the stripe is read: each scan line's window reaches at most 4.5
+    # profile sigmas (plus a pixel) from Steger's centre; the filter's 3 px radius more.
+    found = stripe.found & np.isfinite(stripe.centre) & np.isfinite(stripe.width)
+    if not found.any():
+        return stripe
+    reach = 4.5 * np.maximum(0.5, stripe.width[found] / 2.3548) + 2.0
+    n_prof = off_g.shape[0] if stripe.direction == "columns" else off_g.shape[1]
+    lo = int(max(0, np.floor(np.min(stripe.centre[found] - reach)) - 4))
+    hi = int(min(n_prof, np.ceil(np.max(stripe.centre[found] + reach)) + 5))
+    band = (slice(lo, hi), slice(None)) if stripe.direction == "columns" else \
+        (slice(None), slice(lo, hi))
+    full_shape = off_g.shape
+    on_g, off_g = on_g[band], off_g[band]
     off_f = off_g.astype(np.float32)
     if frame > 0:
         # 7 px across, 3 px scale; a step of 4 noise sigmas (the print's edges are tens) is
@@ -693,14 +707,12 @@ def _weighted_centres(stripe: StripeResult, on_g: np.ndarray, off_g: np.ndarray,
         bg = off_f
     diff = np.maximum(on_g.astype(np.float32) - bg, 0.0)
     if normalize:
-        mean = float(off_g.mean())
         gain = (mean + offset) / np.maximum(bg + np.float32(offset), max(1.0, 0.1 * mean))
         diff *= gain.astype(np.float32)
     else:
         gain = np.ones(1, np.float32)
     # each scan line's additive noise: the laser-on frame's, times the gain at its centre
-    pos = np.clip(np.nan_to_num(np.rint(stripe.centre)), 0, (
-        off_g.shape[0] if stripe.direction == "columns" else off_g.shape[1]) - 1).astype(int)
+    pos = np.clip(np.nan_to_num(np.rint(stripe.centre)) - lo, 0, hi - lo - 1).astype(int)
     if gain.size == 1:
         g = np.ones(pos.size)
     elif stripe.direction == "columns":
@@ -708,7 +720,9 @@ def _weighted_centres(stripe: StripeResult, on_g: np.ndarray, off_g: np.ndarray,
     else:
         g = gain[np.arange(pos.size), pos]
     line_noise = np.where(stripe.found, frame * g, np.nan)
-    return refine_centres(stripe, diff, line_noise, sigma_along=sigma_along)
+    whole = np.zeros(full_shape, np.float32)
+    whole[band] = diff
+    return refine_centres(stripe, whole, line_noise, sigma_along=sigma_along)
 
 
 #: Steger's default smoothing along the stripe, as a multiple of its scale across it, in
