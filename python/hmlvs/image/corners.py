@@ -306,6 +306,10 @@ def _on_grid(px: np.ndarray, idx: np.ndarray, bxy: np.ndarray, tol: float
 
     keep = np.ones(len(idx), bool)
     worst = float(res(keep).max())
+    if not np.isfinite(worst):
+        raise ValueError("the matched corners fit no homography (they lie on a line or "
+                         "repeat): the expected pixels are far off; check the board's geometry "
+                         "and the pose they were predicted from")
     while worst > tol and keep.sum() > 6 and (~keep).sum() < len(idx) // 4:
         # each corner against the homography of the others, so that one far-off corner
         # cannot pull the fit towards itself and hide among the good ones
