@@ -138,6 +138,24 @@ def test_whole_board_views_are_numbered_right_or_refused(far, squares):
                     find_corners(off, BOARD, expected=expected)
 
 
+@pytest.mark.parametrize("which", ["views", "far"])
+def test_saddle_refinement_halves_the_corner_error(which, request):
+    """The default refinement (cornerSubPix, then the saddle point of the smoothed image)
+    against cornerSubPix alone, on the same corners of the same renders. Measured per axis:
+    0.012 against 0.029 px RMS on the close views, 0.011 against 0.021 px on the far ones
+    (at most 0.033 against 0.088 px)."""
+    rms = {}
+    for refine in ("saddle", "cornersubpix"):
+        err = []
+        for pose, off, truth in request.getfixturevalue(which):
+            c = find_corners(off, BOARD, expected=predicted_corners(Parameters.nominal(), pose,
+                                                                    BOARD),
+                             options=CornerOptions(refine=refine))
+            err.append(c.pixels - truth[c.index])
+        rms[refine] = float(np.sqrt(np.mean(np.vstack(err) ** 2)))
+    assert rms["saddle"] < 0.02 and rms["saddle"] < 0.7 * rms["cornersubpix"], rms
+
+
 #: base_from_hand poses of two close views of the independent renders (seed 12 view 5, seed 15
 #: view 9) in which ``findChessboardCornersSB`` with ``CALIB_CB_LARGER`` returns one corner
 #: next to the image border 12.9 and 18.4 px off the board's grid. Before, such a view was

@@ -27,11 +27,15 @@ class CornerOptions:
         spacing (``find_corners`` with ``expected`` only)
     fallback : when ``findChessboardCornersSB`` finds no whole board, try the classic
         ``findChessboardCorners`` (+ ``cornerSubPix``) before giving up (whole board only)
+    refine : "saddle" (default): ``cornerSubPix``, then the saddle point of the smoothed
+        image (:func:`saddle_refine`); "cornersubpix": ``cornerSubPix`` alone, as OpenCV's
+        classic pipeline
     """
 
     extend: bool = True
     max_error: float = 0.35
     fallback: bool = True
+    refine: str = "saddle"
 
     def __post_init__(self) -> None:
         for name in ("extend", "fallback"):
@@ -43,6 +47,9 @@ class CornerOptions:
         if isinstance(v, bool) or not isinstance(v, Real) or not (np.isfinite(v) and v > 0):
             raise ValueError(f"corners.max_error must be a positive number, got {v!r}")
         object.__setattr__(self, "max_error", float(v))
+        if self.refine not in REFINE_METHODS:
+            raise ValueError(f"corners.refine must be one of {', '.join(REFINE_METHODS)}, "
+                             f"got {self.refine!r}")
 
     @classmethod
     def from_dict(cls, values: Any) -> "CornerOptions":
@@ -56,6 +63,10 @@ class CornerOptions:
             raise ValueError(f"unknown corner option(s) {', '.join(unknown)}; valid: "
                              f"{', '.join(valid)}")
         return cls(**values)
+
+
+#: corner refinements (:class:`CornerOptions` ``refine``)
+REFINE_METHODS = ("saddle", "cornersubpix")
 
 
 class BoardNotFoundError(ValueError):
@@ -161,6 +172,61 @@ def _refine(gray: np.ndarray, pts: np.ndarray, win: int) -> np.ndarray:
     return cv2.cornerSubPix(gray, p, (win, win), (-1, -1), crit).reshape(-1, 2).astype(float)
 
 
+def saddle_refine(gray: np.ndarray, pts: np.ndarray, spacing: float) -> np.ndarray:
+    """Corners ``pts`` (k, 2) moved to the saddle point of the Gaussian-smoothed image.
+
+    A checkerboard corner is point-symmetric (opposite quadrants alike, whatever the
+    perspective), so the smoothed image is too and its gradient vanishes at the corner. A
+    quadratic fitted to a (2h+1)^2 window of the smoothed image, resampled (bilinear) around
+    the current estimate, gives its saddle; 8 Newton steps of at most 1 px each. The window
+    scales with the corner ``spacing`` (h = 0.12 spacing, 2..4 px; smoothing 0.375 h), so
+    with its smoothing it reaches about a fifth of a square. ``cornerSubPix`` aligns the
+    gradients over a larger window and is pulled by the blur of perspective-distorted
+    edges: measured on independent renders, 0.027 px RMS per axis against 0.014 px for the
+    saddle; on OpenCV's real left/right sample images the calibration RMS falls from
+    0.18/0.19 px to 0.17/0.16 px.
+
+    A corner is left where it was when its fit is no saddle (Hessian not indefinite), does
+    not converge, reaches the image border, or would move by more than min(1 px, 0.05
+    spacings)."""
+    import cv2
+    pts = np.asarray(pts, dtype=float).reshape(-1, 2)
+    if len(pts) == 0:
+        return pts.copy()
+    half = int(np.clip(round(0.12 * spacing), 2, 4))
+    f = cv2.GaussianBlur(np.asarray(gray, np.float32), (0, 0), 0.375 * half).astype(float)
+    h, w = f.shape
+    ys, xs = np.mgrid[-half:half + 1, -half:half + 1].astype(float)
+    x, y = xs.ravel(), ys.ravel()
+    wt = np.exp(-0.5 * (x * x + y * y) / (0.5 * half) ** 2)
+    design = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], axis=1) * wt[:, None]
+    fit = np.linalg.pinv(design) * wt[None, :]  # (6, K): coefficients from grey values
+    q = pts.copy()
+    step = np.full(len(q), np.inf)
+    ok = np.ones(len(q), bool)
+    for _ in range(8):
+        sx, sy = q[:, :1] + x, q[:, 1:] + y
+        x0, y0 = np.floor(sx), np.floor(sy)
+        inside = ((x0 >= 0) & (x0 <= w - 2) & (y0 >= 0) & (y0 <= h - 2)).all(axis=1)
+        ok &= inside
+        ix = np.clip(x0, 0, w - 2).astype(int)
+        iy = np.clip(y0, 0, h - 2).astype(int)
+        fx, fy = sx - x0, sy - y0
+        z = ((1 - fx) * (1 - fy) * f[iy, ix] + fx * (1 - fy) * f[iy, ix + 1] +
+             (1 - fx) * fy * f[iy + 1, ix] + fx * fy * f[iy + 1, ix + 1])
+        c = z @ fit.T
+        det = 4.0 * c[:, 0] * c[:, 2] - c[:, 1] ** 2
+        ok &= det < 0
+        safe = np.where(det < 0, det, -1.0)
+        d = np.stack([-(2 * c[:, 2] * c[:, 3] - c[:, 1] * c[:, 4]),
+                      -(2 * c[:, 0] * c[:, 4] - c[:, 1] * c[:, 3])], axis=1) / safe[:, None]
+        d = np.clip(np.where(ok[:, None], d, 0.0), -1.0, 1.0)
+        q += d
+        step = np.abs(d).max(axis=1)
+    ok &= (step < 1e-3) & (np.linalg.norm(q - pts, axis=1) < min(1.0, 0.05 * spacing))
+    return np.where(ok[:, None], q, pts)
+
+
 def _match(px: np.ndarray, pred: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
     """Mutual nearest neighbours between detected px and predicted board corners within
     radius: (indices into px, board indices)."""
@@ -203,10 +269,12 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
     spacing, at most 19 x 19 px); corners too close to the image border for the window are
     dropped. With ``extend`` the homography of the numbered corners predicts the board's
     remaining corners inside the image, which are refined the same way and kept when they
-    move less than 15 % of the spacing (repeated as the set grows).
+    move less than 15 % of the spacing (repeated as the set grows). Finally (the default
+    ``refine="saddle"``) each corner moves to the saddle point of the smoothed image
+    (:func:`saddle_refine`).
 
-    ``options`` (a :class:`CornerOptions`) holds ``extend``, ``max_error`` and ``fallback``
-    instead of the keywords (which are then ignored).
+    ``options`` (a :class:`CornerOptions`) holds ``extend``, ``max_error``, ``fallback`` and
+    ``refine`` instead of the keywords (which are then ignored).
 
     Raises ``ValueError`` if the image is not an 8- or 16-bit image or the corners cannot be
     numbered, and :class:`BoardNotFoundError` (a ``ValueError``) if no board is found.
@@ -284,7 +352,8 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
         idx = c.ravel()
         px = grid.reshape(-1, 2)
         rule = "top-left"
-    return _refine_and_extend(gray, px, idx, board, spacing, extend, rule)
+    return _refine_and_extend(gray, px, idx, board, spacing, extend, rule,
+                              refine=options.refine)
 
 
 def _on_grid(px: np.ndarray, idx: np.ndarray, bxy: np.ndarray, tol: float
@@ -410,15 +479,17 @@ def _junction_corners(gray: np.ndarray, board: Any, expected: np.ndarray,
                  expected, spacing, _RATIO, options.max_error,
                  f"the {len(cand)} X-junctions found")
     return _refine_and_extend(gray, cand, idx, board, spacing, options.extend, "predicted",
-                              x_check=True)
+                              x_check=True, refine=options.refine)
 
 
 def _refine_and_extend(gray: np.ndarray, px: np.ndarray, idx: np.ndarray, board: Any,
                        spacing: float, extend: bool, rule: str,
-                       x_check: bool = False) -> Corners:
+                       x_check: bool = False, refine: str = "saddle") -> Corners:
     """Numbered corners (pixels ``px``, board indices ``idx``) refined with ``cornerSubPix``
     and, with ``extend``, completed by following the board's homography (see
-    :func:`find_corners`); with ``x_check`` an added corner must be an X-junction."""
+    :func:`find_corners`); with ``x_check`` an added corner must be an X-junction. With
+    ``refine="saddle"`` every corner is then moved to its saddle point
+    (:func:`saddle_refine`)."""
     import cv2
     h, w = gray.shape
     n_board = board.rows * board.cols
@@ -471,6 +542,8 @@ def _refine_and_extend(gray: np.ndarray, px: np.ndarray, idx: np.ndarray, board:
             idx = np.concatenate([idx, todo[inside][keep]])
             px = np.vstack([px, ref[keep]])
             anchor = np.concatenate([anchor, np.zeros(int(keep.sum()), bool)])
+    if refine == "saddle":
+        px = saddle_refine(gray, px, spacing)
     order = np.argsort(idx)
     return Corners(px[order], idx[order], anchor[order], board, rule, (w, h))
 
@@ -865,7 +938,7 @@ def number_grid(image: np.ndarray, grid: CornerGrid, board: Any, expected: np.nd
     idx = _place(px, i, j, board, exp, spacing, ratio, options.max_error,
                  f"the {m} x {n} corners found")
     return _refine_and_extend(gray, px, idx, board, spacing, options.extend, "predicted",
-                              x_check=True)
+                              x_check=True, refine=options.refine)
 
 
 def detect_charuco(image: np.ndarray, board: Any, min_corners: int = 4) -> Corners:
