@@ -73,6 +73,19 @@ Not reached, and why:
   per-view mean errors, and so the map error, do not change: 0.0026, 0.0053, 0.0083,
   0.0027, 0.0031, 0.0036, 0.0071, 0.0053, 0.0040 mm; 1.52, 2.20, 2.35, 0.99, 1.54, 1.43,
   1.37, 1.82, 1.33 x the baseline (median 1.53; RMS over the seeds 1.66 x).
+- the noise-weighted stripe centre (``refine_centres``) and corners that
+  ``findChessboardCornersSB`` puts off the grid dropped rather than the view: all 16 views
+  on seeds 0-17; map error 1.51, 1.93, 1.97, 0.89, 1.12, 1.38, 1.21, 1.39, 1.12, 1.67, 0.85,
+  1.38, 1.24, 1.75, 1.38, 2.78, 2.21, 0.98 x the baseline (median 1.38).
+- the corners moved to the saddle point of the smoothed image after ``cornerSubPix``
+  (``saddle_refine``; 0.027 -> 0.014 px RMS per axis against the true corners): the
+  reference points' error 0.0044 -> 0.0021-0.0031 mm; map error 0.64, 1.43, 1.80, 0.87,
+  0.98, 1.14, 1.09, 0.98, 1.20, 1.72, 0.86, 1.02, 1.31, 2.01, 1.04, 2.50, 1.38, 0.75 x the
+  baseline on seeds 0-17 (median 1.13; RMS over the seeds 1.18 x; 14 of 18 within 1.5 x).
+  The four above 1.5 x are the stripe's: with the exact reference points in place of the
+  homography's, seeds 2 and 15 stay at 1.73 and 2.52 x. Each seed is one draw of the
+  image noise against a baseline averaged over 5 draws of its own; one draw of the
+  baseline's noise alone varies 0.67-3.3 x from seed to seed.
 """
 
 from __future__ import annotations
@@ -117,8 +130,8 @@ def test_views_and_map_error(measured):
     m, _ = measured
     # every view is used (seed 0's p000, 8 corners, through the session's lens distortion)
     assert len(m["used"]) == 16 and not m["dropped"]
-    assert m["map"]["rms"] < 3.0 * m["baseline"]["rms"]  # measured 1.52 and 2.20
-    assert m["map"]["rms"] < 0.008  # mm on held-out true stripes (measured 0.0026, 0.0053)
+    assert m["map"]["rms"] < 2.0 * m["baseline"]["rms"]  # measured 0.64 and 1.43
+    assert m["map"]["rms"] < 0.005  # mm on held-out true stripes (measured 0.0011, 0.0035)
 
 
 def test_albedo_offset_recovers_an_affine_laser_return():
