@@ -29,7 +29,7 @@ def stripe_errors(folder: Path, truth: dict, meta: dict | None = None, **options
     it, or with ``options``) against the exact centre, per status class, over the rendered
     views. ``meta``: the session data set's, whose views that took the session's albedo
     offset (their own could not be fitted) are extracted with it, and with its smoothing
-    along the stripe, as the session did."""
+    along the stripe and the camera blur it fitted (``blur_var``), as the session did."""
     from hmlvs.image.session import stripe_from_pair
     from hmlvs.image.stripe import StripeStatus
 
@@ -41,6 +41,8 @@ def stripe_errors(folder: Path, truth: dict, meta: dict | None = None, **options
         o = dict(options)
         if meta and "smooth_along" in meta:
             o.setdefault("smooth_along", meta["smooth_along"])
+        if meta and meta.get("blur_var"):
+            o.setdefault("blur_var", meta["blur_var"])
         if meta and f"p{i:03d}" in meta.get("albedo_offset_taken_by", []):
             o.setdefault("albedo_offset", meta["albedo_offset_session"])
         s = stripe_from_pair(on, off, **o)

@@ -19,12 +19,16 @@ from .corners import BoardNotFoundError, detect_board, detect_charuco
 from .partial import PartialView, add_partial_views, partial_view
 from .session import (
     ImageReport,
+    _blur_var,
+    _edge_shift,
     _opencv_failure,
     _read_manifest,
     _read_pair,
     _record_id,
     _record_names,
     _Reject,
+    _with_blur_var,
+    session_blur_var,
 )
 
 MIN_CORNERS = 6  # a view needs this many numbered corners (calibrate_joint's minimum)
@@ -77,8 +81,12 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     view is rejected with the reason; a ChArUco board may be partly visible, its corners
     numbered by the marker ids. A pair
     without a stripe, without the board or with fewer than 6 numbered corners is reported
-    and skipped; the rest of the session goes through.
+    and skipped; the rest of the session goes through. Unless ``blur_var`` is given, the
+    stripes' correction at the board's albedo steps uses the camera blur fitted to the
+    session (:func:`hmlvs.image.session.session_blur_var`).
     """
+    from dataclasses import replace
+
     import cv2
 
     from ..geometry.robot import Robot
@@ -101,6 +109,10 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     reports: list[ImageReport] = []
     partial: list[tuple[int, PartialView, Any]] = []
     size = None
+    stripe_options = dict(stripe_options)
+    fit_blur = stripe_options.get("blur_var") is None
+    stripe_options["blur_var"] = _blur_var(stripe_options.get("blur_var"))
+    edges: dict[str, tuple[Any, np.ndarray]] = {}
     for index, rec in enumerate(records):
         pid = _record_id(rec, index)
         on_name, off_name = _record_names(rec)
@@ -108,6 +120,8 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
             pair = _read_pair(rec, index, folder, unit, robot, size, channel, normalize,
                               stripe_options, min_stripe)
             size = pair.size
+            if fit_blur:
+                edges[pid] = (pair.stripe, _edge_shift(pair, normalize, stripe_options))
             try:
                 corners = detect_corners(pair.off, detector_board)
             except BoardNotFoundError as e:
@@ -133,6 +147,12 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         reports.append(ImageReport(pid, index, pair.on_name, pair.off_name, True, "",
                                    pair.stripe.counts(), len(corners.index),
                                    int(pair.stripe.found.sum())))
+    if edges:
+        var = session_blur_var(list(edges.values()))
+        fixed = {pid: _with_blur_var(st, k, var).pixels for pid, (st, k) in edges.items()}
+        views = [replace(v, laser_pixels=fixed.get(v.id, v.laser_pixels)) for v in views]
+        partial = [(slot, replace(p, stripe=fixed.get(p.id, p.stripe)), pair)
+                   for slot, p, pair in partial]
     if partial:
         add_partial_views(partial, views, reports, board_spec, size, detector_board,
                           board_pose, MIN_CORNERS)
