@@ -780,15 +780,23 @@ def _weighted_centres(stripe: StripeResult, on_g: np.ndarray, off_g: np.ndarray,
 BOARD_SMOOTH_ALONG = 2.0
 
 
+def _in_range(value: Any, lo: float, hi: float) -> float | None:
+    """``value`` as a float when it is a number in [lo, hi], else None."""
+    if isinstance(value, bool):
+        return None
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return None
+    return v if np.isfinite(v) and lo <= v <= hi else None
+
+
 def _blur_var(value: Any) -> float:
     """The ``blur_var`` stripe option, checked (None: 0, no correction at albedo steps)."""
     if value is None:
         return 0.0
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        v = float("nan")
-    if isinstance(value, bool) or not (np.isfinite(v) and 0.0 <= v <= MAX_BLUR_VAR):
+    v = _in_range(value, 0.0, MAX_BLUR_VAR)
+    if v is None:
         raise ValueError(f"blur_var must lie in [0, {MAX_BLUR_VAR:g}] px^2 (the variance of "
                          f"the camera's blur, for the correction at albedo steps), got "
                          f"{value!r}")
@@ -867,11 +875,8 @@ def _smooth_along(value: Any) -> float:
     """The ``smooth_along`` stripe option, checked (None: 1, the same scale as across)."""
     if value is None:
         return 1.0
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        v = float("nan")
-    if not (np.isfinite(v) and 1.0 <= v <= 10.0):
+    v = _in_range(value, 1.0, 10.0)
+    if v is None:
         raise ValueError(f"smooth_along must lie in [1, 10] (Steger's scale along the stripe "
                          f"as a multiple of the scale across it), got {value!r}")
     return v
