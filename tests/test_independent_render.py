@@ -86,6 +86,12 @@ Not reached, and why:
   homography's, seeds 2 and 15 stay at 1.73 and 2.52 x. Each seed is one draw of the
   image noise against a baseline averaged over 5 draws of its own; one draw of the
   baseline's noise alone varies 0.67-3.3 x from seed to seed.
+- the correction at albedo steps for the camera blur fitted to the session (``blur_var``,
+  ``session_blur_var``): FOUND 0.038-0.045 px RMS, at most 0.15-0.25 px; map error 0.76,
+  1.38, 1.66, 0.89, 0.80, 1.28, 1.13, 0.90, 1.13, 1.68, 0.83, 0.80, 1.11, 2.00, 0.97, 2.00,
+  1.38, 0.87 x (median 1.12; RMS 1.14 x; 14 of 18 within 1.5 x). On those seeds the
+  speckle decides: re-rendered without it (noise only), seeds 2 and 15 give 0.56 and
+  1.52 x with the exact reference points, with it 1.67 and 2.53 x.
 """
 
 from __future__ import annotations
@@ -118,7 +124,7 @@ def test_stripe_centres_on_accepted_columns(measured):
     s = m["stripe"]
     columns = sum(v["n"] for k, v in s.items() if k != "per_view_found_rms")
     assert s["FOUND"]["n"] > 9000 and s["FOUND"]["n"] > 0.95 * columns  # of 16 x 640
-    # the issue's targets (measured 0.044 / 0.179 and 0.052 / 0.246 px on seeds 0 and 1)
+    # the issue's targets (measured 0.039 / 0.179 and 0.045 / 0.246 px on seeds 0 and 1)
     assert s["FOUND"]["rms"] < 0.06 and s["FOUND"]["max"] < 0.3
     # before: the stripe lost on the light squares, and the rest 3 x worse, over 1 px at worst
     assert before["FOUND"]["n"] < 0.7 * s["FOUND"]["n"]
@@ -130,8 +136,8 @@ def test_views_and_map_error(measured):
     m, _ = measured
     # every view is used (seed 0's p000, 8 corners, through the session's lens distortion)
     assert len(m["used"]) == 16 and not m["dropped"]
-    assert m["map"]["rms"] < 2.0 * m["baseline"]["rms"]  # measured 0.64 and 1.43
-    assert m["map"]["rms"] < 0.005  # mm on held-out true stripes (measured 0.0011, 0.0035)
+    assert m["map"]["rms"] < 2.0 * m["baseline"]["rms"]  # measured 0.75 and 1.35
+    assert m["map"]["rms"] < 0.005  # mm on held-out true stripes (measured 0.0013, 0.0033)
 
 
 def test_albedo_offset_recovers_an_affine_laser_return():
