@@ -90,8 +90,8 @@ Not reached, and why:
   ``session_blur_var``): FOUND 0.038-0.045 px RMS, at most 0.15-0.25 px; map error 0.76,
   1.38, 1.66, 0.89, 0.80, 1.28, 1.13, 0.90, 1.13, 1.68, 0.83, 0.80, 1.11, 2.00, 0.97, 2.00,
   1.38, 0.87 x (median 1.12; RMS 1.14 x; 14 of 18 within 1.5 x). On those seeds the
-  speckle decides: re-rendered without it (noise only), seeds 2 and 15 give 0.56 and
-  1.52 x with the exact reference points, with it 1.67 and 2.53 x.
+  speckle decides: re-rendered without it (noise only), seeds 2 and 15 gave 0.56 and
+  1.52 x with the exact reference points, with it 1.67 and 2.53 x (before this correction).
 """
 
 from __future__ import annotations
