@@ -8,7 +8,9 @@ first N starts that ``hmlvs study`` gives both LM modes at s = 0.2, on the same 
   3. the 3 components of E_i, exact Jacobian (hmlvs.models.paper.residual_jacobian), Euler angles,
 and prints the held-out RMS over the 50 test points (success: < 0.01 mm, as in the study).
 
-    PYTHONPATH=python python docs/study/minpack_check.py [N]     # N = 100 by default
+With hmlvs installed (``pip install .``; ``make test`` does it):
+
+    python docs/study/minpack_check.py [N]     # N = 100 by default
 """
 
 from __future__ import annotations
