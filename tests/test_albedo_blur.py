@@ -101,6 +101,34 @@ def test_calibration_sessions_fit_and_record_the_blur(tmp_path):
     assert 0 < np.count_nonzero(moved > 1e-3) < 0.5 * len(ds)
 
 
+def test_measurement_uses_the_blur_the_calibration_fitted(tmp_path):
+    """`hmlvs calibrate` stores the session's blur in the calibration file, and measuring from
+    images with that file corrects the stripes with it unless told otherwise."""
+    from hmlvs import Calibration
+    from hmlvs.cli import main
+    from hmlvs.data.dataset import Dataset
+    from hmlvs.measurement.measure import measure_images
+
+    folder = tmp_path / "s"
+    R.render_session(folder, seed=3, views=6, held_out=0)
+    out, data = tmp_path / "cal.yaml", tmp_path / "data.npz"
+    with pytest.raises(SystemExit) as e:
+        main(["calibrate", str(folder), "--mode", "homography", "--method", "lm", "--out",
+              str(out), "--save-data", str(data), "--quiet"])
+    assert e.value.code == 0
+    cal = Calibration.load(out)
+    assert cal.blur_var == pytest.approx(Dataset.load(data).meta["blur_var"], abs=1e-12)
+    assert cal.blur_var > 0.05
+    used = measure_images(cal, folder).cloud
+    same = measure_images(cal, folder, blur_var=cal.blur_var).cloud
+    none = measure_images(cal, folder, blur_var=0.0).cloud
+    assert np.array_equal(used.points, same.points, equal_nan=True)
+    # only where the stripe crosses an albedo step does the correction move a point
+    moved = np.linalg.norm(used.points - none.points, axis=1)
+    ok = np.isfinite(moved)
+    assert 0 < np.count_nonzero(moved[ok] > 1e-4) < 0.5 * ok.sum()
+
+
 @pytest.mark.parametrize("value, message", [
     (-0.1, "blur_var must lie in \\[0, 4\\] px\\^2 .* got -0.1"),
     (float("nan"), "blur_var must lie in"),

@@ -29,6 +29,10 @@ def cal_doc():
     (lambda d: d.update(model="pinhole"), r"model: must be one of paper, opencv"),
     (lambda d: d["hand_from_camera"][0].__setitem__(3, 99.0),
      r"hand_from_camera contradicts the calibration's parameters"),
+    (lambda d: d.update(stripe_blur_var_px2="wide"),
+     r"stripe_blur_var_px2: must be a blur variance in px\^2, got 'wide'"),
+    (lambda d: d.update(stripe_blur_var_px2=-0.5),
+     r"stripe_blur_var_px2 must lie in \[0, 4\] px\^2 .*got -0.5"),
 ])
 def test_calibration_file_with_a_wrong_value_names_the_key(tmp_path, cal_doc, change, message):
     change(cal_doc)
@@ -37,6 +41,16 @@ def test_calibration_file_with_a_wrong_value_names_the_key(tmp_path, cal_doc, ch
     with pytest.raises(ValueError, match=message) as e:
         Calibration.load(path)
     assert str(e.value).startswith(str(path))
+
+
+def test_the_camera_blur_reads_back(tmp_path):
+    """The blur an image calibration fitted is kept for measurement; files without it (data
+    not from images, older files) read as None."""
+    path = Calibration(params=Parameters.nominal(), blur_var=0.37).save(tmp_path / "c.yaml")
+    assert Calibration.load(path).blur_var == 0.37
+    plain = Calibration(params=Parameters.nominal()).save(tmp_path / "p.yaml")
+    assert "stripe_blur_var_px2" not in plain.read_text()
+    assert Calibration.load(plain).blur_var is None
 
 
 def test_a_valid_file_with_unknown_keys_still_loads(tmp_path, cal_doc):

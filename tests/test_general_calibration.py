@@ -66,6 +66,9 @@ def test_calibrate_from_images_alone_recovers_the_general_sensor(rendered, tmp_p
     err = _map_error(s, session)
     assert np.sqrt(np.mean(err**2)) < 0.06
     assert (tmp_path / "r.html").read_text().count("data:image/png") == 3
+    # The camera blur fitted to the session is kept for measurement: 0.6 px rendered, about
+    # 0.44 px^2 with the pixel's area (fits on this renderer measured 0.25-0.61).
+    assert cal.blur_var is not None and 0.15 < cal.blur_var < 1.0, cal.blur_var
 
 
 def test_paper_model_can_start_from_the_opencv_calibration(rendered, tmp_path):

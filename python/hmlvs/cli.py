@@ -544,7 +544,8 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
                                  base_from_board=board_pose, test=test_views or None)
         report_path = None
         with _outputs(out) as made:
-            path = Calibration.from_joint(result, robot=arm).save(out)
+            blur = next((r.blur_var for r in reports if r.ok), None)
+            path = Calibration.from_joint(result, robot=arm, blur_var=blur).save(out)
             made.append(path)
             if report is not None:
                 from .report.joint import write_joint_report

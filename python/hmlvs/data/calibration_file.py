@@ -17,6 +17,9 @@ Format ``hmlvs-calibration`` version 1, as YAML (``.yaml``/``.yml``) or JSON (``
     hmlvs_version: 0.1.0
     hand_from_camera: [[...4x4...]]          # derived, for C++/ROS users (mm)
     robot: {...}                             # optional DH description (hmlvs.Robot.to_dict)
+    stripe_blur_var_px2: 0.42                # optional: the camera blur variance fitted by
+                                             # the image calibration; measurement corrects
+                                             # stripes at albedo steps with it
     model: paper                             # or opencv (then 'sensor' holds the calibration
     sensor: {...}                            # and 'parameters' may be absent):
                                              # hmlvs.models.opencv.OpenCvSensor.to_dict
@@ -75,6 +78,7 @@ def _schema() -> "schema.Field":
         "created": sc.text(nullable=True), "hmlvs_version": sc.text(nullable=True),
         "hand_from_camera": sc.matrix(4, 4, "a 4x4 transform", nullable=True),
         "robot": sc.Field("any"), "sensor": sc.Field("map", "the opencv sensor", nullable=True),
+        "stripe_blur_var_px2": sc.number("a blur variance in px^2", nullable=True),
     })
 
 
@@ -108,6 +112,9 @@ class Calibration:
     robot: Robot | None = None
     sensor: OpenCvSensor | None = None
     model: str = "paper"
+    #: the camera blur variance (px^2) the image calibration fitted (its stripes' correction
+    #: at albedo steps, ``stripe_from_pair`` ``blur_var``); measurement from images uses it
+    blur_var: float | None = None
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -134,12 +141,16 @@ class Calibration:
                    data_sha256=None if dataset is None else dataset_hash(dataset),
                    created=datetime.datetime.now(datetime.timezone.utc).isoformat(
                        timespec="seconds"),
-                   hmlvs_version=__version__, robot=robot)
+                   hmlvs_version=__version__, robot=robot,
+                   blur_var=None if dataset is None else _blur_var_of(dataset.meta))
 
     @classmethod
-    def from_joint(cls, result: Any, robot: Robot | None = None) -> "Calibration":
+    def from_joint(cls, result: Any, robot: Robot | None = None,
+                   blur_var: float | None = None) -> "Calibration":
         """The calibration file of a general-model (opencv) joint calibration
-        (:class:`hmlvs.calibration.joint.JointCalibration`)."""
+        (:class:`hmlvs.calibration.joint.JointCalibration`); ``blur_var``: the camera blur
+        variance its image session was extracted with (the reports'
+        :attr:`~hmlvs.image.session.ImageReport.blur_var`), if any."""
         from .. import __version__
 
         return cls(params=None, sensor=result.sensor, model="opencv", std=dict(result.std),
@@ -148,7 +159,7 @@ class Calibration:
                    method=f"joint-lm ({result.mode})",
                    created=datetime.datetime.now(datetime.timezone.utc).isoformat(
                        timespec="seconds"),
-                   hmlvs_version=__version__, robot=robot)
+                   hmlvs_version=__version__, robot=robot, blur_var=blur_var)
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {
@@ -173,6 +184,8 @@ class Calibration:
                                  else self.sensor.hand_from_camera).tolist(),
             "robot": None if self.robot is None else self.robot.to_dict(),
         })
+        if self.blur_var is not None:
+            d["stripe_blur_var_px2"] = float(self.blur_var)
         if self.sensor is not None:
             d["sensor"] = self.sensor.to_dict()
             if self.params is None:
@@ -234,6 +247,14 @@ class Calibration:
             from .robot_file import robot_from_dict
 
             robot = robot_from_dict(d["robot"], f"{source}: robot")
+        blur_var = d.get("stripe_blur_var_px2")
+        if blur_var is not None:
+            from ..image.session import MAX_BLUR_VAR
+
+            if not 0.0 <= blur_var <= MAX_BLUR_VAR:
+                raise ValueError(f"{source}: stripe_blur_var_px2 must lie in [0, "
+                                 f"{MAX_BLUR_VAR:g}] px^2 (the camera blur's variance), got "
+                                 f"{blur_var}")
         std = d.get("std") or {}
         if not isinstance(std, dict):
             raise ValueError(f"{source}: 'std' must map names to standard deviations")
@@ -243,7 +264,8 @@ class Calibration:
                    test_rms=d.get("test_rms_mm"), num_points=d.get("num_points"),
                    method=d.get("method"), data_sha256=d.get("data_sha256"),
                    created=d.get("created"), hmlvs_version=d.get("hmlvs_version"), robot=robot,
-                   sensor=sensor, model=model)
+                   sensor=sensor, model=model,
+                   blur_var=None if blur_var is None else float(blur_var))
 
     def table(self) -> str:
         if self.params is None:
@@ -259,6 +281,13 @@ class Calibration:
             s_txt = "fixed" if n in self.fixed else ("-" if s is None else f"{s:.3g}")
             lines.append(f"{n:<7} {UNITS[n]:<7} {getattr(self.params, n):>14.7g} {s_txt:>11}")
         return "\n".join(lines)
+
+
+def _blur_var_of(meta: dict[str, Any]) -> float | None:
+    """The camera blur variance an image data set's stripes were corrected with (its
+    ``meta["blur_var"]``; None for data not from images)."""
+    v = meta.get("blur_var") if meta.get("source") == "images" else None
+    return None if v is None else float(v)
 
 
 def load_calibration(path: str | os.PathLike) -> Calibration:

@@ -44,6 +44,9 @@ class ImageReport:
     corners : corners found and numbered
     points : calibration points contributed
     rejected : candidate points not used, with the reason for each
+    blur_var : the camera blur variance (px^2) the stripe was corrected with at albedo steps
+        (:func:`stripe_from_pair` ``blur_var``, fitted to the session unless given); None
+        for a rejected pair
     """
 
     id: str
@@ -56,6 +59,7 @@ class ImageReport:
     corners: int = 0
     points: int = 0
     rejected: dict[str, str] = field(default_factory=dict)
+    blur_var: float | None = None
 
     def __str__(self) -> str:
         if not self.ok:
@@ -296,7 +300,8 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                                        info.get("rejected", {})))
             continue
         reports.append(ImageReport(pid, index, str(on_name), str(off_name), True, "",
-                                   info["stripe"], info["corners"], len(cp), info["rejected"]))
+                                   info["stripe"], info["corners"], len(cp), info["rejected"],
+                                   blur_var))
         px_all.append(cp.pixels)
         pt_all.append(cp.points)
         ids_all += [f"{pid}:{k}" for k in cp.ids]
@@ -365,6 +370,7 @@ def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | Non
     robot = Robot.scorbot_er7() if robot is None else robot
     # option typos fail here
     extract_stripe(np.zeros((4, 4), np.uint8), **_core_options(stripe_options))
+    blur_var = _blur_var(stripe_options.get("blur_var"))
     from ..data.manifest import read_stripe_list
 
     ids, stripes, poses, reports = [], [], [], []
@@ -400,7 +406,8 @@ def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | Non
         stripes.append(item)
         poses.append(pose)
         reports.append(ImageReport(pid, index, on_name, off_name, True, "",
-                                   getattr(item, "counts", lambda: {})(), 0, found, {}))
+                                   getattr(item, "counts", lambda: {})(), 0, found, {},
+                                   None if isinstance(item, StripeList) else blur_var))
     return ids, stripes, np.array(poses).reshape(-1, 4, 4), reports
 
 

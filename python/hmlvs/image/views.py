@@ -147,6 +147,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         reports.append(ImageReport(pid, index, pair.on_name, pair.off_name, True, "",
                                    pair.stripe.counts(), len(corners.index),
                                    int(pair.stripe.found.sum())))
+    var = stripe_options["blur_var"]
     if edges:
         var = session_blur_var(list(edges.values()))
         fixed = {pid: _with_blur_var(st, k, var).pixels for pid, (st, k) in edges.items()}
@@ -156,6 +157,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     if partial:
         add_partial_views(partial, views, reports, board_spec, size, detector_board,
                           board_pose, MIN_CORNERS)
+    reports = [replace(r, blur_var=var) if r.ok else r for r in reports]
     if size is None:
         raise ValueError("no image pair could be read: " +
                          "; ".join(f"{r.id}: {r.reason}" for r in reports))

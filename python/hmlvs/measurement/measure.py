@@ -272,6 +272,8 @@ def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
 
     Pairs that fail (no stripe, bad image, mismatched pair) are skipped and named in the
     result's ``rejected``; ``options`` go to :func:`hmlvs.image.session.stripes_from_images`.
+    Without a ``blur_var`` option, that of the calibration (the camera blur its image session
+    fitted, :attr:`hmlvs.Calibration.blur_var`) corrects the stripes at albedo steps.
 
     Returns
     -------
@@ -281,6 +283,10 @@ def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
 
     if robot is None:
         robot = _calibration_robot(calibration, source)
+    if isinstance(calibration, (str, os.PathLike)):
+        calibration = Calibration.load(calibration)
+    if options.get("blur_var") is None and getattr(calibration, "blur_var", None) is not None:
+        options["blur_var"] = calibration.blur_var
     ids, stripes, poses, reports = stripes_from_images(source, robot=robot, **options)
     rejected = tuple(RejectedPair(str(r.id), str(r.reason)) for r in reports if not r.ok)
     if not stripes:
