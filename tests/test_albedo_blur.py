@@ -101,7 +101,7 @@ def test_calibration_sessions_fit_and_record_the_blur(tmp_path):
     assert 0 < np.count_nonzero(moved > 1e-3) < 0.5 * len(ds)
 
 
-def test_measurement_uses_the_blur_the_calibration_fitted(tmp_path):
+def test_measurement_uses_the_blur_the_calibration_fitted(tmp_path, capsys):
     """`hmlvs calibrate` stores the session's blur in the calibration file, and measuring from
     images with that file corrects the stripes with it unless told otherwise."""
     from hmlvs import Calibration
@@ -127,6 +127,12 @@ def test_measurement_uses_the_blur_the_calibration_fitted(tmp_path):
     moved = np.linalg.norm(used.points - none.points, axis=1)
     ok = np.isfinite(moved)
     assert 0 < np.count_nonzero(moved[ok] > 1e-4) < 0.5 * ok.sum()
+    # `hmlvs measure` says so
+    with pytest.raises(SystemExit) as e:
+        main(["measure", str(out), str(folder), "--out", str(tmp_path / "c.ply")])
+    assert e.value.code == 0
+    assert f"camera blur the calibration fitted ({cal.blur_var:.3g} px^2)" in \
+        capsys.readouterr().out
 
 
 @pytest.mark.parametrize("value, message", [

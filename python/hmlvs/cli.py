@@ -879,7 +879,7 @@ def measure(
         cal = Calibration.load(calibration)
         if _is_manifest(source):
             result = measure_images(cal, source, robot=_load_robot(robot))
-            cloud, info = result.cloud, result.summary()
+            cloud, info = result.cloud, {**result.summary(), "blur_var_px2": cal.blur_var}
         else:
             ds = Dataset.load(source)
             cloud = measure_points(cal, [ds.pixels[i:i + 1] for i in range(len(ds))], ds.poses)
@@ -900,6 +900,9 @@ def measure(
                "grazing angle or lie outside the image)")
     for pid, why in (info.get("rejected") or {}).items():
         typer.echo(f"{pid}: rejected: {why}")
+    if info.get("blur_var_px2") is not None:
+        typer.echo(f"stripes corrected at albedo steps for the camera blur the calibration "
+                   f"fitted ({info['blur_var_px2']:.3g} px^2)")
     if info.get("rms_mm") is not None:
         typer.echo(f"RMS distance to the reference points: {info['rms_mm']:.4g} mm")
     typer.echo(f"point cloud written to {path}")
