@@ -9,7 +9,7 @@ baseline's own scatter, against which a single scene's ratio must be read.
 With hmlvs installed (``pip install .``; ``make test`` does it):
 
     python tests/independent_check.py [--seeds 0 1 2] [--method pso+lm]
-        [--ideal 30]
+        [--ideal 30] [--speckle 0]
 """
 
 from __future__ import annotations
@@ -223,13 +223,16 @@ if __name__ == "__main__":
                     "fitted; 0: the laser-off frame divided out as it is)")
     ap.add_argument("--blur-var", type=float, help="the stripe's blur_var, px^2 (default: "
                     "fitted to the session; 0: no correction at albedo steps)")
+    ap.add_argument("--speckle", type=float, help="the renderer's speckle contrast (default: "
+                    "independent_render's; 0: no speckle)")
     a = ap.parse_args()
     opts = {k: v for k, v in (("albedo_step", a.albedo_step), ("albedo_offset", a.albedo_offset),
                               ("blur_var", a.blur_var)) if v is not None}
+    render = {} if a.speckle is None else {"speckle": a.speckle}
     runs = []
     for s in a.seeds:
         runs.append(measure(s, a.method, None if a.keep is None else f"{a.keep}/s{s}", opts,
-                            ideal_draws=a.ideal))
+                            ideal_draws=a.ideal, **render))
         print(report(runs[-1]), flush=True)
     if len(runs) > 1:
         print(summary(runs))
