@@ -115,7 +115,8 @@ def measured(request, tmp_path_factory):
     folder = tmp_path_factory.mktemp(f"independent{request.param}")
     m = C.measure(request.param, "lm", folder)
     truth = dict(np.load(folder / "truth.npz"))
-    before = C.stripe_errors(folder, truth, albedo_offset=0.0)
+    # before: the laser-off frame divided out as it is, the peaks found on the image itself
+    before = C.stripe_errors(folder, truth, albedo_offset=0.0, detect_sigma_along=0.0)
     return m, before
 
 
@@ -170,9 +171,11 @@ def test_albedo_offset_recovers_an_affine_laser_return():
 def test_a_stripe_on_one_level_takes_the_sessions_albedo_offset(tmp_path):
     """A view whose stripe runs along the light squares, touching the dark ones only at
     their corners (seed 7's pose 13), cannot fit the albedo offset: with 0 instead (the
-    laser-off frame divided out as it is) its stripe is found in 70 of 640 columns, 0.55 px
-    RMS off (pulled towards the dark squares). The session takes the median offset of its
-    other views for it: 640 columns, 0.060 px RMS, at most 0.16 px (measured)."""
+    laser-off frame divided out as it is) its stripe was found in 70 of 640 columns, 0.50 px
+    RMS off (pulled towards the dark squares); found on the image smoothed along the stripe
+    (``detect_sigma_along``) in 634, still 0.22 px RMS off. The session takes the median
+    offset of its other views for it: 634 columns, 0.052 px RMS, at most 0.16 px
+    (measured)."""
     import json
 
     import cv2
@@ -204,9 +207,54 @@ def test_a_stripe_on_one_level_takes_the_sessions_albedo_offset(tmp_path):
     off = cv2.imread(str(tmp_path / "p003_off.png"), cv2.IMREAD_UNCHANGED)
     truth = R.true_centres(R.TRUE, poses[13])
     alone = stripe_from_pair(on, off)
+    unsmoothed = stripe_from_pair(on, off, detect_sigma_along=0.0)
     shared = stripe_from_pair(on, off, albedo_offset=a)
     e_alone = (alone.centre - truth)[alone.found]
+    e_unsmoothed = (unsmoothed.centre - truth)[unsmoothed.found]
     e_shared = (shared.centre - truth)[shared.found]
-    assert alone.found.sum() < 200 and np.sqrt(np.mean(e_alone ** 2)) > 0.3
+    assert unsmoothed.found.sum() < 200 and np.sqrt(np.mean(e_unsmoothed ** 2)) > 0.3
+    assert np.sqrt(np.mean(e_alone ** 2)) > 2.5 * np.sqrt(np.mean(e_shared ** 2))
     assert shared.found.sum() > 600 and np.sqrt(np.mean(e_shared ** 2)) < 0.1
     np.testing.assert_array_equal(reports[3].stripe["FOUND"], shared.found.sum())
+
+
+@pytest.mark.parametrize("seed", [3, 11])
+def test_a_noisy_camera_keeps_the_stripe(tmp_path, seed):
+    """3 grey levels of sensor noise (a camera at high gain): normalising by the laser-off
+    frame multiplies the noise on the dark squares, and the threshold that keeps it out cut
+    the stripe where it is faint (measured on ``independent_check`` seed 0's 16 views: 3595
+    of 10144 columns found). Found on the image smoothed 2 px along the stripe
+    (``DETECT_ALONG``), the peaks clear a threshold 2.7 x lower: 10127 columns, 0.060 px
+    RMS, at most 0.33 px; the map error 2.00 -> 1.10 x the baseline (seeds 1, 2: 2.52 ->
+    1.97, 1.97 -> 1.88). A session of 3 grey levels also fits its albedo offset on fewer
+    views: the peaks it takes must clear 5 sigmas of their 5-pixel mean, not of a pixel."""
+    import json
+
+    import cv2
+    from hmlvs.image.session import dataset_from_images
+
+    rng = np.random.default_rng(seed)
+    poses = [R.random_pose(rng) for _ in range(5)]
+    draw = np.random.default_rng(100 + seed)
+    entries, centres = [], []
+    for k, pose in enumerate(poses):
+        on, off = R.render_view(R.TRUE, pose, draw, noise=3.0)
+        cv2.imwrite(str(tmp_path / f"p{k:03d}_on.png"), on)
+        cv2.imwrite(str(tmp_path / f"p{k:03d}_off.png"), off)
+        entries.append({"id": f"p{k:03d}", "on": f"p{k:03d}_on.png",
+                        "off": f"p{k:03d}_off.png", "pose": pose.tolist()})
+        centres.append(R.true_centres(R.TRUE, pose))
+    (tmp_path / "manifest.json").write_text(json.dumps({
+        "format": "hmlvs-images", "version": 1, "image_size": list(R.SIZE),
+        "board": R.BOARD, "poses": entries}))
+    ds, reports = dataset_from_images(tmp_path, mode="homography")
+    assert all(r.ok for r in reports)
+    truth = {"views": len(poses), "centres": centres}
+    on_image = int(sum(np.isfinite(c).sum() for c in centres))
+    now = C.stripe_errors(tmp_path, truth, ds.meta)["FOUND"]
+    before = C.stripe_errors(tmp_path, truth, ds.meta, detect_sigma_along=0.0)["FOUND"]
+    assert now["n"] > 0.95 * on_image and before["n"] < 0.75 * on_image
+    # three times the noise of the issue's scene (its targets 0.06 px RMS, 0.3 px at most):
+    # measured 0.070 / 0.062 px RMS, at most 0.50 / 0.30 px on seeds 3 / 11; the 0.50 px
+    # column is also found, as far off, without the smoothing
+    assert now["rms"] < 0.09 and now["max"] < 0.75

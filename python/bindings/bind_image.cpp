@@ -91,7 +91,8 @@ void BindImage(py::module_& m) {
       .def_readwrite("noise", &StripeOptions::noise)
       .def_readwrite("steger_sigma", &StripeOptions::steger_sigma)
       .def_readwrite("steger_sigma_along", &StripeOptions::steger_sigma_along)
-      .def_readwrite("dominance", &StripeOptions::dominance);
+      .def_readwrite("dominance", &StripeOptions::dominance)
+      .def_readwrite("detect_sigma_along", &StripeOptions::detect_sigma_along);
   py::class_<StripeResult>(m, "_StripeResult")
       .def_readonly("centre", &StripeResult::centre)
       .def_readonly("intensity", &StripeResult::intensity)
@@ -230,6 +231,7 @@ void BindImage(py::module_& m) {
         return EstimateDifferenceNoise(v);
       },
       py::arg("image"));
+  m.def("_smoothing_noise_gain", &SmoothingNoiseGain, py::arg("sigma"));
 }
 
 }  // namespace hmlvs::python

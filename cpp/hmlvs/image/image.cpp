@@ -418,6 +418,10 @@ void ValidateOptions(const StripeOptions& o) {
         << o.steger_sigma_along;
   } else if (!(o.dominance == 0.0 || (o.dominance >= 1.0 && std::isfinite(o.dominance)))) {
     msg << "dominance must be 0 (off) or a finite ratio >= 1, got " << o.dominance;
+  } else if (!(o.detect_sigma_along == 0.0 ||
+               (o.detect_sigma_along >= 0.5 && o.detect_sigma_along <= 40.0))) {
+    msg << "detect_sigma_along must be 0 (off) or lie in [0.5, 40] px, got "
+        << o.detect_sigma_along;
   } else {
     return;
   }
@@ -675,26 +679,31 @@ double EstimateDifferenceNoise(const ImageView<T>& image, int row_step) {
   return std::sqrt(var + 1.0 / 6.0);
 }
 
+// The scan view smoothed across scan lines (along the stripe) with the kernel g (edges
+// replicated), stored with adjacent scan lines contiguous (ss = 1, sp = n_scan).
 template <typename T>
-StripeResult ExtractStripe(const ImageView<T>& image, const StripeOptions& o) {
-  RequireImage(image, "the image");
-  ValidateOptions<T>(o);
-  const ScanView<T> v = MakeScanView(image, o.direction);
-  StripeResult res;
-  res.noise = o.noise >= 0.0 ? o.noise : EstimateDifferenceNoise(image);
-  if (o.threshold >= 0.0) {
-    res.threshold = o.threshold;
-  } else {
-    T mx = 0;
-    for (int r = 0; r < image.rows; r += 4) {
-      for (int c = 0; c < image.cols; ++c) mx = std::max(mx, image(r, c));
+std::vector<float> SmoothAlong(const ScanView<T>& v, const Kernels& g) {
+  std::vector<float> out(static_cast<size_t>(v.n_scan) * static_cast<size_t>(v.n_prof));
+  const int r = g.radius;
+  for (int p = 0; p < v.n_prof; ++p) {
+    float* line = out.data() + static_cast<size_t>(p) * static_cast<size_t>(v.n_scan);
+    for (int s = 0; s < v.n_scan; ++s) {
+      double acc = 0.0;
+      if (s >= r && s + r < v.n_scan) {
+        for (int k = -r; k <= r; ++k) acc += g.g0[static_cast<size_t>(k + r)] * v.at(s + k, p);
+      } else {
+        for (int k = -r; k <= r; ++k) {
+          acc += g.g0[static_cast<size_t>(k + r)] * v.clamped(s + k, p);
+        }
+      }
+      line[s] = static_cast<float>(acc);
     }
-    res.threshold = std::max(5.0 * res.noise, 0.15 * static_cast<double>(mx));
   }
-  // v > threshold  <=>  v > floor(threshold) for integer pixel values
-  const double tmax = static_cast<double>(std::numeric_limits<T>::max());
-  const T thr = static_cast<T>(std::min(std::floor(res.threshold), tmax));
+  return out;
+}
 
+template <typename T>
+Runs DetectRuns(const ScanView<T>& v, T thr) {
   Runs runs(v.n_scan);
   if (std::abs(v.ss) <= std::abs(v.sp)) {
     if (v.ss == 1) {
@@ -707,6 +716,48 @@ StripeResult ExtractStripe(const ImageView<T>& image, const StripeOptions& o) {
   } else {
     DetectPerLine<T, false>(v, thr, &runs);
   }
+  return runs;
+}
+
+template <typename T>
+StripeResult ExtractStripe(const ImageView<T>& image, const StripeOptions& o) {
+  RequireImage(image, "the image");
+  ValidateOptions<T>(o);
+  const ScanView<T> v = MakeScanView(image, o.direction);
+  StripeResult res;
+  res.noise = o.noise >= 0.0 ? o.noise : EstimateDifferenceNoise(image);
+  // The detection image: the image itself, or smoothed along the stripe, where the noise
+  // is lower by the kernel's gain sqrt(sum g^2) and a faint stripe clears the threshold.
+  const bool smoothed = o.detect_sigma_along > 0.0;
+  std::vector<float> smooth;
+  ScanView<float> dv{nullptr, v.n_scan, v.n_prof, 1, v.n_scan};
+  double noise_gain = 1.0;
+  if (smoothed) {
+    const Kernels g = MakeKernels(o.detect_sigma_along);
+    noise_gain = std::sqrt(g.sum_sq0);
+    smooth = SmoothAlong(v, g);
+    dv.data = smooth.data();
+  }
+  if (o.threshold >= 0.0) {
+    res.threshold = o.threshold;
+  } else {
+    double mx = 0.0;
+    if (smoothed) {
+      for (size_t i = 0; i < smooth.size(); i += 4) mx = std::max(mx, double{smooth[i]});
+    } else {
+      T m = 0;
+      for (int r = 0; r < image.rows; r += 4) {
+        for (int c = 0; c < image.cols; ++c) m = std::max(m, image(r, c));
+      }
+      mx = static_cast<double>(m);
+    }
+    res.threshold = std::max(5.0 * res.noise * noise_gain, 0.15 * mx);
+  }
+  // v > threshold  <=>  v > floor(threshold) for integer pixel values
+  const double tmax = static_cast<double>(std::numeric_limits<T>::max());
+  const Runs runs = smoothed
+                        ? DetectRuns(dv, static_cast<float>(res.threshold))
+                        : DetectRuns(v, static_cast<T>(std::min(std::floor(res.threshold), tmax)));
 
   const int n = v.n_scan;
   res.centre.setConstant(n, kNaN);
@@ -737,7 +788,8 @@ StripeResult ExtractStripe(const ImageView<T>& image, const StripeOptions& o) {
     Peak peaks[kMaxRuns];
     for (int k = 0; k < count; ++k) {
       const size_t idx = static_cast<size_t>(s) * kMaxRuns + k;
-      peaks[k] = MeasurePeak(v, s, runs.begin[idx], runs.end[idx], limit);
+      peaks[k] = smoothed ? MeasurePeak(dv, s, runs.begin[idx], runs.end[idx], limit)
+                          : MeasurePeak(v, s, runs.begin[idx], runs.end[idx], limit);
     }
     // A run whose half-maximum span holds a stronger run's peak is that peak's shoulder
     // (noise splitting a wide profile where it crosses the threshold), not a peak.
@@ -1014,6 +1066,16 @@ template void AssessStripe<std::uint16_t>(const ImageView<std::uint16_t>&,
                                           const StripeQualityOptions&, StripeResult*);
 template ColumnPeaks FindColumnPeaks<std::uint8_t>(const ImageView<std::uint8_t>&, int);
 template ColumnPeaks FindColumnPeaks<std::uint16_t>(const ImageView<std::uint16_t>&, int);
+
+double SmoothingNoiseGain(double sigma) {
+  if (!(sigma >= 0.5 && sigma <= 40.0)) {
+    std::ostringstream msg;
+    msg << "the smoothing scale must lie in [0.5, 40] px, got " << sigma;
+    throw std::invalid_argument(msg.str());
+  }
+  return std::sqrt(MakeKernels(sigma).sum_sq0);
+}
+
 template double EstimateDifferenceNoise<std::uint8_t>(const ImageView<std::uint8_t>&, int);
 template double EstimateDifferenceNoise<std::uint16_t>(const ImageView<std::uint16_t>&, int);
 

@@ -120,6 +120,11 @@ struct StripeOptions {
   /// 0: a second plausible peak makes the scan line kMultiple. A value d >= 1 accepts the
   /// strongest peak when its intensity is at least d times every other peak's.
   double dominance = 0.0;
+  /// Smoothing scale (px) along the stripe (across scan lines) of the image the peaks are
+  /// found and sized on; 0: the image itself. Centres are still measured on the image. The
+  /// automatic threshold then takes the smoothed noise (noise x the kernel's noise gain)
+  /// and the smoothed maximum; a given threshold applies to the smoothed image.
+  double detect_sigma_along = 0.0;
 };
 
 /// One entry per scan line (image column for kColumns, image row for kRows).
@@ -202,5 +207,10 @@ void RefineStripeCentres(const ImageView<float>& image, StripeDirection directio
 /// count), combined with the quantisation noise of two rounded frames (variance 1/6).
 template <typename T>
 double EstimateDifferenceNoise(const ImageView<T>& image, int row_step = 4);
+
+/// The factor by which smoothing with the sampled Gaussian of scale `sigma` (px, radius
+/// ceil(3.5 sigma), as StripeOptions::detect_sigma_along uses it) lowers independent
+/// per-pixel noise: sqrt(sum g^2).
+double SmoothingNoiseGain(double sigma);
 
 }  // namespace hmlvs

@@ -676,7 +676,12 @@ def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: b
     d = difference_image(on_g, off_g, normalize=normalize, offset=offset if normalize else 0.0)
     automatic = opts.get("threshold") is None
     if normalize and automatic:
-        opts["threshold"] = _normalized_threshold(on_g, off_g, d, offset, noise)
+        # Normalising raises the noise on dark squares, and the threshold that keeps their
+        # noise out would cut a faint stripe on a noisy image (3 grey levels of noise: half
+        # the columns lost): peaks are found on the image smoothed along the stripe.
+        opts.setdefault("detect_sigma_along", DETECT_ALONG)
+        opts["threshold"] = _normalized_threshold(on_g, off_g, d, offset, noise,
+                                                  opts["detect_sigma_along"])
     weighted = opts.get("method") is None
     if opts.get("method") is None:
         # The pipeline's default centre: Steger's line detector at a scale fitted to the
@@ -785,6 +790,11 @@ def _weighted_centres(stripe: StripeResult, on_g: np.ndarray, off_g: np.ndarray,
 #: (at most 0.16-0.25 px) at 2; each view's mean error, which the calibration feels, is
 #: unchanged.
 BOARD_SMOOTH_ALONG = 2.0
+
+#: The smoothing along the stripe (px) of the image a normalised stripe's peaks are found
+#: on (``detect_sigma_along`` of :func:`~hmlvs.image.stripe.extract_stripe`): 2.7x less
+#: noise, at most 4 px of a jump's ends blurred together.
+DETECT_ALONG = 2.0
 
 
 def _in_range(value: Any, lo: float, hi: float) -> float | None:

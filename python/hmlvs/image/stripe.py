@@ -163,7 +163,9 @@ def _albedo_offset(on: np.ndarray, off: np.ndarray,
     top = float(np.iinfo(a.dtype).max)
     cols = np.arange(a.shape[1])
     lo, hi = np.clip(m - 2, 0, a.shape[0] - 1), np.clip(m + 2, 0, a.shape[0] - 1)
-    ok = flat & (peak > max(5.0 * noise, 3.0)) & (a[lo, cols] < top) & \
+    # 5 sigma of the 5-pixel mean (sqrt(5) less noise than a pixel): at 3 grey levels of
+    # noise, 5 sigmas of a pixel left too few dark squares' peaks for the fit
+    ok = flat & (peak > max(5.0 * noise / np.sqrt(5.0), 3.0)) & (a[lo, cols] < top) & \
         (a[m, cols] < top) & (a[hi, cols] < top)
     return _affine_offset(peak[ok], level[ok]), noise
 
@@ -321,6 +323,7 @@ class StripeOptions:
     dominance: float = 0.0
     channel: int | None = None
     steger_sigma_along: float | None = None
+    detect_sigma_along: float = 0.0
 
     def __post_init__(self) -> None:
         if self.direction not in _DIRECTIONS:
@@ -332,7 +335,8 @@ class StripeOptions:
             v = getattr(self, name)
             if v is not None:
                 object.__setattr__(self, name, _nonneg(v, name))
-        for name in ("min_width", "max_width", "steger_sigma", "dominance"):
+        for name in ("min_width", "max_width", "steger_sigma", "dominance",
+                     "detect_sigma_along"):
             object.__setattr__(self, name, _finite(getattr(self, name), name))
         c = self.channel
         if c is not None and (isinstance(c, bool) or not isinstance(c, Integral) or c < 0):
@@ -348,6 +352,7 @@ class StripeOptions:
         o.min_width, o.max_width = self.min_width, self.max_width
         o.steger_sigma, o.dominance = self.steger_sigma, self.dominance
         o.steger_sigma_along = 0.0 if self.steger_sigma_along is None else self.steger_sigma_along
+        o.detect_sigma_along = self.detect_sigma_along
         return o
 
 
@@ -357,6 +362,7 @@ def extract_stripe(image: np.ndarray, direction: Direction = "columns",
                    noise: float | None = None, steger_sigma: float = 1.5,
                    dominance: float = 0.0, channel: int | None = None,
                    steger_sigma_along: float | None = None,
+                   detect_sigma_along: float = 0.0,
                    options: StripeOptions | None = None) -> StripeResult:
     """Sub-pixel laser stripe centres, one per image column (or row), computed in C++.
 
@@ -385,6 +391,12 @@ def extract_stripe(image: np.ndarray, direction: Direction = "columns",
     steger_sigma_along : Steger's smoothing scale along the stripe (px), default
         ``steger_sigma``. A straight stripe stays unbiased at any scale; a larger one
         averages more laser speckle but blurs where the stripe bends or jumps.
+    detect_sigma_along : find and size the peaks (``threshold``, ``min_width``,
+        ``max_width``, ``dominance``, ``intensity``, ``width``) on the image smoothed along
+        the stripe at this scale (px; 0, the default: on the image itself), where the
+        noise is lower by the kernel's gain (:func:`smoothing_noise_gain`) and a faint
+        stripe on a noisy image clears the threshold; the centres are still measured on
+        the image. The automatic threshold then uses the smoothed noise and maximum.
     options : a :class:`StripeOptions` holding all of the above instead (then the keyword
         options are ignored)
 
@@ -396,7 +408,8 @@ def extract_stripe(image: np.ndarray, direction: Direction = "columns",
         options = StripeOptions(direction=direction, method=method, threshold=threshold,
                                 min_width=min_width, max_width=max_width, noise=noise,
                                 steger_sigma=steger_sigma, dominance=dominance,
-                                channel=channel, steger_sigma_along=steger_sigma_along)
+                                channel=channel, steger_sigma_along=steger_sigma_along,
+                                detect_sigma_along=detect_sigma_along)
     elif not isinstance(options, StripeOptions):
         raise ValueError(f"options must be a StripeOptions, got {options!r}")
     direction, method = options.direction, options.method
@@ -566,8 +579,16 @@ def _nonneg(x: Any, name: str) -> float:
     return v
 
 
+def smoothing_noise_gain(sigma: float) -> float:
+    """The factor by which :func:`extract_stripe`'s ``detect_sigma_along`` smoothing at
+    ``sigma`` (px, in [0.5, 40]) lowers independent per-pixel noise: sqrt(sum g^2) of its
+    sampled Gaussian (about 1 / sqrt(2 sqrt(pi) sigma); 0.376 at 2 px)."""
+    return float(_core._smoothing_noise_gain(_finite(sigma, "sigma")))
+
+
 def _normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray,
-                          offset: float = 0.0, sigma: float | None = None) -> float:
+                          offset: float = 0.0, sigma: float | None = None,
+                          along: float = 0.0) -> float:
     """Automatic threshold for an albedo-normalised difference image.
 
     Normalising multiplies the noise by the gain mean(off) / max(off, floor), which is
@@ -575,7 +596,9 @@ def _normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray,
     :func:`extract_stripe` would let noise peaks through there. Use 5 x the plain
     difference's noise x the 95th percentile of the gain instead (and at least 0.15 x the
     image maximum, as for the plain image). ``sigma``: the plain difference's noise when
-    known (``_estimate_difference_noise`` of it), else estimated here.
+    known (``_estimate_difference_noise`` of it), else estimated here. ``along``: the
+    ``detect_sigma_along`` the stripe is found with (px; 0: none), whose smoothing lowers
+    the noise term by :func:`smoothing_noise_gain`.
     """
     if sigma is None:
         raw = _core._difference_image(on, off, False, -1.0, -1.0)
@@ -583,4 +606,5 @@ def _normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray,
     mean = float(off.mean())
     gain = (mean + offset) / np.maximum(off[::4, ::4].astype(float) + offset,
                                         max(1.0, 0.1 * mean))
-    return max(5.0 * sigma * float(np.percentile(gain, 95)), 0.15 * float(d[::4].max()))
+    k = smoothing_noise_gain(along) if along > 0.0 else 1.0
+    return max(5.0 * sigma * k * float(np.percentile(gain, 95)), 0.15 * float(d[::4].max()))
