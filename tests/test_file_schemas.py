@@ -194,6 +194,80 @@ def test_a_valid_data_set_reads_back_in_both_forms(tmp_path, small_dataset):
         np.testing.assert_array_equal(back.ids, small_dataset.ids)
 
 
+def _with_quality(ds):
+    from dataclasses import replace
+
+    m = len(ds)
+    return replace(ds, quality={"sigma": np.linspace(0.01, 0.02, m),
+                                "width": np.full(m, 4.5), "peak": np.arange(m) + 40.0,
+                                "residual": np.r_[np.nan, np.full(m - 1, 0.05)]})
+
+
+def test_the_stripe_quality_reads_back_and_follows_subsets(tmp_path, small_dataset):
+    """Per-point stripe quality (a data set from images has it) survives both file forms
+    (NaN as JSON null), a subset and a concatenation."""
+    from dataclasses import replace
+
+    from hmlvs import Dataset
+
+    ds = _with_quality(small_dataset)
+    for name in ("q.npz", "q.json"):
+        back = Dataset.load(ds.save(tmp_path / name))
+        assert sorted(back.quality) == sorted(ds.quality)
+        for k, v in ds.quality.items():
+            np.testing.assert_array_equal(back.quality[k], v)
+    assert "null" in (tmp_path / "q.json").read_text()
+    sub = ds.subset(ds.quality["peak"] > 42.0)
+    np.testing.assert_array_equal(sub.quality["peak"], [43.0, 44.0, 45.0])
+    np.testing.assert_array_equal(sub.ids, ds.ids[3:])
+    other = replace(sub, ids=np.char.add(sub.ids, "b"))
+    both = ds.concat(other)
+    np.testing.assert_array_equal(both.quality["peak"], np.r_[ds.quality["peak"], 43, 44, 45])
+    assert ds.concat(replace(other, quality=None)).quality is None  # one side without it
+    assert Dataset.load(small_dataset.save(tmp_path / "plain.npz")).quality is None
+
+
+@pytest.mark.parametrize("quality, message", [
+    ({"width": np.ones(5)}, r"quality\['width'\] must have 6 entries \(one per point\), got "
+     r"shape \(5,\)"),
+    ({"snr": np.ones(6)}, r"quality has an unknown entry 'snr'; the entries are sigma, width, "
+     "peak, residual"),
+    ({"peak": np.r_[np.inf, np.ones(5)]}, r"quality\['peak'\] entry 0 is infinite"),
+    ([1, 2], r"quality must be a dict of arrays named sigma, width, peak, residual, got list"),
+])
+def test_a_wrong_stripe_quality_is_named(small_dataset, quality, message):
+    from dataclasses import replace
+
+    with pytest.raises(ValueError, match=message):
+        replace(small_dataset, quality=quality)
+
+
+def test_a_data_set_file_with_a_wrong_quality_names_the_point(tmp_path, small_dataset):
+    from hmlvs import Dataset
+
+    doc = _with_quality(small_dataset).to_json_dict()
+    doc["points"][2]["quality"].pop("peak")
+    (tmp_path / "a.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=r"points\[2\]\.quality: has \['residual', 'sigma', "
+                       r"'width'\], points\[0\] has \['peak', 'residual', 'sigma', 'width'\]"):
+        Dataset.load(tmp_path / "a.json")
+    doc["points"][2]["quality"]["peak"] = "high"
+    (tmp_path / "b.json").write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=r"points\[2\]\.quality\.peak: must be a number"):
+        Dataset.load(tmp_path / "b.json")
+    with np.load(_with_quality(small_dataset).save(tmp_path / "ok.npz")) as z:
+        arrays = dict(z)
+    arrays["quality_width"] = np.ones(4)
+    np.savez(tmp_path / "c.npz", **arrays)
+    with pytest.raises(ValueError, match=r"c.npz: quality\['width'\] must have 6 entries"):
+        Dataset.load(tmp_path / "c.npz")
+    arrays["quality_width"] = np.r_[np.ones(5), -np.inf]
+    np.savez(tmp_path / "d.npz", **arrays)
+    with pytest.raises(ValueError, match=r"quality_width: must be finite; the entry at 5 is "
+                       "-inf"):
+        Dataset.load(tmp_path / "d.npz")
+
+
 # --- pose files (YAML) and manifest poses -----------------------------------------------
 
 @pytest.mark.parametrize("text, message", [

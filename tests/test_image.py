@@ -707,6 +707,24 @@ def test_dataset_from_images_end_to_end(written, mode):
         assert len(ds) > 10 * sum(x.ok for x in report)
     assert rms(e3) < 0.1  # mm, for < 0.1 px at ~0.25 mm per pixel
     assert ds.meta["smooth_along"] == BOARD_SMOOTH_ALONG  # the stripe lies on the board
+    # every point carries the quality of its scan line of the stripe the session extracted
+    from hmlvs.image.session import stripe_from_pair
+
+    q = ds.quality
+    assert sorted(q) == ["peak", "residual", "sigma", "width"]
+    assert all(v.shape == (len(ds),) and np.isfinite(v).all() for v in q.values())
+    assert (q["sigma"] > 0).all() and (q["residual"] >= 0).all()
+    view = int(ds.pose_index[0])
+    on, off = r.on[view], r.off[view]
+    opts = {"smooth_along": ds.meta["smooth_along"], "blur_var": ds.meta["blur_var"]}
+    if f"p{view:03d}" in ds.meta.get("albedo_offset_taken_by", []):
+        opts["albedo_offset"] = ds.meta["albedo_offset_session"]
+    stripe = stripe_from_pair(on, off, **opts)
+    here = ds.pose_index == view
+    line = np.rint(ds.pixels[here, 0]).astype(int)
+    np.testing.assert_array_equal(q["width"][here], stripe.width[line])
+    np.testing.assert_array_equal(q["peak"][here], stripe.intensity[line])
+    np.testing.assert_array_equal(q["residual"][here], stripe.residual[line])
 
 
 def test_smooth_along_bad_values(written):

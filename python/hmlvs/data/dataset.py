@@ -18,6 +18,8 @@ from ..models.paper import validate_poses
 FORMAT = "hmlvs-dataset"
 FORMAT_VERSION = 1
 _LENGTH_SCALE = {"mm": 1.0, "m": 1000.0}
+#: The per-point stripe quality a data set from images carries (:attr:`Dataset.quality`).
+QUALITY_FIELDS = ("sigma", "width", "peak", "residual")
 _ANGLE_UNITS = ("rad", "deg")
 
 
@@ -34,6 +36,15 @@ class Dataset:
     joints : (m, n) joint readings the poses came from, or None
     joint_unit : "rad" or "deg"
     pose_index : (m,) index of the image/pose each point was seen in, or None
+    quality : the stripe's quality at each point, or None: a dict of (m,) arrays named by
+        :data:`QUALITY_FIELDS`, some or all of ``sigma`` (1-sigma uncertainty of the centre
+        from the pixel noise, px), ``width`` (the profile's FWHM, px), ``peak`` (its peak on
+        the stripe's difference image) and ``residual`` (the profile's asymmetry about its
+        centre, relative to the peak; 0 when symmetric), as
+        :class:`~hmlvs.image.stripe.StripeResult` gives them for the scan line of the point.
+        Data sets from images have them (every point is a ``FOUND`` scan line); a
+        calibration can drop points by them, e.g.
+        ``ds.subset(ds.quality["residual"] < 0.05)``.
 
     Lengths given in metres (``length_unit="m"``) are converted to mm on construction.
     """
@@ -47,6 +58,7 @@ class Dataset:
     pose_index: np.ndarray | None = None
     length_unit: str = "mm"
     meta: dict[str, Any] = field(default_factory=dict)
+    quality: dict[str, np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         if self.length_unit not in _LENGTH_SCALE:
@@ -89,8 +101,10 @@ class Dataset:
             if pose_index.shape != (m,) or not np.issubdtype(pose_index.dtype, np.integer):
                 raise ValueError(f"pose_index must be {m} integers, got {pose_index.shape} "
                                  f"{pose_index.dtype}")
+        quality = _check_quality(self.quality, m)
         for name, value in (("pixels", px), ("poses", poses), ("points", pts), ("ids", ids),
-                            ("joints", joints), ("pose_index", pose_index)):
+                            ("joints", joints), ("pose_index", pose_index),
+                            ("quality", quality)):
             object.__setattr__(self, name, value)
         object.__setattr__(self, "length_unit", "mm")
 
@@ -133,7 +147,9 @@ class Dataset:
             self.pixels[idx], self.poses[idx], self.points[idx], ids=self.ids[idx],
             joints=None if self.joints is None else self.joints[idx], joint_unit=self.joint_unit,
             pose_index=None if self.pose_index is None else self.pose_index[idx],
-            meta=dict(self.meta))
+            meta=dict(self.meta),
+            quality=None if self.quality is None else
+            {k: v[idx] for k, v in self.quality.items()})
 
     def split(self, fit: float | int = 0.5, seed: int | None = None,
               by_pose: bool = False) -> tuple["Dataset", "Dataset"]:
@@ -159,11 +175,15 @@ class Dataset:
         joints = None
         if self.joints is not None and other.joints is not None:
             joints = np.vstack([self.joints, other.joints])
+        quality = None
+        if self.quality is not None and other.quality is not None:
+            quality = {k: np.concatenate([v, other.quality[k]])
+                       for k, v in self.quality.items() if k in other.quality} or None
         return Dataset(np.vstack([self.pixels, other.pixels]),
                        np.concatenate([self.poses, other.poses]),
                        np.vstack([self.points, other.points]),
                        ids=np.concatenate([self.ids, other.ids]), joints=joints,
-                       joint_unit=self.joint_unit, meta=dict(self.meta))
+                       joint_unit=self.joint_unit, meta=dict(self.meta), quality=quality)
 
     def summary(self) -> str:
         lo, hi = self.points.min(axis=0), self.points.max(axis=0)
@@ -191,6 +211,8 @@ class Dataset:
                 arrays["joints"] = self.joints
             if self.pose_index is not None:
                 arrays["pose_index"] = self.pose_index
+            for k, v in (self.quality or {}).items():
+                arrays[f"quality_{k}"] = v
             with atomic_write(path, "wb") as fh:
                 np.savez_compressed(fh, **arrays)
         elif path.suffix == ".json":
@@ -216,6 +238,10 @@ class Dataset:
                 e["joints"] = self.joints[i].tolist()
             if self.pose_index is not None:
                 e["pose_index"] = int(self.pose_index[i])
+            if self.quality:
+                # NaN (no value) as null: JSON has no NaN
+                e["quality"] = {k: (float(v[i]) if np.isfinite(v[i]) else None)
+                                for k, v in self.quality.items()}
             d["points"].append(e)
         return d
 
@@ -238,7 +264,9 @@ class Dataset:
                            joint_unit=header.get("joint_unit", "rad"),
                            pose_index=arrays.get("pose_index"),
                            length_unit=header.get("length_unit", "mm"),
-                           meta=header.get("meta", {}))
+                           meta=header.get("meta", {}),
+                           quality={k: arrays[f"quality_{k}"] for k in QUALITY_FIELDS
+                                    if f"quality_{k}" in arrays} or None)
             if path.suffix == ".json":
                 with open(path, encoding="utf-8") as fh:
                     d = json.load(fh)
@@ -266,20 +294,21 @@ class Dataset:
         _check_header(d, source)
         validate(d, _json_schema(), str(source))
         entries = d["points"]
-        for key in ("joints", "pose_index"):
+        for key in ("joints", "pose_index", "quality"):
             having = [key in e for e in entries]
             if any(having) and not all(having):
                 i = having.index(not having[0])
                 raise ValueError(f"{source}: points[{i}] {'has' if having[i] else 'lacks'} "
                                  f"{key} but points[0] {'has' if having[0] else 'does not'}: "
                                  f"give {key} for every point or for none")
-        if entries and "joints" in entries[0]:
-            n = len(entries[0]["joints"])
-            for i, e in enumerate(entries):
-                if len(e["joints"]) != n:
-                    raise ValueError(f"{source}: points[{i}].joints: has {len(e['joints'])} "
-                                     f"readings, points[0] has {n}")
         m = len(entries)
+        quality = None
+        if entries and "joints" in entries[0]:
+            _alike(entries, "joints", lambda j: f"{len(j)} readings", source)
+        if entries and "quality" in entries[0]:
+            keys = _alike(entries, "quality", sorted, source)
+            quality = {k: np.array([np.nan if e["quality"][k] is None else e["quality"][k]
+                                    for e in entries], float) for k in keys}
         return cls(np.array([e["pixel"] for e in entries], float).reshape(m, 2),
                    np.array([e["base_from_hand"] for e in entries], float).reshape(m, 4, 4),
                    np.array([e["reference"] for e in entries], float).reshape(m, 3),
@@ -289,7 +318,45 @@ class Dataset:
                    joint_unit=d.get("joint_unit", "rad"),
                    pose_index=np.array([e["pose_index"] for e in entries], dtype=np.int64)
                    if entries and "pose_index" in entries[0] else None,
-                   length_unit=d.get("length_unit", "mm"), meta=d.get("meta", {}))
+                   length_unit=d.get("length_unit", "mm"), meta=d.get("meta", {}),
+                   quality=quality)
+
+
+def _alike(entries: list[dict[str, Any]], key: str, describe: Any, source: str) -> Any:
+    """``describe(entry[key])`` (the number of joint readings, the quality's names), the same
+    for every point as for points[0], or a ValueError naming the first that differs."""
+    want = describe(entries[0][key])
+    for i, e in enumerate(entries):
+        got = describe(e[key])
+        if got != want:
+            raise ValueError(f"{source}: points[{i}].{key}: has {got}, points[0] has {want}")
+    return want
+
+
+def _check_quality(quality: Any, m: int) -> dict[str, np.ndarray] | None:
+    """:attr:`Dataset.quality` checked: None, or a dict of (m,) float arrays named by
+    QUALITY_FIELDS (NaN where a value is missing, no infinities)."""
+    if quality is None:
+        return None
+    if not isinstance(quality, dict):
+        raise ValueError(f"quality must be a dict of arrays named {', '.join(QUALITY_FIELDS)}"
+                         f", got {type(quality).__name__}")
+    out = {}
+    for k, v in quality.items():
+        if k not in QUALITY_FIELDS:
+            raise ValueError(f"quality has an unknown entry {k!r}; the entries are "
+                             f"{', '.join(QUALITY_FIELDS)}")
+        try:
+            a = np.array(v, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"quality[{k!r}] must be numbers") from None
+        if a.shape != (m,):
+            raise ValueError(f"quality[{k!r}] must have {m} entries (one per point), got "
+                             f"shape {a.shape}")
+        if np.isinf(a).any():
+            raise ValueError(f"quality[{k!r}] entry {int(np.argmax(np.isinf(a)))} is infinite")
+        out[k] = a
+    return out or None
 
 
 def fit_and_test(dataset: Any, test: Any = None) -> tuple["Dataset", "Dataset | None"]:
@@ -347,7 +414,10 @@ def _json_schema() -> Any:
             "reference": numbers(3, "the reference point [x, y, z]"),
             "base_from_hand": sc.matrix(4, 4, "the 4x4 base_from_hand pose"),
             "joints": sc.Field("list", "the joint readings", items=sc.number()),
-            "pose_index": sc.integer()})
+            "pose_index": sc.integer(),
+            "quality": sc.Field("struct", "the stripe's quality {sigma, width, peak, "
+                                "residual} (numbers or null)", keys={
+                                    k: sc.number(nullable=True) for k in QUALITY_FIELDS})})
     return _header_schema(points=sc.Field("list", "a list of calibration points",
                                           items=entry))
 
@@ -365,7 +435,10 @@ def _npz_schema() -> Any:
             "points": sc.array(("m", 3), "the reference points"),
             "ids": sc.array(("m",), "the point ids", dtype="id"),
             "joints": sc.array(("m", "n"), "the joint readings"),
-            "pose_index": sc.array(("m",), "the pose index of each point", dtype="int")})
+            "pose_index": sc.array(("m",), "the pose index of each point", dtype="int"),
+            **{f"quality_{k}": sc.array(("m",), f"the stripe's {k} at each point",
+                                        nullable=True)
+               for k in QUALITY_FIELDS}})
 
 
 def _split_count(fit: float | int, total: int, what: str) -> int:

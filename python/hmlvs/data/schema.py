@@ -40,7 +40,7 @@ class Field:
         them (forward-compatible files)
     length : for "list": the exact number of items
     choices : allowed values
-    nullable : None (null) allowed
+    nullable : None (null) allowed; for an "array" of numbers, NaN entries (no value)
     check : a further test returning an error text or None
     shape : for "array": the dimensions, an int for a fixed one or a name for a free one
         (``("m", 2)``)
@@ -96,9 +96,11 @@ def non_empty(what: str) -> Callable[[Any], str | None]:
     return lambda v: None if len(v) else f"must hold at least one {what}"
 
 
-def array(shape: tuple[int | str, ...], what: str, dtype: str = "number") -> Field:
-    """A numpy array (an ``.npz`` member) of ``shape`` and ``dtype``."""
-    return Field("array", what, shape=shape, dtype=dtype)
+def array(shape: tuple[int | str, ...], what: str, dtype: str = "number",
+          nullable: bool = False) -> Field:
+    """A numpy array (an ``.npz`` member) of ``shape`` and ``dtype`` (``nullable``: NaN
+    entries allowed, infinite ones not)."""
+    return Field("array", what, shape=shape, dtype=dtype, nullable=nullable)
 
 
 _DTYPE_KINDS = {"number": "iuf", "int": "iu", "id": "USiu"}
@@ -119,8 +121,11 @@ def _check_array(doc: Any, schema: Field) -> str | None:
     if doc.dtype.kind not in _DTYPE_KINDS[schema.dtype]:
         return (f"must be {schema.what}: {_DTYPE_WHAT[schema.dtype]}, got an array of "
                 f"{doc.dtype}")
-    if schema.dtype == "number" and doc.dtype.kind == "f" and not np.all(np.isfinite(doc)):
-        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(doc))[0])
+    if schema.dtype != "number" or doc.dtype.kind != "f":
+        return None
+    wrong = np.isinf(doc) if schema.nullable else ~np.isfinite(doc)  # NaN: no value
+    if wrong.any():
+        bad = tuple(int(i) for i in np.argwhere(wrong)[0])
         at = bad[0] if len(bad) == 1 else bad
         return f"must be finite; the entry at {at} is {doc[bad]}"
     return None

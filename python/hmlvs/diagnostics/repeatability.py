@@ -126,7 +126,9 @@ def _resample(ds: Dataset, idx: np.ndarray) -> Dataset:
                    joints=None if ds.joints is None else ds.joints[idx],
                    joint_unit=ds.joint_unit,
                    pose_index=None if ds.pose_index is None else ds.pose_index[idx],
-                   meta=dict(ds.meta))
+                   meta=dict(ds.meta),
+                   quality=None if ds.quality is None else
+                   {k: v[idx] for k, v in ds.quality.items()})
 
 
 def repeatability(dataset: Dataset | Any, runs: int = 50, method: str = "lm", seed: int = 0,

@@ -275,6 +275,7 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
 
     reports: list[ImageReport] = []
     px_all, pt_all, ids_all, joints_all, pidx_all, poses_all = [], [], [], [], [], []
+    quality_all: list[dict[str, np.ndarray]] = []
     for item in found:
         if isinstance(item, ImageReport):
             reports.append(item)
@@ -308,12 +309,15 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
         joints_all.append(None if joints is None else np.repeat(joints[None], len(cp), axis=0))
         poses_all.append(np.repeat(pose[None], len(cp), axis=0))
         pidx_all.append(np.full(len(cp), index, dtype=np.int64))
+        quality_all.append(_point_quality(pair.stripe, cp))
     if not px_all:
         raise ValueError("no image pair gave a calibration point:\n" +
                          "\n".join(str(r) for r in reports))
     joints_arr = None if any(j is None for j in joints_all) else np.vstack(joints_all)
     ds = Dataset(np.vstack(px_all), np.concatenate(poses_all), np.vstack(pt_all),
                  ids=np.array(ids_all), joints=joints_arr, pose_index=np.concatenate(pidx_all),
+                 quality={k: np.concatenate([q[k] for q in quality_all])
+                          for k in quality_all[0]},
                  meta={"source": "images", "mode": mode, "normalize": normalize,
                        "smooth_along": stripe_options["smooth_along"],
                        "blur_var": blur_var, "blur_var_fitted": fit_blur,
@@ -327,6 +331,18 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                            "centre_px": [float(x) for x in distortion[0]],
                            "k_per_px2": float(distortion[1])}})})
     return ds, reports
+
+
+def _point_quality(stripe: StripeResult, cp: Any) -> dict[str, np.ndarray]:
+    """The stripe's quality at calibration points ``cp`` (:attr:`Dataset.quality`): the
+    points' own centre uncertainty, and width, peak and residual of the scan line each lies
+    on (nearest it, for a corner mode point's foot on the fitted centre line)."""
+    scan = cp.pixels[:, 0] if stripe.direction == "columns" else cp.pixels[:, 1]
+    line = np.clip(np.rint(scan).astype(int), 0, stripe.position.size - 1)
+    residual = stripe.residual if stripe.residual is not None else \
+        np.full(stripe.position.size, np.nan)
+    return {"sigma": np.asarray(cp.sigma, float), "width": stripe.width[line],
+            "peak": stripe.intensity[line], "residual": residual[line]}
 
 
 def _record_id(rec: Any, index: int) -> str:
