@@ -680,23 +680,22 @@ double EstimateDifferenceNoise(const ImageView<T>& image, int row_step) {
 }
 
 // The scan view smoothed across scan lines (along the stripe) with the kernel g (edges
-// replicated), stored with adjacent scan lines contiguous (ss = 1, sp = n_scan).
+// replicated), stored with adjacent scan lines contiguous (ss = 1, sp = n_scan). Per profile
+// line a sum of shifted copies, so that the inner loop runs over contiguous scan lines.
 template <typename T>
 std::vector<float> SmoothAlong(const ScanView<T>& v, const Kernels& g) {
-  std::vector<float> out(static_cast<size_t>(v.n_scan) * static_cast<size_t>(v.n_prof));
+  const int n = v.n_scan;
   const int r = g.radius;
+  std::vector<float> out(static_cast<size_t>(n) * static_cast<size_t>(v.n_prof), 0.0f);
+  std::vector<float> line(static_cast<size_t>(n + 2 * r));
   for (int p = 0; p < v.n_prof; ++p) {
-    float* line = out.data() + static_cast<size_t>(p) * static_cast<size_t>(v.n_scan);
-    for (int s = 0; s < v.n_scan; ++s) {
-      double acc = 0.0;
-      if (s >= r && s + r < v.n_scan) {
-        for (int k = -r; k <= r; ++k) acc += g.g0[static_cast<size_t>(k + r)] * v.at(s + k, p);
-      } else {
-        for (int k = -r; k <= r; ++k) {
-          acc += g.g0[static_cast<size_t>(k + r)] * v.clamped(s + k, p);
-        }
-      }
-      line[s] = static_cast<float>(acc);
+    // the profile line padded by r replicated values either side
+    for (int i = 0; i < n + 2 * r; ++i) line[i] = static_cast<float>(v.clamped(i - r, p));
+    float* acc = out.data() + static_cast<size_t>(p) * static_cast<size_t>(n);
+    for (int k = 0; k <= 2 * r; ++k) {
+      const float w = static_cast<float>(g.g0[static_cast<size_t>(k)]);
+      const float* src = line.data() + k;
+      for (int s = 0; s < n; ++s) acc[s] += w * src[s];
     }
   }
   return out;
