@@ -628,9 +628,11 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
     the stripe by :func:`~hmlvs.image.stripe.albedo_offset`, or given as ``albedo_offset``;
     0 divides by the laser-off frame itself) and :func:`extract_stripe`
     with ``stripe_options``; for a normalised image without a given threshold, a noise-aware
-    one; without a given ``method``, Steger's at ``steger_sigma`` = half the stripe's median
-    FWHM (at least 3 px), robust to laser speckle, and along the stripe ``smooth_along``
-    (default 1; calibration sessions use :data:`BOARD_SMOOTH_ALONG`) times that, then refined
+    one, the peaks found on the image smoothed along the stripe (``detect_sigma_along``,
+    default :data:`DETECT_ALONG`); without a given ``method``, Steger's at ``steger_sigma``
+    = half the stripe's median FWHM (at least 3 px), robust to laser speckle, and along
+    the stripe ``smooth_along`` (default 1; calibration sessions use
+    :data:`BOARD_SMOOTH_ALONG`) times that, then refined
     by :func:`~hmlvs.image.stripe.refine_centres` (noise-weighted symmetric centres, on the
     unrounded difference with a denoised laser-off frame; ``method`` "weighted"). With
     ``assess`` the centres are checked by :func:`assess_stripe` (saturation of the laser-on
