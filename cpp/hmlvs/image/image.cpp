@@ -681,22 +681,40 @@ double EstimateDifferenceNoise(const ImageView<T>& image, int row_step) {
 
 // The scan view smoothed across scan lines (along the stripe) with the kernel g (edges
 // replicated), stored with adjacent scan lines contiguous (ss = 1, sp = n_scan). Per profile
-// line a sum of shifted copies, so that the inner loop runs over contiguous scan lines.
+// line a sum of shifted copies, so that the inner loops run over contiguous scan lines.
+// One output line: acc = sum_k w[k] line[s + k], the inner loop over contiguous floats.
+void SumShifted(const float* __restrict line, const float* __restrict w, int taps, int n,
+                float* __restrict acc) {
+  for (int s = 0; s < n; ++s) acc[s] = w[0] * line[s];
+  for (int k = 1; k < taps; ++k) {
+    const float wk = w[k];
+    const float* __restrict b = line + k;
+    for (int s = 0; s < n; ++s) acc[s] += wk * b[s];
+  }
+}
+
 template <typename T>
 std::vector<float> SmoothAlong(const ScanView<T>& v, const Kernels& g) {
   const int n = v.n_scan;
   const int r = g.radius;
-  std::vector<float> out(static_cast<size_t>(n) * static_cast<size_t>(v.n_prof), 0.0f);
+  std::vector<float> out(static_cast<size_t>(n) * static_cast<size_t>(v.n_prof));
   std::vector<float> line(static_cast<size_t>(n + 2 * r));
+  const std::vector<float> w(g.g0.begin(), g.g0.end());
   for (int p = 0; p < v.n_prof; ++p) {
     // the profile line padded by r replicated values either side
-    for (int i = 0; i < n + 2 * r; ++i) line[i] = static_cast<float>(v.clamped(i - r, p));
-    float* acc = out.data() + static_cast<size_t>(p) * static_cast<size_t>(n);
-    for (int k = 0; k <= 2 * r; ++k) {
-      const float w = static_cast<float>(g.g0[static_cast<size_t>(k)]);
-      const float* src = line.data() + k;
-      for (int s = 0; s < n; ++s) acc[s] += w * src[s];
+    const T* src = v.data + p * v.sp;
+    float* mid = line.data() + r;
+    if (v.ss == 1) {
+      for (int s = 0; s < n; ++s) mid[s] = static_cast<float>(src[s]);
+    } else {
+      for (int s = 0; s < n; ++s) mid[s] = static_cast<float>(src[s * v.ss]);
     }
+    for (int i = 1; i <= r; ++i) {
+      mid[-i] = mid[0];
+      mid[n - 1 + i] = mid[n - 1];
+    }
+    SumShifted(line.data(), w.data(), 2 * r + 1, n,
+               out.data() + static_cast<size_t>(p) * static_cast<size_t>(n));
   }
   return out;
 }

@@ -693,20 +693,24 @@ def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: b
         normalize = not np.isinf(offset)
     d = difference_image(on_g, off_g, normalize=normalize, offset=offset if normalize else 0.0)
     automatic = opts.get("threshold") is None
+    first_opts: dict[str, Any] = {}
     if normalize and automatic:
         # Normalising raises the noise on dark squares, and the threshold that keeps their
         # noise out would cut a faint stripe on a noisy image (3 grey levels of noise: half
         # the columns lost): peaks are found on the image smoothed along the stripe.
         opts.setdefault("detect_sigma_along", DETECT_ALONG)
-        opts["threshold"] = _normalized_threshold(on_g, off_g, d, offset, noise,
-                                                  opts["detect_sigma_along"])
+        opts["threshold"], plain = _normalized_threshold(
+            on_g, off_g, d, offset, noise, (opts["detect_sigma_along"], 0.0))
+        # the width estimate below needs a sample of the stripe's columns, not all: its pass
+        # finds them on the image itself (half the smoothing's cost)
+        first_opts = {"detect_sigma_along": 0.0, "threshold": plain}
     weighted = opts.get("method") is None
     if opts.get("method") is None:
         # The pipeline's default centre: Steger's line detector at a scale fitted to the
         # stripe (half its median FWHM, at least 3 px). Its smoothing along the stripe
         # averages the laser speckle of neighbouring columns, which dominates the error of
         # a per-column centroid (measured on the general renders: 0.10 -> 0.05 px RMS).
-        first = extract_stripe(d, **dict(opts, method="centroid"))
+        first = extract_stripe(d, **dict(opts, method="centroid", **first_opts))
         w = first.width[first.found]
         opts["method"] = "steger"
         if opts.get("steger_sigma") is None:

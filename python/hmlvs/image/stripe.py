@@ -588,7 +588,7 @@ def smoothing_noise_gain(sigma: float) -> float:
 
 def _normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray,
                           offset: float = 0.0, sigma: float | None = None,
-                          along: float = 0.0) -> float:
+                          along: float | tuple[float, ...] = 0.0) -> Any:
     """Automatic threshold for an albedo-normalised difference image.
 
     Normalising multiplies the noise by the gain mean(off) / max(off, floor), which is
@@ -598,7 +598,8 @@ def _normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray,
     image maximum, as for the plain image). ``sigma``: the plain difference's noise when
     known (``_estimate_difference_noise`` of it), else estimated here. ``along``: the
     ``detect_sigma_along`` the stripe is found with (px; 0: none), whose smoothing lowers
-    the noise term by :func:`smoothing_noise_gain`.
+    the noise term by :func:`smoothing_noise_gain`; a tuple of them gives a tuple of
+    thresholds.
     """
     if sigma is None:
         raw = _core._difference_image(on, off, False, -1.0, -1.0)
@@ -606,5 +607,8 @@ def _normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray,
     mean = float(off.mean())
     gain = (mean + offset) / np.maximum(off[::4, ::4].astype(float) + offset,
                                         max(1.0, 0.1 * mean))
-    k = smoothing_noise_gain(along) if along > 0.0 else 1.0
-    return max(5.0 * sigma * k * float(np.percentile(gain, 95)), 0.15 * float(d[::4].max()))
+    noise = 5.0 * sigma * float(np.percentile(gain, 95))
+    top = 0.15 * float(d[::4].max())
+    out = tuple(max(noise * (smoothing_noise_gain(a) if a > 0.0 else 1.0), top)
+                for a in (along if isinstance(along, tuple) else (along,)))
+    return out if isinstance(along, tuple) else out[0]
