@@ -679,9 +679,6 @@ double EstimateDifferenceNoise(const ImageView<T>& image, int row_step) {
   return std::sqrt(var + 1.0 / 6.0);
 }
 
-// The scan view smoothed across scan lines (along the stripe) with the kernel g (edges
-// replicated), stored with adjacent scan lines contiguous (ss = 1, sp = n_scan). Per profile
-// line a sum of shifted copies, so that the inner loops run over contiguous scan lines.
 // One output line: acc = sum_k w[k] line[s + k], the inner loop over contiguous floats.
 void SumShifted(const float* __restrict line, const float* __restrict w, int taps, int n,
                 float* __restrict acc) {
@@ -693,6 +690,9 @@ void SumShifted(const float* __restrict line, const float* __restrict w, int tap
   }
 }
 
+// The scan view smoothed across scan lines (along the stripe) with the kernel g (edges
+// replicated), stored with adjacent scan lines contiguous (ss = 1, sp = n_scan). Per profile
+// line a sum of shifted copies, so that the inner loops run over contiguous scan lines.
 template <typename T>
 std::vector<float> SmoothAlong(const ScanView<T>& v, const Kernels& g) {
   const int n = v.n_scan;
