@@ -46,6 +46,8 @@ def stripe_errors(folder: Path, truth: dict, meta: dict | None = None, **options
         o = dict(options)
         if meta and "smooth_along" in meta:
             o.setdefault("smooth_along", meta["smooth_along"])
+        if meta and "albedo_step" in meta:
+            o.setdefault("albedo_step", meta["albedo_step"])
         if meta and meta.get("blur_var"):
             o.setdefault("blur_var", meta["blur_var"])
         if meta and f"p{i:03d}" in meta.get("albedo_offset_taken_by", []):

@@ -2,6 +2,7 @@
 (against the truth and against the NumPy reference), corners, calibration points, and whole
 sessions of image files to a data set."""
 
+from dataclasses import replace
 import json
 
 import cv2
@@ -660,6 +661,13 @@ def test_calibration_points_bad_input(clean):
         hmlvs.calibration_points(st, c, tolerance=0)
     with pytest.raises(ValueError, match="numbered on a 6 x 8 board"):
         hmlvs.calibration_points(st, c, hmlvs.Checkerboard(rows=5, cols=7))
+    # a stripe without a found centre (every scan line flagged, here ALBEDO_EDGE: a stripe
+    # along a row of squares' edges with the check on) gives no point and says why
+    flagged = replace(st, status=np.where(st.found, np.uint8(StripeStatus.ALBEDO_EDGE),
+                                          st.status))
+    for mode in ("corners", "homography"):
+        cp = hmlvs.calibration_points(flagged, c, mode=mode)
+        assert len(cp) == 0 and cp.rejected, mode
 
 
 # ------------------------------------------------------------------------------ sessions

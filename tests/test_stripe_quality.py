@@ -124,7 +124,8 @@ def test_quality_statuses_on_synthetic_columns():
     ]
     d = np.clip(np.rint(np.stack(cols, axis=1)), 0, 255).astype(np.uint8)
     off = np.full_like(d, 30)
-    off[31:, 4] = 50  # the albedo steps under column 4's profile
+    off[31:, 3:] = 50  # the albedo steps under column 4's profile (a square's edge, over
+    # columns 3-4: the check averages over 3 x 3 pixels against the sensor's noise)
     on = np.clip(d.astype(int) + off, 0, 255).astype(np.uint8)
     on[29:32, 3] = 255
     st = hmlvs.extract_stripe(d, threshold=20, noise=1.0)
@@ -138,8 +139,31 @@ def test_quality_statuses_on_synthetic_columns():
     # the checks can be turned off
     b = assess_stripe(st, d, None, None, hump=0.0)
     assert b.status.tolist() == [S.FOUND, S.CLIPPED, S.FOUND, S.FOUND, S.FOUND]
+    # the laser's albedo as the laser-off level plus an offset: 50 + 30 is not 1.5 x (30 + 30)
+    assert assess_stripe(st, d, on, off, albedo_offset=30.0).status[4] == S.FOUND
     with pytest.raises(ValueError, match="2 x 60 pixels"):
         assess_stripe(st, d, on[:, :2], off)
+    with pytest.raises(ValueError, match="albedo_offset must be >= 0, got -1"):
+        assess_stripe(st, d, on, off, albedo_offset=-1.0)
+
+
+def test_an_albedo_edge_is_a_step_not_the_noise_of_a_dark_square():
+    """A laser-off frame at 8 grey levels with 1.2 levels of noise (a dark square): in half the
+    columns single pixels under the profile vary by more than 1.5 x, but no column is
+    ALBEDO_EDGE; a step to 38 is."""
+    rng = np.random.default_rng(2)
+    n, m = 60, 200
+    d = np.clip(np.rint(np.repeat(gaussian(n, 30.2, 1.5, 200)[:, None], m, axis=1)), 0,
+                255).astype(np.uint8)
+    off = np.clip(np.rint(8 + rng.normal(0, 1.2, (n, m))), 0, 255).astype(np.uint8)
+    window = off[26:35].astype(float)  # the centre +- one FWHM
+    assert np.mean(window.max(axis=0) > 1.5 * np.maximum(window.min(axis=0), 1)) > 0.4
+    st = hmlvs.extract_stripe(d, threshold=20, noise=1.0)
+    assert st.found.all()
+    assert not np.any(assess_stripe(st, d, None, off).status == S.ALBEDO_EDGE)
+    step = off.copy()
+    step[32:] += 30
+    assert np.all(assess_stripe(st, d, None, step).status == S.ALBEDO_EDGE)
 
 
 @pytest.mark.parametrize("seed", [0, 4])

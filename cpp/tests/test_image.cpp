@@ -121,7 +121,7 @@ TEST(Stripe, AssessStripeStatuses) {
   d.Add(4, 40.0, 1.5, 200);  // an albedo step under the profile
   for (int r = 0; r < kRows; ++r) {
     for (int c = 0; c < 5; ++c) {
-      off.at(r, c) = (c == 4 && r > 41) ? 50 : 30;
+      off.at(r, c) = (c >= 3 && r > 41) ? 50 : 30;  // a square's edge, over scan lines 3-4
       on.at(r, c) = static_cast<std::uint8_t>(std::min(255, d.at(r, c) + off.at(r, c)));
     }
   }
@@ -144,6 +144,50 @@ TEST(Stripe, AssessStripeStatuses) {
   Image small(2);
   EXPECT_THROW(AssessStripe(d.View(), small.View(), off.View(), StripeDirection::kColumns,
                             StripeQualityOptions(), &res),
+               std::invalid_argument);
+}
+
+TEST(Stripe, AlbedoEdgeIsAStepNotTheNoiseOfADarkSquare) {
+  // Laser-off level 10 with +-3 grey levels of noise: single pixels vary by up to 13 / 7, but
+  // no scan line is an albedo edge. A step from 10 to 40 under the profile is one, unless the
+  // laser's albedo is the level plus a large offset (40 + 200 is not 1.5 x 10 + 200).
+  const int cols = 40;
+  Image d(cols), off(cols);
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> noise(-3, 3);
+  for (int c = 0; c < cols; ++c) {
+    d.Add(c, 40.3, 1.5, 200);
+    for (int r = 0; r < kRows; ++r) off.at(r, c) = static_cast<std::uint8_t>(10 + noise(rng));
+  }
+  StripeOptions o;
+  o.threshold = 20.0;
+  o.noise = 1.0;
+  const StripeResult found = ExtractStripe(d.View(), o);
+  auto edges = [&](const Image& frame, double offset) {
+    StripeResult res = found;
+    StripeQualityOptions q;
+    q.albedo_offset = offset;
+    AssessStripe(d.View(), ImageView<std::uint8_t>{}, frame.View(), StripeDirection::kColumns, q,
+                 &res);
+    int n = 0;
+    for (int c = 0; c < cols; ++c) {
+      n += res.status[c] == static_cast<std::uint8_t>(StripeStatus::kAlbedoEdge);
+    }
+    return n;
+  };
+  for (int c = 0; c < cols; ++c) ASSERT_EQ(found.status[c], 0) << c;
+  EXPECT_EQ(edges(off, 0.0), 0);
+  Image step = off;
+  for (int r = 42; r < kRows; ++r) {
+    for (int c = 0; c < cols; ++c) step.at(r, c) = static_cast<std::uint8_t>(step.at(r, c) + 30);
+  }
+  EXPECT_EQ(edges(step, 0.0), cols);
+  EXPECT_EQ(edges(step, 200.0), 0);
+  StripeResult res = found;
+  StripeQualityOptions bad;
+  bad.albedo_offset = -1.0;
+  EXPECT_THROW(AssessStripe(d.View(), ImageView<std::uint8_t>{}, off.View(),
+                            StripeDirection::kColumns, bad, &res),
                std::invalid_argument);
 }
 

@@ -150,6 +150,7 @@ void BindImage(py::module_& m) {
   py::class_<StripeQualityOptions>(m, "_StripeQualityOptions")
       .def(py::init<>())
       .def_readwrite("albedo_step", &StripeQualityOptions::albedo_step)
+      .def_readwrite("albedo_offset", &StripeQualityOptions::albedo_offset)
       .def_readwrite("hump", &StripeQualityOptions::hump)
       .def_readwrite("dip", &StripeQualityOptions::dip);
   m.def(

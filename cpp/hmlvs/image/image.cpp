@@ -889,10 +889,12 @@ void AssessStripe(const ImageView<T>& image, const ImageView<T>& on, const Image
     }
   }
   if (!std::isfinite(o.albedo_step) || !(o.hump >= 0.0 && o.hump <= 1.0) ||
-      !(o.dip > 0.0 && o.dip <= 1.0)) {
+      !(o.dip > 0.0 && o.dip <= 1.0) ||
+      !(o.albedo_offset >= 0.0 && std::isfinite(o.albedo_offset))) {
     std::ostringstream msg;
-    msg << "quality options must satisfy albedo_step finite, 0 <= hump <= 1, 0 < dip <= 1; got "
-        << o.albedo_step << ", " << o.hump << ", " << o.dip;
+    msg << "quality options must satisfy albedo_step finite, 0 <= hump <= 1, 0 < dip <= 1, "
+           "albedo_offset finite and >= 0; got "
+        << o.albedo_step << ", " << o.hump << ", " << o.dip << ", " << o.albedo_offset;
     throw std::invalid_argument(msg.str());
   }
   const ScanView<T> v = MakeScanView(image, direction);
@@ -964,14 +966,27 @@ void AssessStripe(const ImageView<T>& image, const ImageView<T>& on, const Image
       }
     }
     if (with_off) {
+      // 3 x 3 means: one grey level of noise on a dark square's level of 10 would otherwise
+      // pass for a step in half the scan lines that cross such a square
       const int a = std::max(0, static_cast<int>(std::floor(c - w)));
       const int z = std::min(v.n_prof - 1, static_cast<int>(std::ceil(c + w)));
-      double mn = voff.at(s, a), mx = mn;
-      for (int p = a + 1; p <= z; ++p) {
-        mn = std::min(mn, voff.at(s, p));
-        mx = std::max(mx, voff.at(s, p));
+      double mn = std::numeric_limits<double>::infinity(), mx = -mn;
+      for (int p = a; p <= z; ++p) {
+        double sum = 0.0;
+        int count = 0;
+        for (int t = std::max(0, s - 1); t <= std::min(n - 1, s + 1); ++t) {
+          for (int q = std::max(0, p - 1); q <= std::min(v.n_prof - 1, p + 1); ++q) {
+            sum += voff.at(t, q);
+            ++count;
+          }
+        }
+        const double mean = sum / count;
+        mn = std::min(mn, mean);
+        mx = std::max(mx, mean);
       }
-      if (mx > o.albedo_step * std::max(mn, 1.0)) set(StripeStatus::kAlbedoEdge);
+      if (mx + o.albedo_offset > o.albedo_step * std::max(mn + o.albedo_offset, 1.0)) {
+        set(StripeStatus::kAlbedoEdge);
+      }
     }
   }
 }

@@ -150,9 +150,14 @@ StripeResult ExtractStripe(const ImageView<T>& image, const StripeOptions& optio
 
 /// Options of AssessStripe.
 struct StripeQualityOptions {
-  /// A found scan line whose laser-off image varies by more than this factor (max / min)
-  /// within the centre +- one FWHM is kAlbedoEdge; <= 1 turns the check off.
+  /// A found scan line whose laser-off image, averaged over 3 x 3 pixels (the sensor's
+  /// noise on a dark square would pass for a step) and raised by albedo_offset, varies by
+  /// more than this factor (max / min) within the centre +- one FWHM is kAlbedoEdge; <= 1
+  /// turns the check off.
   double albedo_step = 1.5;
+  /// Added to the laser-off level before the ratio (>= 0): the laser's albedo taken as the
+  /// level plus this offset, as the albedo normalisation does.
+  double albedo_offset = 0.0;
   /// A second hump of at least this fraction of the peak, separated from it by a dip below
   /// dip x the hump, makes the scan line kDoublePeak; 0 turns the check off.
   double hump = 0.3;

@@ -114,6 +114,8 @@ def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None
     if int(window) < 1 or int(step) < 1:
         raise ValueError(f"window and step must be >= 1, got {window} and {step}")
     found = stripe.found
+    if not found.any():
+        return _empty_points(mode, {"stripe": "no scan line with a found centre"})
     pos = stripe.position[found].astype(float)
     cen = stripe.centre[found]
     sig = stripe.sigma[found]

@@ -13,6 +13,7 @@ from .corners import find_corners
 from .points import Mode, calibration_points, fit_division_distortion
 from .stripe import (
     StripeResult,
+    StripeStatus,
     _albedo_offset,
     _as_gray,
     _normalized_threshold,
@@ -320,6 +321,8 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                           for k in quality_all[0]},
                  meta={"source": "images", "mode": mode, "normalize": normalize,
                        "smooth_along": stripe_options["smooth_along"],
+                       **({"albedo_step": stripe_options["albedo_step"]}
+                          if stripe_options.get("albedo_step") is not None else {}),
                        "blur_var": blur_var, "blur_var_fitted": fit_blur,
                        "pairs": len(records),
                        "pairs_used": sum(r.ok for r in reports),
@@ -511,9 +514,10 @@ def _pending(pair: _Pair) -> bool:
 
 
 def _check_stripe(pair: _Pair, min_stripe: int) -> None:
-    if pair.stripe.found.sum() < min_stripe:
+    n = int(_centred(pair.stripe).sum())
+    if n < min_stripe:
         raise _Reject(f"no laser stripe found in {pair.on_name}: only "
-                      f"{int(pair.stripe.found.sum())} scan lines have one "
+                      f"{n} scan lines have one "
                       f"({_counts_text(pair.stripe.counts())})")
 
 
@@ -734,7 +738,8 @@ def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: b
         # normalisation (``albedo_step`` chooses).
         if albedo_step is None:
             albedo_step = 0.0 if normalize else 1.5
-        stripe = assess_stripe(stripe, d, on_g, off_g, albedo_step=albedo_step)
+        stripe = assess_stripe(stripe, d, on_g, off_g, albedo_step=albedo_step,
+                               albedo_offset=max(offset, 0.0) if normalize else 0.0)
     return stripe, fitted
 
 
@@ -862,8 +867,7 @@ def _edge_shift(pair: _Pair, normalize: bool, stripe_options: dict[str, Any]) ->
     base = _blur_var(stripe_options.get("blur_var"))
     ref = _stripe_and_background(pair.on, pair.off, normalize,
                                  dict(stripe_options, blur_var=base + _EDGE_REF))[0]
-    ok = pair.stripe.found & ref.found & np.isfinite(pair.stripe.centre) & \
-        np.isfinite(ref.centre)
+    ok = _centred(pair.stripe) & _centred(ref)
     k[ok] = (ref.centre[ok] - pair.stripe.centre[ok]) / _EDGE_REF
     return k
 
@@ -889,7 +893,7 @@ def session_blur_var(stripes: list[tuple[StripeResult, np.ndarray]]) -> float:
     pixel's area): 0.25-0.44; with 1 px (1.08 px^2): 1.12-1.30."""
     num = den = 0.0
     for stripe, k in stripes:
-        ok = stripe.found & np.isfinite(stripe.centre) & np.isfinite(k)
+        ok = _centred(stripe) & np.isfinite(k)
         if ok.sum() < 20:
             continue
         r = _detrend(stripe.centre, ok)
@@ -906,8 +910,16 @@ def _with_blur_var(stripe: StripeResult, k: np.ndarray, var: float) -> StripeRes
     (first order; exact at the reference variance)."""
     if var == 0.0 or not np.any(k):
         return stripe
-    return replace(stripe, centre=np.where(stripe.found, stripe.centre + var * k,
+    return replace(stripe, centre=np.where(_centred(stripe), stripe.centre + var * k,
                                            stripe.centre))
+
+
+def _centred(stripe: StripeResult) -> np.ndarray:
+    """The scan lines with a measured centre on the board: found, or flagged ALBEDO_EDGE
+    (a centre at a square's edge, corrected like the others but left out of the
+    calibration points; the blur fit needs exactly those lines)."""
+    return (stripe.found | (stripe.status == StripeStatus.ALBEDO_EDGE)) & \
+        np.isfinite(stripe.centre)
 
 
 def _smooth_along(value: Any) -> float:

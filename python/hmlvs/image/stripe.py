@@ -426,7 +426,8 @@ def extract_stripe(image: np.ndarray, direction: Direction = "columns",
 
 def assess_stripe(stripe: StripeResult, image: np.ndarray, on: np.ndarray | None = None,
                   off: np.ndarray | None = None, *, albedo_step: float = 1.5,
-                  hump: float = 0.3, dip: float = 0.7) -> StripeResult:
+                  albedo_offset: float = 0.0, hump: float = 0.3, dip: float = 0.7
+                  ) -> StripeResult:
     """Quality checks of the centres of :func:`extract_stripe` (computed in C++).
 
     Scan lines that had a centre keep it but change their status when it cannot be trusted:
@@ -434,9 +435,12 @@ def assess_stripe(stripe: StripeResult, image: np.ndarray, on: np.ndarray | None
     second hump of at least ``hump`` x the peak behind a dip below ``dip`` x the hump, on the
     profile smoothed at FWHM / 6 against speckle), ``SATURATED`` (the laser-on frame ``on``,
     or ``image`` itself if ``on`` is None, reaches the pixel type's maximum within the centre
-    +- FWHM / 2) and ``ALBEDO_EDGE`` (the laser-off frame ``off`` varies by more than
-    ``albedo_step`` (max / min) within the centre +- one FWHM: the stripe crosses a square's
-    edge there and its reflected profile is skewed; ``albedo_step <= 1``: no check).
+    +- FWHM / 2) and ``ALBEDO_EDGE`` (the laser-off frame ``off``, averaged over 3 x 3 pixels
+    against its noise and raised by ``albedo_offset``, varies by more than ``albedo_step``
+    (max / min) within the centre +- one FWHM: the stripe crosses a square's edge there and
+    its reflected profile is skewed; ``albedo_step <= 1``: no check; ``albedo_offset`` >= 0:
+    the laser's albedo taken as the laser-off level plus it, as the albedo normalisation of
+    :func:`difference_image` ``offset`` does).
 
     Parameters
     ----------
@@ -456,6 +460,9 @@ def assess_stripe(stripe: StripeResult, image: np.ndarray, on: np.ndarray | None
               for x, name in ((on, "the laser-on image"), (off, "the laser-off image"))]
     o = _core._StripeQualityOptions()
     o.albedo_step = _finite(albedo_step, "albedo_step")
+    o.albedo_offset = _finite(albedo_offset, "albedo_offset")
+    if o.albedo_offset < 0:
+        raise ValueError(f"albedo_offset must be >= 0, got {albedo_offset!r}")
     o.hump, o.dip = _finite(hump, "hump"), _finite(dip, "dip")
     status = _core._assess_stripe(img, frames[0], frames[1], _DIRECTIONS[stripe.direction], o,
                                   np.asarray(stripe.centre, float), np.asarray(stripe.width, float),
