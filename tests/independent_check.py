@@ -64,7 +64,7 @@ def stripe_errors(folder: Path, truth: dict, meta: dict | None = None, **options
     for name, lst in errs.items():
         e = np.concatenate(lst)
         out[name] = {"n": int(e.size), "rms": float(np.sqrt(np.mean(e ** 2))),
-                     "max": float(np.max(np.abs(e)))}
+                     "max": float(np.max(np.abs(e))), "mean": float(np.mean(e))}
     out["per_view_found_rms"] = per_view
     return out
 
@@ -176,7 +176,7 @@ def report(m: dict) -> str:
     for name, s in m["stripe"].items():
         if name != "per_view_found_rms":
             lines.append(f"  {name:12s} n={s['n']:5d}  rms {s['rms']:.3f} px  max "
-                         f"{s['max']:.3f} px")
+                         f"{s['max']:.3f} px  mean {s['mean']:+.4f} px")
     pv = m["stripe"]["per_view_found_rms"]
     lines.append("  per-view FOUND rms: " + " ".join(f"{x:.3f}" for x in pv))
     ratio = m["map"]["rms"] / m["baseline"]["rms"]
