@@ -514,10 +514,9 @@ def _pending(pair: _Pair) -> bool:
 
 
 def _check_stripe(pair: _Pair, min_stripe: int) -> None:
-    n = int(_centred(pair.stripe).sum())
-    if n < min_stripe:
+    if pair.stripe.found.sum() < min_stripe:
         raise _Reject(f"no laser stripe found in {pair.on_name}: only "
-                      f"{n} scan lines have one "
+                      f"{int(pair.stripe.found.sum())} scan lines have one "
                       f"({_counts_text(pair.stripe.counts())})")
 
 
