@@ -143,8 +143,12 @@ class Dataset:
             raise ValueError(f"subset indices must be whole numbers, got {idx.dtype}")
         if idx.size and (idx.min() < -len(self) or idx.max() >= len(self)):
             raise ValueError(f"subset index out of range for a data set of {len(self)} points")
+        return self._rows(idx, self.ids[idx])
+
+    def _rows(self, idx: np.ndarray, ids: np.ndarray) -> "Dataset":
+        """The points at indices ``idx`` (every per-point field), named ``ids``."""
         return Dataset(
-            self.pixels[idx], self.poses[idx], self.points[idx], ids=self.ids[idx],
+            self.pixels[idx], self.poses[idx], self.points[idx], ids=ids,
             joints=None if self.joints is None else self.joints[idx], joint_unit=self.joint_unit,
             pose_index=None if self.pose_index is None else self.pose_index[idx],
             meta=dict(self.meta),

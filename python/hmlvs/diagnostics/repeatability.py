@@ -121,14 +121,7 @@ def _combinations(q: np.ndarray, near_gimbal: bool) -> dict[str, float]:
 
 def _resample(ds: Dataset, idx: np.ndarray) -> Dataset:
     """The points at ``idx`` (with repetitions), with fresh unique ids."""
-    return Dataset(ds.pixels[idx], ds.poses[idx], ds.points[idx],
-                   ids=np.array([f"{ds.ids[i]}#{k}" for k, i in enumerate(idx)]),
-                   joints=None if ds.joints is None else ds.joints[idx],
-                   joint_unit=ds.joint_unit,
-                   pose_index=None if ds.pose_index is None else ds.pose_index[idx],
-                   meta=dict(ds.meta),
-                   quality=None if ds.quality is None else
-                   {k: v[idx] for k, v in ds.quality.items()})
+    return ds._rows(idx, np.array([f"{ds.ids[i]}#{k}" for k, i in enumerate(idx)]))
 
 
 def repeatability(dataset: Dataset | Any, runs: int = 50, method: str = "lm", seed: int = 0,
