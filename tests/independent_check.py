@@ -227,10 +227,17 @@ if __name__ == "__main__":
                     "fitted to the session; 0: no correction at albedo steps)")
     ap.add_argument("--speckle", type=float, help="the renderer's speckle contrast (default: "
                     "independent_render's; 0: no speckle)")
+    ap.add_argument("--flat-laser", type=float, metavar="ALBEDO",
+                    help="the print's albedo at the laser's wavelength, the same on dark and "
+                    "light squares and the table: no albedo step under the stripe, the board "
+                    "still seen by the camera (what speckle, noise and the fan's fall-off "
+                    "alone cost)")
     a = ap.parse_args()
     opts = {k: v for k, v in (("albedo_step", a.albedo_step), ("albedo_offset", a.albedo_offset),
                               ("blur_var", a.blur_var)) if v is not None}
     render = {} if a.speckle is None else {"speckle": a.speckle}
+    if a.flat_laser is not None:
+        render["laser_albedo"] = dict.fromkeys(("dark", "light", "table"), a.flat_laser)
     runs = []
     for s in a.seeds:
         runs.append(measure(s, a.method, None if a.keep is None else f"{a.keep}/s{s}", opts,

@@ -101,9 +101,12 @@ def board_coords(pts: np.ndarray, board: dict = BOARD) -> np.ndarray:
                      rel @ np.asarray(board["col_direction"])], axis=-1)
 
 
-def albedos(xy: np.ndarray, board: dict = BOARD) -> tuple[np.ndarray, np.ndarray]:
+def albedos(xy: np.ndarray, board: dict = BOARD, laser_albedo: dict | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
     """(ambient, laser) albedo at board coordinates: squares from -1 to rows (cols) square
-    widths, a half-square white margin, the table beyond."""
+    widths, a half-square white margin, the table beyond; the laser's from ``laser_albedo``
+    (default :data:`LASER_ALBEDO`)."""
+    la = LASER_ALBEDO if laser_albedo is None else laser_albedo
     sq = board["square"]
     i, j = np.floor(xy[..., 0] / sq), np.floor(xy[..., 1] / sq)
     x, y = xy[..., 0] / sq, xy[..., 1] / sq
@@ -111,8 +114,7 @@ def albedos(xy: np.ndarray, board: dict = BOARD) -> tuple[np.ndarray, np.ndarray
     paper = (x >= -1.5) & (x <= board["rows"] + 0.5) & (y >= -1.5) & (y <= board["cols"] + 0.5)
     dark = squares & ((i + j) % 2 == 0)
     amb = np.where(dark, ALBEDO["dark"], np.where(paper, ALBEDO["light"], ALBEDO["table"]))
-    las = np.where(dark, LASER_ALBEDO["dark"],
-                   np.where(paper, LASER_ALBEDO["light"], LASER_ALBEDO["table"]))
+    las = np.where(dark, la["dark"], np.where(paper, la["light"], la["table"]))
     bad = ~np.isfinite(xy).all(axis=-1)
     return np.where(bad, 0.0, amb), np.where(bad, 0.0, las)
 
@@ -174,10 +176,14 @@ def random_pose(rng: np.random.Generator, p: dict = TRUE, board: dict = BOARD,
 def render_view(p: dict, pose: np.ndarray, rng: np.random.Generator, *, ss: int = 4,
                 ambient: float = 150.0, laser: float = 110.0, sheet_sigma: float = 0.45,
                 blur: float = 0.5, speckle: float = 0.1, noise: float = 1.0,
-                board: dict = BOARD) -> tuple[np.ndarray, np.ndarray]:
+                board: dict = BOARD, laser_albedo: dict | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
     """(laser-on, laser-off) 8-bit images of one pose. Pixels are integrated over their area
     with ``ss`` x ``ss`` samples wherever the albedo changes within the pixel's neighbourhood
-    and wherever the laser sheet can reach (elsewhere the scene is constant over a pixel)."""
+    and wherever the laser sheet can reach (elsewhere the scene is constant over a pixel).
+    ``laser_albedo``: the print's albedo at the laser's wavelength (keys dark, light, table;
+    default :data:`LASER_ALBEDO`); one value for all three removes the albedo steps from the
+    stripe while the board stays visible to the camera."""
     w, h = SIZE
     off = (np.arange(ss) + 0.5) / ss - 0.5
     sub_u, sub_v = np.meshgrid(off, off)
@@ -186,7 +192,7 @@ def render_view(p: dict, pose: np.ndarray, rng: np.random.Generator, *, ss: int 
         """Area samples of pixels (u, v): ambient albedo and laser return, (n, ss * ss)."""
         uu, vv = u[:, None] + sub_u.ravel(), v[:, None] + sub_v.ravel()
         pts, pc = board_hits(p, pose, uu, vv)
-        amb, las = albedos(board_coords(pts, board), board)
+        amb, las = albedos(board_coords(pts, board), board, laser_albedo)
         d = plane_offset(p, pc)
         dist = np.linalg.norm(pc - np.array([0.0, p["H"], 0.0]), axis=-1)
         beam = np.nan_to_num(np.exp(-0.5 * (d / sheet_sigma) ** 2) * 300.0 / dist)
