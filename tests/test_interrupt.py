@@ -10,8 +10,11 @@ import textwrap
 
 import pytest
 
+# Ctrl-C as in a terminal: a suite launched with SIGINT ignored (nohup, a detached job) passes
+# that on to its child processes, which would never see the signal (all three runs timed out).
 SCRIPT = textwrap.dedent("""
     import os, signal, sys, threading, time, warnings
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     import hmlvs
     from hmlvs import cli
     warnings.simplefilter("ignore")

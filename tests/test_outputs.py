@@ -200,9 +200,12 @@ def test_ctrl_c_stops_a_long_calibration_promptly(tmp_path, extra):
 
     data = hmlvs.simulate(seed=0).dataset.save(tmp_path / "d.npz")
     out = tmp_path / "cal.yaml"
+    # Ctrl-C as in a terminal: SIGINT at its default in the command, even when the suite was
+    # launched with it ignored (nohup, a detached job), which the command would inherit
     proc = subprocess.Popen(
         [sys.executable, "-m", "hmlvs", "calibrate", str(data), "--iterations", "100000000",
-         "--out", str(out), *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+         "--out", str(out), *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         time.sleep(4.0)  # imports and the start of the (hours-long) swarm
         assert proc.poll() is None
