@@ -7,16 +7,17 @@ theta = 25 deg) with the division-model radial distortion k = 4.8e-4 / mm^2 (MOD
 on a hand moved by random poses (yaw, tilt, camera 230-400 mm above the board) over the
 paper's checkerboard (6 x 8 inner corners, 30 mm squares, on the plane z = 0 of the base).
 
-Image formation, per pixel: the area of the pixel is integrated (``ss`` x ``ss`` samples);
-every sample's ray (MODEL.md steps 1-2, inverted to a ray) meets the board plane, whose
-printed albedo (dark 0.07, light 0.85, a white margin and a grey table around it) is lit by
-vignetted ambient light. The laser sheet has a Gaussian thickness profile (1-sigma 0.45 mm
-across the plane) and falls off as 1 / range; its return is the surface's albedo *at the
-laser's wavelength* (dark 0.25, light 0.9: not proportional to the ambient albedo, as with
-a real red laser on printed toner). Then a slight optical blur, multiplicative laser
-speckle correlated over about 2 px, 1 grey level of Gaussian sensor noise, rounding and
-clipping to 8 bits (so the stripe saturates where it is bright on white squares at short
-range).
+Image formation, per pixel: the area of the pixel is integrated (``ss`` x ``ss`` samples,
+each of which takes the print averaged over its share of the pixel, so the sum is exact at
+the print's edges); every sample's ray (MODEL.md steps 1-2, inverted to a ray) meets the
+board plane, whose printed albedo (dark 0.07, light 0.85, a white margin and a grey table
+around it) is lit by vignetted ambient light. The laser sheet has a Gaussian thickness
+profile (1-sigma 0.45 mm across the plane) and falls off as 1 / range; its return is the
+surface's albedo *at the laser's wavelength* (dark 0.25, light 0.9: not proportional to the
+ambient albedo, as with a real red laser on printed toner). Then a slight optical blur,
+multiplicative laser speckle correlated over about 2 px, 1 grey level of Gaussian sensor
+noise, rounding and clipping to 8 bits (so the stripe saturates where it is bright on white
+squares at short range).
 
 The truth of every view: the hand pose and, for every image column, the row where the
 centre plane of the laser sheet meets the board (``true_centres``).
@@ -101,22 +102,67 @@ def board_coords(pts: np.ndarray, board: dict = BOARD) -> np.ndarray:
                      rel @ np.asarray(board["col_direction"])], axis=-1)
 
 
-def albedos(xy: np.ndarray, board: dict = BOARD, laser_albedo: dict | None = None
+def _below(z: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """P(X <= z) for X the sum of two centred uniform variables of widths p and q: the
+    share of a parallelogram footprint whose coordinate lies at most z from its centre
+    (trapezoidal distribution; a step where both widths are 0)."""
+    z, p, q = np.broadcast_arrays(z, p, q)
+    out = (z > 0).astype(float)
+    ramp = np.abs(z) < 0.5 * (p + q)  # within the footprint: its share (most points: none)
+    if ramp.any():
+        z, p, q = z[ramp], np.maximum(p[ramp], q[ramp]), np.minimum(p[ramp], q[ramp])
+        a, b = 0.5 * (p - q), 0.5 * (p + q)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out[ramp] = np.where(z < -a, (z + b) ** 2 / (2 * p * q),
+                                 np.where(z <= a, 0.5 + z / p, 1.0 - (b - z) ** 2 / (2 * p * q)))
+    return out
+
+
+def albedos(xy: np.ndarray, board: dict = BOARD, laser_albedo: dict | None = None,
+            footprint: tuple[np.ndarray, np.ndarray] | None = None
             ) -> tuple[np.ndarray, np.ndarray]:
     """(ambient, laser) albedo at board coordinates: squares from -1 to rows (cols) square
     widths, a half-square white margin, the table beyond; the laser's from ``laser_albedo``
-    (default :data:`LASER_ALBEDO`)."""
+    (default :data:`LASER_ALBEDO`).
+
+    ``footprint``: the two edge vectors (..., 2) (board mm) of the parallelogram each point
+    stands for. The albedo is then its mean over that area (exact for the straight edges of
+    the print away from the squares' corners), so that a pixel's samples add up to its area
+    integral; point samples of the sharp print err by up to half a sample spacing at every
+    edge."""
     la = LASER_ALBEDO if laser_albedo is None else laser_albedo
     sq = board["square"]
-    i, j = np.floor(xy[..., 0] / sq), np.floor(xy[..., 1] / sq)
     x, y = xy[..., 0] / sq, xy[..., 1] / sq
-    squares = (i >= -1) & (i <= board["rows"] - 1) & (j >= -1) & (j <= board["cols"] - 1)
-    paper = (x >= -1.5) & (x <= board["rows"] + 0.5) & (y >= -1.5) & (y <= board["cols"] + 0.5)
-    dark = squares & ((i + j) % 2 == 0)
-    amb = np.where(dark, ALBEDO["dark"], np.where(paper, ALBEDO["light"], ALBEDO["table"]))
-    las = np.where(dark, la["dark"], np.where(paper, la["light"], la["table"]))
+    if footprint is None:
+        wx = wy = np.zeros((2,) + x.shape)
+    else:
+        a, b = (np.nan_to_num(np.abs(np.asarray(f, float))) / sq for f in footprint)
+        wx, wy = np.stack([a[..., 0], b[..., 0]]), np.stack([a[..., 1], b[..., 1]])
+
+    def above(t: np.ndarray, w: np.ndarray, edge: float) -> np.ndarray:
+        """Share of the footprint beyond ``edge`` along one board axis."""
+        return 1.0 - _below(edge - t, w[0], w[1])
+
+    def inside(t: np.ndarray, w: np.ndarray, lo: float, hi: float) -> np.ndarray:
+        return above(t, w, lo) - above(t, w, hi)
+
+    def wave(t: np.ndarray, w: np.ndarray, squares: int) -> np.ndarray:
+        """+1 on even squares, -1 on odd ones, averaged over the footprint at the nearest
+        edge between two squares (the outer edges are the squares' area's)."""
+        n = np.clip(np.round(np.nan_to_num(t)), 0, squares - 1)
+        return np.where(n % 2 == 0, 1.0, -1.0) * (2.0 * above(t, w, n) - 1.0)
+
+    rows, cols = board["rows"], board["cols"]
+    squares = inside(x, wx, -1.0, rows) * inside(y, wy, -1.0, cols)
+    paper = inside(x, wx, -1.5, rows + 0.5) * inside(y, wy, -1.5, cols + 0.5)
+    dark = squares * 0.5 * (1.0 + wave(x, wx, rows) * wave(y, wy, cols))
+
+    def mix(level: dict) -> np.ndarray:
+        return level["table"] * (1.0 - paper) + level["light"] * (paper - dark) + \
+            level["dark"] * dark  # the print's own levels, exactly, away from its edges
+
     bad = ~np.isfinite(xy).all(axis=-1)
-    return np.where(bad, 0.0, amb), np.where(bad, 0.0, las)
+    return np.where(bad, 0.0, mix(ALBEDO)), np.where(bad, 0.0, mix(la))
 
 
 def true_centres(p: dict, pose: np.ndarray, size: tuple[int, int] = SIZE) -> np.ndarray:
@@ -189,10 +235,16 @@ def render_view(p: dict, pose: np.ndarray, rng: np.random.Generator, *, ss: int 
     sub_u, sub_v = np.meshgrid(off, off)
 
     def samples(u: np.ndarray, v: np.ndarray):
-        """Area samples of pixels (u, v): ambient albedo and laser return, (n, ss * ss)."""
+        """Area samples of pixels (u, v): ambient albedo and laser return, (n, ss * ss).
+        Each sample stands for its 1/ss x 1/ss share of the pixel (``albedos``' footprint,
+        from the board's coordinates one pixel to the right of and below the centre)."""
         uu, vv = u[:, None] + sub_u.ravel(), v[:, None] + sub_v.ravel()
         pts, pc = board_hits(p, pose, uu, vv)
-        amb, las = albedos(board_coords(pts, board), board, laser_albedo)
+        centre = board_coords(board_hits(p, pose, u, v)[0], board)
+        step = [(board_coords(board_hits(p, pose, u + du, v + dv)[0], board) - centre)
+                [:, None, :] / ss for du, dv in ((1.0, 0.0), (0.0, 1.0))]
+        amb, las = albedos(board_coords(pts, board), board, laser_albedo,
+                           footprint=(step[0], step[1]))
         d = plane_offset(p, pc)
         dist = np.linalg.norm(pc - np.array([0.0, p["H"], 0.0]), axis=-1)
         beam = np.nan_to_num(np.exp(-0.5 * (d / sheet_sigma) ** 2) * 300.0 / dist)

@@ -646,8 +646,8 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
     undo an albedo step under a blurred profile (the blur of a product is not the product
     of the blurs); to first order in the blur's variance s2 the normalised profile P is
     P_true + s2 grad(P) . grad(log albedo), which is subtracted before the centre fit.
-    Measured on noise-free independent renders (0.5 px blur): column error 0.017 -> 0.012
-    px RMS, each view's mean error 0.0045 -> 0.0028 px. Calibration sessions fit it
+    Measured on noise-free independent renders (0.5 px blur): column error 0.017 -> 0.011
+    px RMS, each view's mean error 0.0041 -> 0.0023 px. Calibration sessions fit it
     (:func:`session_blur_var`).
     ``off``
     None: a laser-on image alone, its background estimated (:func:`estimate_background`).
