@@ -146,10 +146,11 @@ def albedos(xy: np.ndarray, board: dict = BOARD, laser_albedo: dict | None = Non
     def inside(t: np.ndarray, w: np.ndarray, lo: float, hi: float) -> np.ndarray:
         return above(t, w, lo) - above(t, w, hi)
 
-    def wave(t: np.ndarray, w: np.ndarray, squares: int) -> np.ndarray:
+    def wave(t: np.ndarray, w: np.ndarray, count: int) -> np.ndarray:
         """+1 on even squares, -1 on odd ones, averaged over the footprint at the nearest
-        edge between two squares (the outer edges are the squares' area's)."""
-        n = np.clip(np.round(np.nan_to_num(t)), 0, squares - 1)
+        edge between two of the ``count`` + 1 squares along the axis (the outer edges are
+        the squares' area's)."""
+        n = np.clip(np.round(np.nan_to_num(t)), 0, count - 1)
         return np.where(n % 2 == 0, 1.0, -1.0) * (2.0 * above(t, w, n) - 1.0)
 
     rows, cols = board["rows"], board["cols"]
