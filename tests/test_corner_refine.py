@@ -10,11 +10,13 @@ import pytest
 
 
 def _junction(centre: tuple[float, float], angles: tuple[float, float], size: int = 64,
-              blur: float = 0.8, ss: int = 8, period: float | None = None) -> np.ndarray:
+              blur: float = 0.8, ss: int = 8, period: float | None = None,
+              light=None) -> np.ndarray:
     """An 8-bit X-junction: two straight edges through ``centre`` at ``angles`` (rad), dark
     and light quadrants (40 / 200), area-integrated over ``ss`` x ``ss`` samples a pixel
     (pixel centres at integers), then a Gaussian blur of ``blur`` px. With ``period`` a
-    skewed checkerboard: edges every ``period`` px along both directions."""
+    skewed checkerboard: edges every ``period`` px along both directions. ``light(u, v)``:
+    the illumination multiplying the print."""
     off = (np.arange(ss) + 0.5) / ss - 0.5
     v, u = np.mgrid[0:size * ss, 0:size * ss] / ss
     u, v = u + off[0], v + off[0]
@@ -24,6 +26,8 @@ def _junction(centre: tuple[float, float], angles: tuple[float, float], size: in
     if period is not None:
         s1, s2 = np.sin(np.pi * s1 / period), np.sin(np.pi * s2 / period)
     img = np.where(s1 * s2 > 0, 40.0, 200.0)
+    if light is not None:
+        img = img * light(u, v)
     img = img.reshape(size, ss, size, ss).mean(axis=(1, 3))
     return np.rint(cv2.GaussianBlur(img, (0, 0), blur)).astype(np.uint8)
 
@@ -75,3 +79,51 @@ def test_a_small_board_gets_a_small_window():
         got = saddle_refine(img, start[None], spacing=12.0)[0]
         assert np.linalg.norm(got - c) < 0.05, (got, c)
         assert np.linalg.norm(got - c) < np.linalg.norm(_refine(img, start[None], 2)[0] - c)
+
+
+def _grid(centre: np.ndarray, angles: tuple[float, float], period: float, size: int,
+          margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """The corners of :func:`_junction`'s skewed checkerboard at least ``margin`` px inside
+    the image, and their parity (which diagonal is dark)."""
+    m = np.array([[np.sin(a), -np.cos(a)] for a in angles])
+    pts, parity = [], []
+    for k in range(-8, 9):
+        for n in range(-8, 9):
+            p = np.linalg.solve(m, [k * period, n * period]) + centre
+            if (p >= margin).all() and (p <= size - 1 - margin).all():
+                pts.append(p)
+                parity.append((k + n) % 2)
+    return np.array(pts), np.array(parity)
+
+
+@pytest.mark.parametrize("centre", [(80.3, 79.6), (81.1, 78.45), (79.7, 80.2)])
+def test_uneven_light_is_taken_out_of_the_saddles(centre):
+    """A vignette (30 % darker at the corner of a 640 x 480 image; this is its top-left
+    160 x 160 px) tilts the smoothed image at every corner and moves its saddle. Measured
+    on 19-20 corners an 80 degree skewed board: 0.0092-0.0164 px RMS from the truth
+    without the correction, 0.0056-0.0057 with it (0.0049-0.0055 unlit). On the unlit
+    board the correction moves the corners by less than 0.001 px RMS: the parity term
+    takes the alternating value of the non-square corners, which a fit without it took for
+    light (then 0.0073-0.0119 px)."""
+    size, period, angles = 160, 30.0, (0.35, 1.75)
+    c = np.array(centre)
+    truth, parity = _grid(c, angles, period, size, 12.0)
+    assert len(truth) >= 19
+
+    def vignette(u, v):
+        return 1.0 - 0.3 * ((u - 320) ** 2 + (v - 240) ** 2) / (320 ** 2 + 240 ** 2)
+
+    lit = _junction(tuple(c), angles, size=size, period=period, light=vignette)
+    unlit = _junction(tuple(c), angles, size=size, period=period)
+    start = truth + np.random.default_rng(0).uniform(-0.3, 0.3, truth.shape)
+
+    def rms(a: np.ndarray, b: np.ndarray) -> float:
+        return float(np.sqrt(np.mean((a - b) ** 2)))
+
+    plain = saddle_refine(lit, start, period, illumination=False, parity=parity)
+    corrected = saddle_refine(lit, start, period, parity=parity)
+    assert rms(corrected, truth) < 0.7 * rms(plain, truth)
+    assert rms(corrected, truth) < 0.008
+    unlit_plain = saddle_refine(unlit, start, period, illumination=False)
+    assert rms(saddle_refine(unlit, start, period, parity=parity), unlit_plain) < 0.002
+    assert rms(saddle_refine(unlit, start, period), unlit_plain) > 0.003  # no parity given

@@ -129,6 +129,14 @@ Not reached, and why:
   from 1.49 to 0.80 x. On that view's calibration columns the pipeline's mean centre error
   is -0.0042 px over 16 other noise draws (sd 0.0031), -0.0100 px in this one; the
   baseline's 0.05 px per point gives that view's mean an sd of 0.0063 px.
+- the corners' saddles with the tilt of the renderer's 30 % vignette taken out
+  (``saddle_refine``'s ``illumination``: the light fitted to the corners' grey values):
+  corners 0.0097 -> 0.0076 px RMS per axis (seed 3; 0.0075 -> 0.0047 without noise, 0.0040
+  with no vignette). Map error 0.63, 1.39, 1.55, 0.80, 0.56, 1.28, 1.20, 0.77, 1.00, 1.56,
+  0.79, 0.74, 0.93, 1.70, 0.90, 1.90, 1.43, 0.84 x the baseline (median 0.97; 4 of 18
+  above 1.5 x); without speckle 0.61, 0.96, 0.51, 1.54, 0.72, 1.07, 0.38, 0.84, 0.38, 0.85,
+  0.24, 0.84, 0.49, 0.87, 0.70, 0.93, 0.53, 0.43 x (median 0.71; 17 of 18 within 1.5 x,
+  seed 3 at 1.54 x).
 """
 
 from __future__ import annotations
@@ -174,8 +182,8 @@ def test_views_and_map_error(measured):
     m, _ = measured
     # every view is used (seed 0's p000, 8 corners, through the session's lens distortion)
     assert len(m["used"]) == 16 and not m["dropped"]
-    assert m["map"]["rms"] < 2.0 * m["baseline"]["rms"]  # measured 0.80 and 1.37
-    assert m["map"]["rms"] < 0.005  # mm on held-out true stripes (measured 0.0014, 0.0033)
+    assert m["map"]["rms"] < 2.0 * m["baseline"]["rms"]  # measured 0.63 and 1.39
+    assert m["map"]["rms"] < 0.005  # mm on held-out true stripes (measured 0.0011, 0.0034)
 
 
 def test_albedo_offset_recovers_an_affine_laser_return():
