@@ -1,4 +1,5 @@
-"""Shape and value checks shared by the public functions (clear ValueErrors, no copies)."""
+"""Shape and value checks shared by the public functions (clear ValueErrors, no copies), and
+the robust spread several fits use."""
 
 from __future__ import annotations
 
@@ -71,3 +72,12 @@ def check_transform(t: Any, name: str, tol: float = 1e-6) -> np.ndarray:
         raise ValueError(f"{name} is not a rigid transform (its rotation must be orthonormal with "
                          "determinant +1 and its last row [0 0 0 1])")
     return m
+
+
+def robust_sigma(r: np.ndarray) -> float:
+    """1.4826 x the median absolute deviation of the finite values of ``r`` (the standard
+    deviation for normal data, unmoved by outliers); NaN if there are none."""
+    r = r[np.isfinite(r)]
+    if r.size == 0:
+        return float("nan")
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))

@@ -28,7 +28,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from .. import _core
-from .._arrays import check_transform
+from .._arrays import check_transform, robust_sigma
 from ..data.views import ViewData
 from ..geometry.board import BoardSpec
 from ..models.opencv import DISTORTION_NAMES, OpenCvSensor
@@ -290,13 +290,6 @@ def fit_plane(points: np.ndarray) -> np.ndarray:
     return -plane if plane[3] > 0 else plane
 
 
-def _robust_sigma(r: np.ndarray) -> float:
-    r = r[np.isfinite(r)]
-    if r.size == 0:
-        return float("nan")
-    return float(1.4826 * np.median(np.abs(r - np.median(r))))
-
-
 def _rms(r: np.ndarray) -> float:
     r = r[np.isfinite(r)]
     return float(np.sqrt(np.mean(r**2))) if r.size else float("nan")
@@ -391,7 +384,7 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
     plane = fit_plane(all_pts)
     # Stripe pixels far off that plane (reflections, stray light) go before the first solve.
     plane_res = [p @ plane[:3] + plane[3] for p in plane_pts]
-    sigma_l0 = _robust_sigma(np.concatenate(plane_res))
+    sigma_l0 = robust_sigma(np.concatenate(plane_res))
     if robust and sigma_l0 > 0:
         inlier = [np.abs(r) <= _ROBUST_K * sigma_l0 for r in plane_res]
         plane = fit_plane(np.concatenate([p[k] for p, k in zip(plane_pts, inlier)]))
@@ -451,8 +444,8 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         dropped_any = False
         if robust:
             full_c, full_l = _core._evaluate_joint(make_views(all_c, all_l), state, opts)
-            limit_c = _ROBUST_K * max(_robust_sigma(c_all) * math.sqrt(2), 1e-9)
-            limit_l = _ROBUST_K * max(_robust_sigma(l_all), 1e-9)
+            limit_c = _ROBUST_K * max(robust_sigma(c_all) * math.sqrt(2), 1e-9)
+            limit_l = _ROBUST_K * max(robust_sigma(l_all), 1e-9)
             for i in range(len(views)):
                 new_c = np.hypot(full_c[i][:, 0], full_c[i][:, 1]) <= limit_c
                 new_l = np.isfinite(full_l[i]) & (np.abs(full_l[i]) <= limit_l)

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arrays import robust_sigma
 from ..models.paper import project
 from .stripe import _as_gray
 
@@ -199,21 +200,21 @@ def saddle_refine(gray: np.ndarray, pts: np.ndarray, spacing: float,
 
     ``illumination``: uneven light (vignetting, a lamp to one side) multiplies the print by
     a smooth L, which breaks the symmetry: to first order in g = grad log L the smoothed
-    image gains the gradient (F0 + s2 H) g at the corner (F0 its value there, H its
-    Hessian, s2 the smoothing's and the image's blur variance, :data:`IMAGE_BLUR_VAR`),
-    and the saddle moves. With 6 or more corners, log F0 is fitted over them (a quadratic
-    in the pixel position, linear with fewer than 10 corners; points more than 3 MADs off
-    dropped once), its gradient taken as g (at most :data:`MAX_LIGHT_GRADIENT`), and the
-    saddles are found again with that gradient taken out. It needs ``parity`` (k,), the
-    corners' (row + column) on the board (``find_corners`` passes it; without it the
-    corners are not corrected): where the squares are not square, F0 alternates from
-    corner to corner (by 14 % at 80 degrees) with which diagonal is dark, which a fit
-    without a term for it takes for light. Measured on
-    independent renders with a 30 % vignette (seed 3, 16 views): 0.0075 -> 0.0047 px RMS
-    per axis without noise (0.0040 with no vignette, where it changes nothing); with 1 grey
-    level of noise 0.0097 -> 0.0076, 0.0114 -> 0.0097, 0.0097 -> 0.0076 px (seeds 0, 1,
-    3); on OpenCV's real left/right images the calibration RMS does not move (0.1661 /
-    0.1630 px -> 0.1663 / 0.1626 px).
+    image gains the gradient (F0 + s2 H) g at the corner (F0 its value there, H its Hessian,
+    s2 the smoothing's and the image's blur variance, :data:`IMAGE_BLUR_VAR`), and the
+    saddle moves. With 6 or more corners, log F0 is fitted over them (a quadratic in the
+    pixel position, linear with fewer than 10 corners; points more than 3 robust standard
+    deviations (1.4826 MAD) off dropped once), its gradient taken as g (at most
+    :data:`MAX_LIGHT_GRADIENT`), and the saddles are found again with that gradient taken
+    out. It needs ``parity`` (k,), the corners' (row + column) on the board
+    (``find_corners`` passes it; without it the corners are not corrected): where the
+    squares are not square, F0 alternates from corner to corner (by 14 % at 80 degrees) with
+    which diagonal is dark, which a fit without a term for it takes for light. Measured on
+    independent renders with a 30 % vignette (seed 3, 16 views): 0.0075 -> 0.0047 px RMS per
+    axis without noise (0.0040 with no vignette, where it changes nothing); with 1 grey
+    level of noise 0.0097 -> 0.0076, 0.0114 -> 0.0097, 0.0097 -> 0.0076 px (seeds 0, 1, 3);
+    on OpenCV's real left/right images the calibration RMS does not move (0.1661 / 0.1630 px
+    -> 0.1663 / 0.1626 px).
 
     A corner is left where it was when its fit is no saddle (Hessian not indefinite), does
     not converge, reaches the image border, or would move by more than min(1 px, 0.05
@@ -221,22 +222,23 @@ def saddle_refine(gray: np.ndarray, pts: np.ndarray, spacing: float,
     pts = np.asarray(pts, dtype=float).reshape(-1, 2)
     if len(pts) == 0:
         return pts.copy()
-    q, value, ok = _saddles(gray, pts, spacing)
+    import cv2
+    half = int(np.clip(round(0.12 * spacing), 2, 4))
+    f = cv2.GaussianBlur(np.asarray(gray, np.float32), (0, 0), 0.375 * half).astype(float)
+    q, value, ok = _saddles(f, pts, spacing, half)
     if not illumination or parity is None:
         return q
     g = _light_gradient(q, value, ok, parity)
-    return q if g is None else _saddles(gray, pts, spacing, g)[0]
+    return q if g is None else _saddles(f, pts, spacing, half, g)[0]
 
 
-def _saddles(gray: np.ndarray, pts: np.ndarray, spacing: float,
+def _saddles(f: np.ndarray, pts: np.ndarray, spacing: float, half: int,
              light: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The saddle iteration of :func:`saddle_refine` from ``pts``, with the illumination
-    gradient ``light`` (k, 2) (grad log L, 1/px) taken out if given: (the refined corners,
-    the smoothed image's value at each, which of them converged)."""
-    import cv2
-    half = int(np.clip(round(0.12 * spacing), 2, 4))
+    """The saddle iteration of :func:`saddle_refine` from ``pts`` on the smoothed image
+    ``f`` (window half-width ``half``), with the illumination gradient ``light`` (k, 2)
+    (grad log L, 1/px) taken out if given: (the refined corners, the smoothed image's value
+    at each, which of them converged)."""
     s2 = (0.375 * half) ** 2 + IMAGE_BLUR_VAR
-    f = cv2.GaussianBlur(np.asarray(gray, np.float32), (0, 0), 0.375 * half).astype(float)
     h, w = f.shape
     ys, xs = np.mgrid[-half:half + 1, -half:half + 1].astype(float)
     x, y = xs.ravel(), ys.ravel()
@@ -281,7 +283,7 @@ def _light_gradient(px: np.ndarray, value: np.ndarray, ok: np.ndarray,
     """grad log L (k, 2) at corners ``px`` from the smoothed image's ``value`` at those that
     converged (``ok``): log value fitted by a quadratic in the pixel position (linear with
     fewer than 10 corners, None with fewer than 6), refitted once without the points more
-    than 3 MADs off, the gradient clipped to :data:`MAX_LIGHT_GRADIENT`."""
+    than 3 robust standard deviations off, the gradient clipped to :data:`MAX_LIGHT_GRADIENT`."""
     good = ok & np.isfinite(value) & (value > 0)
     if good.sum() < 6:
         return None
@@ -299,8 +301,7 @@ def _light_gradient(px: np.ndarray, value: np.ndarray, ok: np.ndarray,
     a = np.hstack([a, np.where(np.asarray(parity)[good] % 2 == 0, 1.0, -1.0)[:, None]])
     coef = np.linalg.lstsq(a, b, rcond=None)[0]
     r = b - a @ coef
-    keep = np.abs(r - np.median(r)) <= 3.0 * 1.4826 * max(float(np.median(np.abs(
-        r - np.median(r)))), 1e-6)
+    keep = np.abs(r - np.median(r)) <= 3.0 * max(robust_sigma(r), 1.4826e-6)
     if keep.sum() >= a.shape[1] + 2:
         coef = np.linalg.lstsq(a[keep], b[keep], rcond=None)[0]
     u, v = ((px - centre) / scale).T
