@@ -285,16 +285,20 @@ def render_view(p: dict, pose: np.ndarray, rng: np.random.Generator, *, ss: int 
 
 
 def render_session(folder: str | Path, seed: int = 0, views: int = 16, held_out: int = 4,
-                   **options) -> dict:
+                   noise_seed: int | None = None, **options) -> dict:
     """Render ``views`` image pairs into ``folder`` (manifest.json, p000_on.png, ...) and
     draw ``held_out`` further poses for testing (no images). Returns the truth: ``params``,
     ``poses`` (views + held_out, 4, 4), ``centres`` (views + held_out, width) and ``ids``;
-    also saved as ``truth.npz`` in ``folder``."""
+    also saved as ``truth.npz`` in ``folder``. ``noise_seed``: the images' noise and speckle
+    drawn from their own stream, so that the same scene (``seed``: the poses) can be taken
+    again with other noise; None: one stream for both, as it always was."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     poses = np.array([random_pose(rng) for _ in range(views + held_out)])
     centres = np.array([true_centres(TRUE, q) for q in poses])
+    if noise_seed is not None:
+        rng = np.random.default_rng([seed, 104729, int(noise_seed)])
     entries = []
     for i in range(views):
         on, off = render_view(TRUE, poses[i], rng, **options)
