@@ -100,7 +100,7 @@ def _grid(centre: np.ndarray, angles: tuple[float, float], period: float, size: 
 def test_uneven_light_is_taken_out_of_the_saddles(centre):
     """A vignette (30 % darker at the corner of a 640 x 480 image; this is its top-left
     160 x 160 px) tilts the smoothed image at every corner and moves its saddle. Measured
-    on 19-20 corners an 80 degree skewed board: 0.0092-0.0164 px RMS from the truth
+    on the 19-20 corners of an 80 degree skewed board: 0.0092-0.0164 px RMS from the truth
     without the correction, 0.0056-0.0057 with it (0.0049-0.0055 unlit). On the unlit
     board the correction moves the corners by less than 0.001 px RMS: the parity term
     takes the alternating value of the non-square corners, which a fit without it took for
