@@ -2,8 +2,12 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <optional>
+#include <utility>
+
 #include "bindings.h"
 #include "hmlvs/model/kinematics.h"
+#include "hmlvs/solvers/ik.h"
 
 namespace py = pybind11;
 
@@ -29,6 +33,28 @@ void BindKinematics(py::module_& m) {
       .def_readwrite("flange_from_hand", &DHRobot::flange_from_hand);
   m.def("_forward_kinematics", &ForwardKinematics, py::arg("robot"), py::arg("joints"),
         py::call_guard<py::gil_scoped_release>());
+  m.def(
+      "_solve_look_at",
+      [](const DHRobot& robot, const Eigen::Matrix4d& hand_from_camera,
+         const Eigen::Vector3d& position, const Eigen::Vector3d& axis,
+         const std::optional<Eigen::Vector3d>& x, const Eigen::VectorXd& start,
+         const Eigen::VectorXd& lower, const Eigen::VectorXd& upper, double max_step,
+         int iterations) {
+        LookAtTarget target;
+        target.hand_from_camera = hand_from_camera;
+        target.position = position;
+        target.axis = axis;
+        target.has_x = x.has_value();
+        if (x) target.x = *x;
+        LookAtOptions options;
+        options.max_step = max_step;
+        options.iterations = iterations;
+        LookAtResult r = SolveLookAt(robot, target, start, lower, upper, options);
+        return std::make_pair(std::move(r.joints), r.error);
+      },
+      py::arg("robot"), py::arg("hand_from_camera"), py::arg("position"), py::arg("axis"),
+      py::arg("x"), py::arg("start"), py::arg("lower"), py::arg("upper"), py::arg("max_step"),
+      py::arg("iterations"), py::call_guard<py::gil_scoped_release>());
 }
 
 }  // namespace hmlvs::python

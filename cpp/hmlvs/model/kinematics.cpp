@@ -26,6 +26,16 @@ Eigen::Matrix4d DHLinkTransform(const DHJoint& joint, double reading, DHConventi
   return t;
 }
 
+Eigen::Matrix4d BaseFromHand(const DHRobot& robot,
+                             const Eigen::Ref<const Eigen::VectorXd>& joints) {
+  Eigen::Matrix4d t = robot.base_from_link0;
+  for (Eigen::Index j = 0; j < joints.size(); ++j)
+    t = t * DHLinkTransform(robot.joints[j], joints[j], robot.convention);
+  t = t * robot.flange_from_hand;
+  t.row(3) << 0, 0, 0, 1;
+  return t;
+}
+
 RowMatX16 ForwardKinematics(
     const DHRobot& robot,
     const Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>&
@@ -40,18 +50,14 @@ RowMatX16 ForwardKinematics(
   }
   RowMatX16 poses(joints.rows(), 16);
   for (Eigen::Index i = 0; i < joints.rows(); ++i) {
-    Eigen::Matrix4d t = robot.base_from_link0;
     for (Eigen::Index j = 0; j < n; ++j) {
-      const double r = joints(i, j);
-      if (!std::isfinite(r)) {
+      if (!std::isfinite(joints(i, j))) {
         std::ostringstream msg;
         msg << "joint reading " << i << " is not finite (joint " << j + 1 << ")";
         throw std::invalid_argument(msg.str());
       }
-      t = t * DHLinkTransform(robot.joints[j], r, robot.convention);
     }
-    t = t * robot.flange_from_hand;
-    t.row(3) << 0, 0, 0, 1;
+    const Eigen::Matrix4d t = BaseFromHand(robot, joints.row(i).transpose());
     for (int rr = 0; rr < 4; ++rr)
       for (int cc = 0; cc < 4; ++cc) poses(i, rr * 4 + cc) = t(rr, cc);
   }

@@ -34,6 +34,9 @@ struct DHRobot {
 /// One link transform.
 Eigen::Matrix4d DHLinkTransform(const DHJoint& joint, double reading, DHConvention convention);
 
+/// The base_from_hand pose of one set of joint readings (no checks: see ForwardKinematics).
+Eigen::Matrix4d BaseFromHand(const DHRobot& robot, const Eigen::Ref<const Eigen::VectorXd>& joints);
+
 /// Joint readings (m x n, rad for revolute and mm for prismatic joints) -> base_from_hand
 /// poses (m x 16, row-major 4x4 each). Throws std::invalid_argument on a shape mismatch or a
 /// non-finite reading.

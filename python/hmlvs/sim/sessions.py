@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _core
 from .._arrays import as_params
 from ..data.dataset import Dataset
 from ..geometry.board import Checkerboard
@@ -135,12 +136,13 @@ class Session:
 # Session generation must give the same poses on every CPU. BLAS and LAPACK results differ in
 # the last bits between machines (the kernel OpenBLAS picks for the CPU), and a solver's path
 # can amplify that into another solution (elbow up on one machine, elbow down on another). So
-# the pose solves below use no BLAS: forward kinematics is the C++ core's, and the small
-# products, sums and linear solves are written out in elementwise IEEE operations, which give
-# the same bits everywhere. In addition each pose attempt draws from its own random stream,
-# solves take short steps (no jumps between basins), IK solutions are snapped to a grid of
-# 2**-20 rad, ties between equally good solutions go to the first start, and the acceptance
-# tests have margins of orders of magnitude over the solvers' rounding.
+# the pose solves below use no BLAS: forward kinematics is the C++ core's, the look-at solve is
+# the core's too (no fused multiply-add), and the small products, sums and linear solves are
+# written out in elementwise IEEE operations, which give the same bits everywhere. In addition
+# each pose attempt draws from its own random stream, solves take short steps (no jumps between
+# basins), IK solutions are snapped to a grid of 2**-20 rad, ties between equally good
+# solutions go to the first start, and the acceptance tests have margins of orders of
+# magnitude over the solvers' rounding.
 _JOINT_GRID = 2.0 ** -20  # rad (about 1e-6)
 _IK_EXACT_MM = 1e-6  # an IK residual below this is an exact solution
 _IK_MAX_MM = 20.0  # an IK residual above this is no solution
@@ -152,15 +154,6 @@ def _on_grid(robot: Robot, joints: np.ndarray) -> np.ndarray:
     j = np.round(joints / _JOINT_GRID) * _JOINT_GRID
     lim = robot.joint_limits
     return j if lim is None else np.clip(j, lim[:, 0], lim[:, 1])
-
-
-def _matmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a @ b for (..., n, k) @ (k, m) in elementwise operations (no BLAS, same bits on every
-    CPU)."""
-    out = a[..., :, 0, None] * b[0]
-    for i in range(1, b.shape[0]):
-        out = out + a[..., :, i, None] * b[i]
-    return out
 
 
 def _solve(a: np.ndarray, g: np.ndarray) -> np.ndarray:
@@ -239,17 +232,17 @@ def _ik_look_at(robot: Robot, hfc: np.ndarray, cam_pos: np.ndarray, cam_axis: np
     lim = robot.joint_limits
     lo = lim[:, 0] if lim is not None else np.full(robot.dof, -np.inf)
     hi = lim[:, 1] if lim is not None else np.full(robot.dof, np.inf)
-
-    def res(j: np.ndarray) -> np.ndarray:
-        t = _matmul(robot.poses(j), hfc)
-        r = [t[:, :3, 3] - cam_pos, 300.0 * (t[:, :3, 2] - cam_axis)]
-        if cam_x is not None:
-            r.append(100.0 * (t[:, :3, 0] - cam_x))
-        return np.concatenate(r, axis=1)
+    native = robot._native()
+    axis = np.asarray(cam_axis, dtype=float)
+    pos = np.asarray(cam_pos, dtype=float)
+    x_axis = None if cam_x is None else np.asarray(cam_x, dtype=float)
 
     best, best_err = None, np.inf
     for s in seeds:
-        x, err = _damped_solve(res, s, lo, hi)
+        # :func:`_damped_solve` on the look-at residual, in C++: the same operations in the
+        # same order as NumPy's elementwise ones, so the same bits (tested).
+        x, err = _core._solve_look_at(native, hfc, pos, axis, x_axis, np.asarray(s, float),
+                                      lo, hi, 0.2, 200)
         if err < _IK_EXACT_MM:
             best, best_err = x, err  # the first exact solution, in the order of the seeds
             break
