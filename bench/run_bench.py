@@ -43,6 +43,36 @@ def median_time(fn, reps: int) -> tuple[float, object]:
     return statistics.median(times), out
 
 
+def session_times(reps: int) -> tuple[float, float, bool]:
+    """Median seconds of ``hmlvs.simulate.session(num_poses=12)`` with the C++ look-at solve
+    and with the NumPy one (the tests' reference), interleaved, and whether both gave the
+    same joints."""
+    from hmlvs import _core
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    from reference_ik import solve_look_at  # the tests' NumPy reference of the solve
+
+    native = _core._solve_look_at
+    robot = hmlvs.Robot.scorbot_er7()
+
+    def numpy_solve(_native_robot, hfc, pos, axis, cam_x, start, lo, hi, max_step, iters):
+        return solve_look_at(robot, hfc, pos, axis, cam_x, start, lo, hi, max_step, iters)
+
+    times: dict[str, list[float]] = {"c++": [], "numpy": []}
+    joints: dict[str, list[np.ndarray]] = {"c++": [], "numpy": []}
+    try:
+        for seed in range(reps):
+            for name, solve in (("c++", native), ("numpy", numpy_solve)):
+                _core._solve_look_at = solve
+                t = time.perf_counter()
+                joints[name].append(hmlvs.simulate.session(num_poses=12, seed=seed).joints)
+                times[name].append(time.perf_counter() - t)
+    finally:
+        _core._solve_look_at = native
+    same = all(np.array_equal(a, b) for a, b in zip(joints["c++"], joints["numpy"]))
+    return statistics.median(times["c++"]), statistics.median(times["numpy"]), same
+
+
 def machine() -> str:
     model = "unknown CPU"
     try:
@@ -284,6 +314,17 @@ def main() -> None:
     rows.append(("NumPy oracle of the same model, 1e6 points", f"{t_model_np * 1e3:.0f} ms", ""))
     ratios.append(f"Model: 1e6 points in {t_model * 1e3:.0f} ms from Python "
                   f"({t_model_np / t_model:.1f}x the NumPy oracle)")
+
+    print("session simulation ...", flush=True)
+    t_ses, t_ses_np, same = session_times(reps=3)
+    rows.append(("hmlvs.simulate.session, 12 poses (look-at IK in C++)", f"{t_ses * 1e3:.0f} ms",
+                 "median of 3, interleaved"))
+    rows.append(("the same with the NumPy look-at solve", f"{t_ses_np * 1e3:.0f} ms",
+                 "the same joints" if same else "OTHER JOINTS"))
+    ratios.append(f"Session simulation: the C++ look-at IK makes a 12-pose session "
+                  f"{t_ses_np / t_ses:.0f}x faster than the NumPy solve "
+                  f"({t_ses * 1e3:.0f} against {t_ses_np * 1e3:.0f} ms), "
+                  + ("with the same joints to the last bit" if same else "BUT OTHER JOINTS"))
 
     print("import time ...", flush=True)
 

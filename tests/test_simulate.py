@@ -126,29 +126,13 @@ def test_session_is_the_same_under_every_blas_kernel(tmp_path):
         np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9, err_msg=str(kernel))
 
 
-def _look_at_residual(robot, hfc, pos, axis, cam_x):
-    """The look-at residual in NumPy elementwise operations (no BLAS): camera position - pos,
-    300 (z axis - axis), 100 (x axis - cam_x); base_from_camera summed over the inner index in
-    order, as the C++ solve sums it."""
-    def res(j):
-        t = robot.poses(j)
-        cam = t[:, :, 0, None] * hfc[0]
-        for i in range(1, 4):
-            cam = cam + t[:, :, i, None] * hfc[i]
-        r = [cam[:, :3, 3] - pos, 300.0 * (cam[:, :3, 2] - axis)]
-        if cam_x is not None:
-            r.append(100.0 * (cam[:, :3, 0] - cam_x))
-        return np.concatenate(r, axis=1)
-    return res
-
-
 @pytest.mark.parametrize("limits", [True, False])
 def test_look_at_solve_is_the_numpy_solve_bit_for_bit(limits):
     """The session generator's look-at IK runs in C++; it must be the generic NumPy solve
     (``_damped_solve``, which the stripe snap still uses) on the same residual, to the last bit:
     any difference could move a simulated scene on another machine."""
     from hmlvs import _core
-    from hmlvs.sim.sessions import _damped_solve
+    from reference_ik import solve_look_at
 
     robot = hmlvs.Robot.scorbot_er7()
     if not limits:
@@ -170,7 +154,7 @@ def test_look_at_solve_is_the_numpy_solve_bit_for_bit(limits):
             cam_x = np.cross(axis, [0.0, 0.0, 1.0])
             cam_x /= np.linalg.norm(cam_x)
         start = rng.uniform(-0.5, 0.5, robot.dof)
-        want = _damped_solve(_look_at_residual(robot, hfc, pos, axis, cam_x), start, lo, hi)
+        want = solve_look_at(robot, hfc, pos, axis, cam_x, start, lo, hi)
         got = _core._solve_look_at(robot._native(), hfc, pos, axis, cam_x, start, lo, hi,
                                    0.2, 200)
         np.testing.assert_array_equal(got[0], want[0], err_msg=f"trial {trial}")
