@@ -15,6 +15,7 @@ from hmlvs.cli import main as cli_main
 from hmlvs.models.params import Parameters
 import numpy as np
 import pytest
+import typer
 
 pytestmark = pytest.mark.scene  # simulated sessions or rendered images
 
@@ -46,12 +47,39 @@ def test_version(capsys):
     assert code == 0 and out.strip() == f"hmlvs {hmlvs.__version__}"
 
 
-@pytest.mark.parametrize("command", ["", "simulate", "demo", "calibrate", "design", "report",
-                                     "measure", "study", "scenario"])
+COMMANDS = ["simulate", "demo", "calibrate", "design", "report", "measure", "inspect",
+            "export", "study", "scenario"]
+
+
+@pytest.mark.parametrize("command", ["", *COMMANDS])
 def test_help_has_no_bool_placeholder(command, capsys):
     code, out, _ = _run(([command] if command else []) + ["--help"], capsys)
     assert code == 0 and "Show this message and exit." in out
     assert "<bool>" not in out
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_help_paragraphs_flow_to_the_terminal_width(command, capsys, monkeypatch):
+    """Each paragraph of a command's description is one line on a wide terminal, not broken
+    where the docstring's source lines break (ragged help on every width)."""
+    import inspect
+
+    monkeypatch.setenv("COLUMNS", "400")
+    code, out, _ = _run([command, "--help"], capsys)
+    assert code == 0
+    lines = [" ".join(line.split()) for line in out.splitlines()]
+    doc = inspect.getdoc(next(c.callback for c in cli.app.registered_commands
+                              if (c.name or c.callback.__name__) == command))
+    paragraphs = [" ".join(p.split()) for p in doc.split("\n\n")]
+    assert len(paragraphs) >= 2  # a summary line and an example at least
+    for p in paragraphs:
+        assert p in lines, (p, out)
+    # and every option's help text is shown whole (markup eats nothing, e.g. "<id>")
+    command_obj = typer.main.get_command(cli.app).commands[command]
+    flat = " ".join(out.split())
+    for param in command_obj.params:
+        if getattr(param, "help", None):
+            assert " ".join(param.help.split()) in flat, (param.name, param.help)
 
 
 def test_a_data_warning_appears_once_without_a_source_line(small, tmp_path):

@@ -16,6 +16,7 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode="markdown",  # help paragraphs reflow to the terminal's width
 )
 
 
@@ -914,13 +915,15 @@ def inspect_images(
     data: Path = typer.Argument(..., help="An image session: a folder with manifest.json (or "
                                 "the manifest), with a board."),
     out: Path = typer.Option(Path("inspect"), "--out", "-o",
-                             help="Folder for one PNG per view (<id>.png)."),
+                             help="Folder for the pictures: one PNG per view, named by its id."),
     robot: Optional[Path] = _ROBOT_OPTION,
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
-    """Draw what the image pipeline found in each view: the numbered board corners, the
-    stripe centres and the rejected scan lines coloured by status; print one line per view
-    (used or rejected and why, corners, scan lines per stripe status).
+    """Draw what the image pipeline found in each view, and say why a view was dropped.
+
+    One picture per view: the numbered board corners, the stripe centres and the rejected
+    scan lines coloured by status. One line per view on the terminal: used or rejected and
+    why, corners, scan lines per stripe status.
 
     Example: hmlvs inspect session/ --out inspect/
     """
@@ -952,8 +955,10 @@ def export_calibration(
         "calibration's distortion fit; default 2 Cu x 2 Cv."),
     camera_name: str = typer.Option("hmlvs_camera", help="camera_name of the ros format."),
 ) -> None:
-    """Export a calibration's camera, laser plane and hand-eye transform for OpenCV, ROS or
-    any JSON reader (a paper-model calibration is converted to OpenCV's camera model).
+    """Export a calibration for OpenCV (YAML), ROS (camera_info) or any JSON reader.
+
+    The camera, the laser plane and the hand-eye transform; a paper-model calibration is
+    converted to OpenCV's camera model.
 
     Example: hmlvs export calibration.yaml --format ros --out camera_info.yaml
     """
@@ -998,8 +1003,10 @@ def study(
     progress: bool = typer.Option(
         True, "--progress/--no-progress", help="Show a progress bar on stderr."),
 ) -> None:
-    """The paper's simulation study (Table 1, Fig. 8): RS, paper-mode LM, PSO, modern LM and
-    PSO+LM from the same initial candidates, for each spread s.
+    """The paper's simulation study (Table 1, Fig. 8) of the five identification methods.
+
+    RS, paper-mode LM, PSO, modern LM and PSO+LM from the same initial candidates, for each
+    spread s.
 
     Example: hmlvs study --quick --out study-out
     """
