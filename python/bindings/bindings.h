@@ -9,5 +9,6 @@ void BindKinematics(pybind11::module_& m);
 void BindSolvers(pybind11::module_& m);
 void BindImage(pybind11::module_& m);
 void BindGeneral(pybind11::module_& m);
+void BindSim(pybind11::module_& m);
 
 }  // namespace hmlvs::python

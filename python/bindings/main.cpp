@@ -15,4 +15,5 @@ PYBIND11_MODULE(_core, m) {
   hmlvs::python::BindSolvers(m);
   hmlvs::python::BindImage(m);
   hmlvs::python::BindGeneral(m);
+  hmlvs::python::BindSim(m);
 }

@@ -443,10 +443,8 @@ def render_general_view(session: GeneralSession, i: int, options: RenderOptions 
     rng = np.random.default_rng([session.seed, i]) if rng is None else rng
     sensor = session.sensor
     rays = pixel_rays(sensor, o.supersample)
-    plane = sensor.laser_plane
-    ambient, laser, _ = _board_exposures(
-        rays, session.board_from_camera[i], session.board, o,
-        lambda cam: cam @ plane[:3] + plane[3])
+    ambient, laser, _ = _board_exposures(rays, session.board_from_camera[i], session.board, o,
+                                         sensor.laser_plane)
     return _finish_frames(ambient, laser, o, rng)
 
 

@@ -28,11 +28,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .. import _core
 from .._arrays import as_params
 from ..data.manifest import write_image_manifest
 from ..geometry.board import Checkerboard
 from ..models.paper import hand_from_camera, rays_in_camera
-from .scene import _TINY, Scene, Table, _soft_sign
+from .scene import _TINY, Scene, Table
 
 if TYPE_CHECKING:  # pragma: no cover
     from .sessions import Session
@@ -186,41 +187,17 @@ def _board_from_camera(q: np.ndarray, pose: np.ndarray, board: Checkerboard) -> 
     return np.linalg.inv(board.base_from_board()) @ base_from_camera
 
 
-def _albedo(x: np.ndarray, y: np.ndarray, gx: np.ndarray, gy: np.ndarray,
-            board: Checkerboard, o: RenderOptions) -> np.ndarray:
-    """Albedo at board coordinates (x, y) mm, edges pre-smoothed analytically.
-
-    ``gx``, ``gy`` are |grad x| and |grad y| in mm per pixel, so that every edge is smoothed
-    over +-1.5/supersample px: the supersamples then integrate the pixel area without the
-    aliasing that makes point-sampled squares bias corner positions by ~0.1 px.
-    """
-    sq = board.square
-    width = 1.5 / o.supersample
-
-    def soft_sign(c: np.ndarray, g: np.ndarray) -> np.ndarray:
-        # (-1)^floor(c/sq) smoothed across the lines c = n * sq
-        k = np.floor(c / sq)
-        f = c / sq - k
-        dist = sq * np.minimum(f, 1.0 - f) / g
-        return np.where(k % 2 == 0, 1.0, -1.0) * _soft_sign(dist, width)
-
-    def inside(c: np.ndarray, g: np.ndarray, lo: float, hi: float) -> np.ndarray:
-        return (0.25 * (1.0 + _soft_sign((c - lo) / g, width))
-                * (1.0 + _soft_sign((hi - c) / g, width)))
-
-    black = 0.5 + 0.5 * soft_sign(x, gx) * soft_sign(y, gy)
-    pattern = inside(x, gx, -sq, board.rows * sq) * inside(y, gy, -sq, board.cols * sq)
-    m = o.margin * sq
-    on_board = inside(x, gx, -sq - m, board.rows * sq + m) * \
-        inside(y, gy, -sq - m, board.cols * sq + m)
-    white_part = o.table + (o.white - o.table) * on_board
-    return white_part + (o.black - o.white) * black * pattern
-
-
 def _laser_distance(q: np.ndarray, cam: np.ndarray) -> np.ndarray:
     """Signed distance (mm) of camera-frame points from the laser plane y + z tan(theta) = H."""
     th, hh = q[7], q[6]
     return (cam[..., 1] + cam[..., 2] * np.tan(th) - hh) * np.cos(th)
+
+
+def _laser_plane(q: np.ndarray) -> np.ndarray:
+    """The laser plane y + z tan(theta) = H as (a, b, c, d): a x + b y + c z + d is the signed
+    distance (mm) of :func:`_laser_distance`."""
+    th, hh = q[7], q[6]
+    return np.array([0.0, np.cos(th), np.tan(th) * np.cos(th), -hh * np.cos(th)])
 
 
 def _true_stripe_rows(q: np.ndarray, pose: np.ndarray, board: Checkerboard,
@@ -258,56 +235,29 @@ def _true_stripe_rows(q: np.ndarray, pose: np.ndarray, board: Checkerboard,
 
 
 def _board_exposures(rays: np.ndarray, bfc: np.ndarray, board: Checkerboard, o: RenderOptions,
-                     laser_distance: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                     plane: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ambient and laser exposure (h, w) of the board plane, and the laser-plane distance
     (mm) at the pixel centres (NaN where a ray misses the plane).
 
     ``rays`` (h*s, w*s, 3) are the camera rays of the supersample positions (s =
     ``o.supersample``, the centre sample of each pixel at its integer position), ``bfc`` the
-    4x4 board_from_camera transform and ``laser_distance`` maps camera-frame points (..., 3)
-    to their signed distance (mm) from the laser plane. The sensor model enters only through
-    these two, so any camera model renders with the same shading.
+    4x4 board_from_camera transform and ``plane`` (4,) the laser plane in the camera frame:
+    ``plane[:3] . p + plane[3]`` is a camera point's signed distance (mm) from it. The sensor
+    model enters only through these two, so any camera model renders with the same shading.
+
+    The C++ core shades (``ShadeBoard``): every edge of the print smoothed over +-1.5
+    samples, so that the s x s samples integrate the pixel's area without the aliasing that
+    makes point-sampled squares bias corner positions by ~0.1 px, and the stripe a Gaussian
+    of the sample's distance in pixels from the plane's trace on the board.
     """
-    s = o.supersample
-    h, w = rays.shape[0] // s, rays.shape[1] // s
-    ambient = np.empty((h, w))
-    laser = np.empty((h, w))
-    d_centres = np.empty((h, w))
-    u_sub = ((np.arange(w * s) + 0.5) / s - 0.5)
-    chunk = 40  # pixel rows per block, to bound memory
-    for r0 in range(0, h, chunk):
-        r1 = min(h, r0 + chunk)
-        ray = rays[r0 * s:r1 * s]
-        rb = ray @ bfc[:3, :3].T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = -bfc[2, 3] / rb[..., 2]
-        hit = np.isfinite(t) & (t > 0)
-        t = np.where(hit, t, np.nan)
-        x = bfc[0, 3] + t * rb[..., 0]
-        y = bfc[1, 3] + t * rb[..., 1]
-        gxv, gxu = np.gradient(x, 1.0 / s)
-        gyv, gyu = np.gradient(y, 1.0 / s)
-        with np.errstate(invalid="ignore"):
-            alb = _albedo(np.nan_to_num(x), np.nan_to_num(y),
-                          np.nan_to_num(np.hypot(gxu, gxv), nan=1.0),
-                          np.nan_to_num(np.hypot(gyu, gyv), nan=1.0), board, o)
-        alb = np.where(hit, alb, 0.0)
-        d = laser_distance(ray * t[..., None])
-        # distance to the stripe curve in pixels: d (mm) over its gradient (mm per px)
-        gv, gu = np.gradient(d, 1.0 / s)
-        dpx = d / np.hypot(gu, gv)
-        prof = np.exp(-0.5 * (dpx / o.stripe_sigma) ** 2)
-        if o.spurious > 0:
-            lo, hi = o.spurious_columns
-            inside = (u_sub >= lo * w) & (u_sub <= hi * w)
-            prof = prof + o.spurious * inside[None, :] * np.exp(
-                -0.5 * ((dpx - o.spurious_offset) / o.stripe_sigma) ** 2)
-        lz = np.nan_to_num(o.laser * alb * prof)
-        az = o.ambient * alb
-        ambient[r0:r1] = az.reshape(r1 - r0, s, w, s).mean(axis=(1, 3))
-        laser[r0:r1] = lz.reshape(r1 - r0, s, w, s).mean(axis=(1, 3))
-        d_centres[r0:r1] = d[s // 2::s, s // 2::s]
-    return ambient, laser, d_centres
+    shading = _core._BoardShading()
+    shading.supersample = int(o.supersample)
+    shading.rows, shading.cols, shading.square = int(board.rows), int(board.cols), board.square
+    for name in ("margin", "white", "black", "table", "ambient", "laser", "stripe_sigma",
+                 "spurious", "spurious_offset"):
+        setattr(shading, name, float(getattr(o, name)))
+    shading.spurious_lo, shading.spurious_hi = (float(c) for c in o.spurious_columns)
+    return _core._shade_board(rays, np.asarray(bfc, float), np.asarray(plane, float), shading)
 
 
 def _add_glare(ambient: np.ndarray, stripe_v: np.ndarray, o: RenderOptions) -> np.ndarray:
@@ -346,8 +296,7 @@ def render_pose(params: Any, pose: np.ndarray, board: Checkerboard | None = None
         raise ValueError(f"image_size must be at least 8 x 8 pixels, got {image_size}")
     rays = _sample_rays(q, (w, h), o.supersample)
     bfc = _board_from_camera(q, pose, board)
-    ambient, laser, d_centres = _board_exposures(
-        rays, bfc, board, o, lambda cam: _laser_distance(q, cam))
+    ambient, laser, d_centres = _board_exposures(rays, bfc, board, o, _laser_plane(q))
     stripe_v = _true_stripe_rows(q, pose, board, (w, h), d_centres)
     ambient = _add_glare(ambient, stripe_v, o)
     on, off = _finish_frames(ambient, laser, o, rng)
