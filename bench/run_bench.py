@@ -73,6 +73,39 @@ def session_times(reps: int) -> tuple[float, float, bool]:
     return statistics.median(times["c++"]), statistics.median(times["numpy"]), same
 
 
+def render_times(reps: int) -> tuple[float, float, int, int]:
+    """Median seconds of ``hmlvs.simulate.render_session`` (4 poses, 640 x 480, noise and
+    speckle) with the C++ board shading and with the NumPy one (the tests' reference),
+    interleaved, and how many of how many 8-bit pixels differ between the two."""
+    from hmlvs.sim import render as R
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    from reference_render import board_exposures  # the tests' NumPy reference of the shading
+
+    native = R._board_exposures
+
+    def numpy_shading(rays, bfc, board, o, plane):
+        return board_exposures(rays, bfc, board, o, lambda cam: cam @ plane[:3] + plane[3])
+
+    options = R.RenderOptions(noise=1.0, speckle=0.1)
+    session = hmlvs.simulate.session(num_poses=4, seed=0)
+    times: dict[str, list[float]] = {"c++": [], "numpy": []}
+    frames: dict[str, list[np.ndarray]] = {}
+    try:
+        for _ in range(reps):
+            for name, shade in (("c++", native), ("numpy", numpy_shading)):
+                R._board_exposures = shade
+                t = time.perf_counter()
+                r = R.render_session(session, options=options)
+                times[name].append(time.perf_counter() - t)
+                frames[name] = [*r.on, *r.off]
+    finally:
+        R._board_exposures = native
+    differ = sum(int(np.count_nonzero(a != b)) for a, b in zip(frames["c++"], frames["numpy"]))
+    pixels = sum(a.size for a in frames["c++"])
+    return statistics.median(times["c++"]), statistics.median(times["numpy"]), differ, pixels
+
+
 def machine() -> str:
     model = "unknown CPU"
     try:
@@ -325,6 +358,17 @@ def main() -> None:
                   f"{t_ses_np / t_ses:.0f}x faster than the NumPy solve "
                   f"({t_ses * 1e3:.0f} against {t_ses_np * 1e3:.0f} ms), "
                   + ("with the same joints to the last bit" if same else "BUT OTHER JOINTS"))
+
+    print("rendering ...", flush=True)
+    t_ren, t_ren_np, differ, pixels = render_times(reps=3)
+    rows.append(("hmlvs.simulate.render_session, 4 poses of 640 x 480 (shading in C++)",
+                 f"{t_ren * 1e3:.0f} ms", "median of 3, interleaved; noise, speckle, blur"))
+    rows.append(("the same with the NumPy shading", f"{t_ren_np * 1e3:.0f} ms",
+                 f"{differ} of {pixels} pixels differ"))
+    ratios.append(f"Rendering: the C++ board shading renders a 4-pose session "
+                  f"{t_ren_np / t_ren:.1f}x faster than the NumPy shading "
+                  f"({t_ren * 1e3:.0f} against {t_ren_np * 1e3:.0f} ms), with {differ} of "
+                  f"{pixels} pixels different")
 
     print("import time ...", flush=True)
 
