@@ -26,7 +26,8 @@ double Gauss(double a) {
   return e < 746.0 ? std::exp(-e) : 0.0;
 }
 
-/// numpy.nan_to_num: NaN -> nan, +-inf -> the largest finite double of that sign.
+/// numpy.nan_to_num: NaN -> `nan` (0 by default), +-inf -> the largest finite double of that
+/// sign.
 double NanToNum(double v, double nan = 0.0) {
   if (std::isnan(v)) return nan;
   if (std::isinf(v)) {
