@@ -80,12 +80,10 @@ def render_times(reps: int) -> tuple[float, float, int, int]:
     from hmlvs.sim import render as R
 
     sys.path.insert(0, str(ROOT / "tests"))
-    from reference_render import board_exposures  # the tests' NumPy reference of the shading
+    # the tests' NumPy reference of the shading
+    from reference_render import board_exposures_of_plane as numpy_shading
 
     native = R._board_exposures
-
-    def numpy_shading(rays, bfc, board, o, plane):
-        return board_exposures(rays, bfc, board, o, lambda cam: cam @ plane[:3] + plane[3])
 
     options = R.RenderOptions(noise=1.0, speckle=0.1)
     session = hmlvs.simulate.session(num_poses=4, seed=0)

@@ -11,13 +11,9 @@ from hmlvs.sim import general as G
 from hmlvs.sim import render as R
 import numpy as np
 import pytest
-from reference_render import board_exposures
+from reference_render import board_exposures_of_plane as numpy_exposures
 
 pytestmark = pytest.mark.scene  # simulated sessions or rendered images
-
-
-def numpy_exposures(rays, bfc, board, o, plane):
-    return board_exposures(rays, bfc, board, o, lambda cam: cam @ plane[:3] + plane[3])
 
 
 def assert_same_exposures(rays, bfc, board, o, plane):
