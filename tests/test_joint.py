@@ -321,3 +321,35 @@ def test_a_charuco_board_is_never_flipped_and_partial_views_calibrate():
     assert r.corner_rms_px < 0.2
     for i, name in enumerate(("fx", "fy", "cx", "cy")):
         assert abs(_intrinsics(t)[i] - r.sensor.intrinsics()[name]) < 5 * r.std[name]
+
+
+def _off_board_pixels(t, board, bfh, n=120):
+    """Pixels of points on the board's plane but off the printed board (1.5-4 squares
+    beyond its first row of corners): stripe light on the sheet or the table."""
+    cb = np.linalg.inv(t.hand_from_camera) @ np.linalg.inv(bfh) @ t.base_from_board
+    sq = board.square
+    xy = np.c_[np.linspace(-4 * sq, -1.5 * sq, n), np.linspace(0, (board.cols - 1) * sq, n)]
+    cam = np.c_[xy, np.zeros(n)] @ cb[:3, :3].T + cb[:3, 3]
+    return project(t, cam)
+
+
+@pytest.mark.parametrize("robust", [True, False])
+def test_views_whose_stripe_leaves_or_misses_the_board(robust):
+    # A view whose stripe pixels all lie off the board (it misses the board) used to put the
+    # per-view masks and the plane points out of step: IndexError in the set-up.
+    views, board, t, _ = make_views(4, n_views=8)
+    missed, leaves = views[1], views[3]
+    views[1] = ViewData(missed.id, missed.corner_pixels, missed.corner_index,
+                        _off_board_pixels(t, board, missed.base_from_hand),
+                        missed.base_from_hand)
+    views[3] = ViewData(leaves.id, leaves.corner_pixels, leaves.corner_index,
+                        np.vstack([leaves.laser_pixels,
+                                   _off_board_pixels(t, board, leaves.base_from_hand)]),
+                        leaves.base_from_hand)
+    r = calibrate_joint(views, board, (1024, 768), robust=robust)
+    assert r.per_view[missed.id]["laser_pixels"] == 0
+    # the off-board pixels of the other view are left out, its stripe on the board is kept
+    assert 0 < r.per_view[leaves.id]["laser_pixels"] <= len(leaves.laser_pixels)
+    normal = r.sensor.laser_plane[:3] / np.linalg.norm(r.sensor.laser_plane[:3])
+    assert abs(normal @ t.plane[:3]) > math.cos(math.radians(0.2))
+    assert r.corner_rms_px < 0.2 and r.laser_rms_mm < 0.2

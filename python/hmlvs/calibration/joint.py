@@ -366,18 +366,21 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
             [bfh[i] @ hand_eye @ cam_poses[i] for i in range(len(views))])
 
     # Laser pixels on the board, and the initial laser plane through them.
+    # One entry per view in both lists (empty where a view has no stripe pixel on the board),
+    # so that the per-view masks below stay in step with the views.
     laser_px: list[np.ndarray] = []
-    plane_pts = []
+    plane_pts: list[np.ndarray] = []
     for i, v in enumerate(views):
         px = np.asarray(v.laser_pixels, float).reshape(-1, 2)
         if len(px) == 0:
             laser_px.append(px)
+            plane_pts.append(np.empty((0, 3)))
             continue
         pts, xy = _board_plane_points(intr, cam_poses[i], px)
         keep = on_board(board, xy) & np.isfinite(pts).all(axis=1)
         laser_px.append(px[keep])
         plane_pts.append(pts[keep])
-    all_pts = np.concatenate(plane_pts) if plane_pts else np.empty((0, 3))
+    all_pts = np.concatenate(plane_pts)
     if len(all_pts) < 10:
         raise ValueError(f"only {len(all_pts)} stripe pixels fall on the board over all views; "
                          "the laser plane needs stripe points on the board in several views")
@@ -416,11 +419,7 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
     all_l = [np.ones(len(p), bool) for p in laser_px]
     keep_c, keep_l = list(all_c), list(all_l)
     if robust and sigma_l0 > 0:
-        j = 0
-        for i, px in enumerate(laser_px):
-            if len(px):
-                keep_l[i] = inlier[j]
-                j += 1
+        keep_l = list(inlier)
     # Noise levels start at typical values and are then estimated from the residuals.
     # Noise levels from the set-up's residuals (OpenCV's RMS is per corner, over both axes),
     # then re-estimated from the solve's; a second solve only when they move by > 20 % or
