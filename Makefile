@@ -2,23 +2,38 @@
 #   make demo   install everything, then calibrate a simulated session
 #   make test   install everything, then run the test suite
 #   make bench  install everything, then run the benchmarks and write bench/RESULTS.md
+#
+# Everything Python goes into the project's virtual environment .venv (made with the Python
+# found as $(PYTHON) when it is missing; uv, installed inside it, does the installing), never
+# into the system Python. Afterwards: `. .venv/bin/activate`, then `hmlvs --help`.
+# The Debian packages (Eigen, Ceres; GoogleTest for the tests) come from apt.
 
 PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+UV := $(VENV)/bin/uv
 APT_PACKAGES ?= libeigen3-dev libceres-dev
 # needed by make test (the C++ tests); the browser is only for the report's screenshot check,
 # so a failure to install it does not stop the run (with CI=true the check then fails)
 TEST_APT_PACKAGES ?= libgtest-dev
 BROWSER_APT_PACKAGES ?= chromium
-# CI (CI=true) builds with warnings as errors.
-PIP_FLAGS := --quiet $(if $(CI),--config-settings=cmake.define.HMLVS_WERROR=ON,)
-# make test builds the C++ tests in the extension's own CMake tree (the core compiles once).
-TEST_BUILD_DIR := build/test
-TEST_PIP_FLAGS := $(PIP_FLAGS) --config-settings=build-dir=$(TEST_BUILD_DIR) \
-	--config-settings=cmake.define.HMLVS_BUILD_TESTS=ON
+
+# The extension is built without build isolation, by the build tools installed in .venv (the
+# dependency group `build`), in one persistent CMake tree: a second build compiles only what
+# changed, and nothing when nothing did. The wheel is installed into .venv (newest releases of
+# the dependencies) and, by make test, into .venv-lowest (the declared lower bounds).
+BUILD_DIR := build/venv
+WHEEL_DIR := build/wheel
+# CI (CI=true) builds with warnings as errors; make test builds the C++ tests in the same tree.
+CMAKE_WERROR := $(if $(CI),-C cmake.define.HMLVS_WERROR=ON,)
+SOURCES := CMakeLists.txt pyproject.toml README.md \
+	$(shell find cpp python -type f \( -name '*.cpp' -o -name '*.h' -o -name '*.py' \
+	  -o -name 'CMakeLists.txt' -o -name 'py.typed' \) -not -path '*/__pycache__/*')
 CPP_SOURCES = $(shell find cpp python/bindings bench -name '*.cpp' -o -name '*.h')
 SUDO := $(shell if [ "$$(id -u)" != 0 ] && command -v sudo >/dev/null 2>&1; then echo sudo; fi)
 
-.PHONY: deps test-deps install test-install style demo test bench clean
+.PHONY: deps test-deps venv install test-install style deps-check demo test test-lowest bench \
+	clean
 
 # Install the Debian packages that are missing (apt-get update + install, as root or via sudo).
 define apt_install
@@ -31,6 +46,18 @@ define apt_install
 	fi
 endef
 
+# Build the wheel in $(BUILD_DIR) with the CMake options $(1), install it into .venv with the
+# newest releases of its dependencies (and the test extra), then leave the stamp $(2).
+define build_and_install
+	rm -rf $(WHEEL_DIR)
+	$(UV) build --quiet --no-build-isolation --python $(PY) --wheel --out-dir $(WHEEL_DIR) \
+	  -C build-dir=$(BUILD_DIR) $(CMAKE_WERROR) $(1) .
+	$(UV) pip install --quiet --python $(PY) -r pyproject.toml --extra test
+	$(UV) pip install --quiet --python $(PY) --no-deps --reinstall $(WHEEL_DIR)/hmlvs-*.whl
+	rm -f $(VENV)/.installed-*
+	touch $(2)
+endef
+
 deps:
 	$(call apt_install,$(APT_PACKAGES))
 
@@ -38,40 +65,71 @@ test-deps: deps
 	$(call apt_install,$(TEST_APT_PACKAGES))
 	-$(call apt_install,$(BROWSER_APT_PACKAGES))
 
-install: deps
-	$(PYTHON) -m pip install $(PIP_FLAGS) ".[test]"
+$(VENV)/.created:
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --disable-pip-version-check "uv>=0.9,<1"
+	$(UV) pip install --quiet --python $(PY) --group build
+	touch $@
+
+venv: $(VENV)/.created
+
+# The stamps make a second `make demo` or `make test` skip the build and the install when no
+# source changed since.
+$(VENV)/.installed-app: $(VENV)/.created $(SOURCES)
+	$(call build_and_install,-C cmake.define.HMLVS_BUILD_TESTS=OFF,$@)
+
+$(VENV)/.installed-test: $(VENV)/.created $(SOURCES)
+	$(call build_and_install,-C cmake.define.HMLVS_BUILD_TESTS=ON,$@)
+
+install: deps $(VENV)/.installed-app
+
+test-install: test-deps $(VENV)/.installed-test
 
 demo: install
-	$(PYTHON) -m hmlvs demo
-
-test-install: test-deps
-	$(PYTHON) -m pip install $(TEST_PIP_FLAGS) ".[test]"
+	$(VENV)/bin/hmlvs demo
 
 # ruff (Python) and clang-format (C++), the versions pinned in the test extras.
 style: test-install
-	$(PYTHON) -m ruff check .
-	clang-format --dry-run -Werror $(CPP_SOURCES)
+	$(PY) -m ruff check .
+	$(VENV)/bin/clang-format --dry-run -Werror $(CPP_SOURCES)
 
-# Style, the C++ tests, the Python suite, then the tests that use simulated sessions or images
-# once more under another BLAS kernel: a result that depends on the CPU's last bits fails
-# here, not on a user's machine.
+# Every package the code imports is declared in pyproject.toml (configuration there).
+deps-check: test-install
+	$(PY) -m deptry .
+
+# Style, the dependency check, the C++ tests, the Python suite, then the tests that use
+# simulated sessions or images once more under another BLAS kernel: a result that depends on
+# the CPU's last bits fails here, not on a user's machine. Last, the same wheel against the
+# declared lower bounds of the dependencies (make test-lowest).
 # pytest runs one worker per core (pytest-xdist), each test file on one worker so that a file's
 # fixtures are built once.
-PYTEST := $(PYTHON) -m pytest -q -n auto --dist loadfile
-test: test-install style
-	ctest --test-dir $(TEST_BUILD_DIR) --output-on-failure
+PYTEST := $(PY) -m pytest -q -n auto --dist loadfile
+test: test-install style deps-check
+	$(VENV)/bin/ctest --test-dir $(BUILD_DIR) --output-on-failure
 	$(PYTEST)
 	OPENBLAS_CORETYPE=Prescott $(PYTEST) -m scene
+	$(MAKE) --no-print-directory test-lowest
+
+# The oldest releases pyproject.toml admits (uv's lowest-direct resolution), with the wheel
+# make test built, over the command-line and API smoke tests (marker `smoke`).
+LOWEST := .venv-lowest
+test-lowest: test-install
+	rm -rf $(LOWEST)
+	$(UV) venv --quiet --python $(PY) $(LOWEST)
+	$(UV) pip install --quiet --python $(LOWEST)/bin/python --resolution lowest-direct \
+	  -r pyproject.toml --extra test
+	$(UV) pip install --quiet --python $(LOWEST)/bin/python --no-deps $(WHEEL_DIR)/hmlvs-*.whl
+	$(UV) pip list --python $(LOWEST)/bin/python | grep -iE '^(numpy|scipy|matplotlib|opencv-python-headless|typer|click|rich|pyyaml|pillow|pytest) '
+	$(LOWEST)/bin/python -m pytest -q -p no:cacheprovider -m smoke
 
 # vision-calibration (the bench extra) is optional: without it the joint-calibration section
 # says so and still gives hmlvs' numbers.
-bench: deps
-	$(PYTHON) -m pip install $(PIP_FLAGS) ".[test]"
-	-$(PYTHON) -m pip install --quiet "vision-calibration>=0.9,<1" || \
+bench: deps $(VENV)/.installed-app
+	-$(UV) pip install --quiet --python $(PY) "vision-calibration>=0.9,<1" || \
 	  echo "vision-calibration not installed: bench/RESULTS.md will show hmlvs alone"
-	-$(PYTHON) -m pip install --quiet "pyswarms>=1.3,<2" || \
+	-$(UV) pip install --quiet --python $(PY) "pyswarms>=1.3,<2" || \
 	  echo "pyswarms not installed: bench/RESULTS.md will say so"
-	$(PYTHON) bench/run_bench.py
+	$(PY) bench/run_bench.py
 
 clean:
-	rm -rf build dist *.egg-info
+	rm -rf build dist *.egg-info $(VENV) $(LOWEST)

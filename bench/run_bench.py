@@ -17,6 +17,7 @@ import json
 import os
 from pathlib import Path
 import platform
+import shutil
 import statistics
 import subprocess
 import sys
@@ -119,12 +120,12 @@ def machine() -> str:
 
 def build_cpp_bench() -> Path:
     build = ROOT / "build" / "bench"
-    import pybind11
-    subprocess.run(["cmake", "-S", str(ROOT), "-B", str(build), "-DCMAKE_BUILD_TYPE=Release",
-                    "-DHMLVS_BUILD_BENCH=ON", "-DHMLVS_BUILD_PYTHON=OFF",
-                    f"-Dpybind11_DIR={pybind11.get_cmake_dir()}"], check=True,
+    # the CMake of the environment running the bench (make installs it into .venv)
+    cmake = shutil.which("cmake", path=str(Path(sys.executable).parent)) or "cmake"
+    subprocess.run([cmake, "-S", str(ROOT), "-B", str(build), "-DCMAKE_BUILD_TYPE=Release",
+                    "-DHMLVS_BUILD_BENCH=ON", "-DHMLVS_BUILD_PYTHON=OFF"], check=True,
                    stdout=subprocess.DEVNULL)
-    subprocess.run(["cmake", "--build", str(build), "--target", "hmlvs_bench", "-j2"],
+    subprocess.run([cmake, "--build", str(build), "--target", "hmlvs_bench", "-j2"],
                    check=True, stdout=subprocess.DEVNULL)
     return build / "bench" / "hmlvs_bench"
 

@@ -8,6 +8,7 @@ import pytest
 README = Path(__file__).resolve().parent.parent / "README.md"
 
 
+@pytest.mark.smoke
 @pytest.mark.filterwarnings("ignore::hmlvs.HmlvsDataWarning")
 def test_quickstart_runs(tmp_path, monkeypatch, capsys):
     text = README.read_text()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator, Optional
+from typing import Any, Iterator, Optional
 
 import typer
 
@@ -59,16 +59,20 @@ def _fail(lines: list[str], code: int, as_json: bool) -> None:
     raise typer.Exit(code)
 
 
+# What a command may raise on purpose: typer's own exits and parameter errors (through
+# typer's public names: typer 0.28 and later carry their own click, older ones re-export
+# click's classes, so either way these are the classes the command line raises).
+_PASS_THROUGH = (typer.Exit, typer.Abort, typer.BadParameter, SystemExit)
+
+
 @contextmanager
 def _guard(as_json: bool = False) -> Iterator[None]:
     """The command line's error policy. Exit 2: bad input or an environment fault (a path,
     a permission, disk space), one line naming the file, entry or option. Exit 1: an internal
     error, a short message (the traceback with --debug). Exit 130: Ctrl-C."""
-    import click
-
     try:
         yield
-    except (typer.Exit, click.exceptions.Exit, click.ClickException, SystemExit):
+    except _PASS_THROUGH:
         raise
     except ValueError as e:
         _fail(_error_lines(str(e)), 2, as_json)
@@ -1093,19 +1097,19 @@ def scenario(
 
 
 def _command():
-    """The click command of ``app``, with flags shown without a type placeholder in the help
-    (``--json  Print ...`` rather than ``--json <bool>  Print ...``)."""
-    import click
-
+    """The command object of ``app`` (``typer.main.get_command``), with flags shown without a
+    type placeholder in the help (``--json  Print ...`` rather than ``--json <bool>  Print
+    ...``). Only attributes every typer release has are touched (params, is_flag,
+    get_help_option, commands), so no import of click is needed."""
     cmd = typer.main.get_command(app)
 
-    def strip(c: click.Command) -> None:
+    def strip(c: Any) -> None:
         for p in c.params:
             if getattr(p, "is_flag", False) or getattr(p, "count", False):
                 p.metavar = ""
         original = c.get_help_option
 
-        def help_option(ctx: click.Context, _original=original):
+        def help_option(ctx: Any, _original=original):
             opt = _original(ctx)
             if opt is not None:
                 opt.metavar = ""
