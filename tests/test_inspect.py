@@ -19,7 +19,8 @@ pytestmark = pytest.mark.scene  # rendered images
 @pytest.fixture(scope="module")
 def session(tmp_path_factory):
     """3 rendered views of the general sensor; the laser-off frame of v001 is replaced by a
-    blank wall (its stripe kept), so that view has no board."""
+    blank wall (its stripe kept), so that view has no board: a laser-only view, its stripe on
+    the board's plane."""
     d = tmp_path_factory.mktemp("inspect")
     r = render_general_session(general_session(views=3, seed=4), d)
     on = cv2.imread(str(d / "v001_on.png"), cv2.IMREAD_UNCHANGED)
@@ -37,15 +38,16 @@ def test_inspect_draws_each_view_and_says_which_are_used(session, tmp_path):
     d, r, truth = session
     views = inspect_session(d, tmp_path / "out")
     assert [v.id for v in views] == ["v000", "v001", "v002"]
-    assert [v.used for v in views] == [True, False, True]
-    assert "no fully visible" in views[1].reason and views[1].corners == 0
+    # the view without a board is used for its stripe alone (through its robot pose)
+    assert [v.used for v in views] == [True, True, True]
+    assert views[1].reason == "" and views[1].corners == 0
     n = truth["board"]["rows"] * truth["board"]["cols"]
     for v in (views[0], views[2]):
         assert v.corners == n and v.reason == ""
         assert v.stripe["FOUND"] > 300
     # the view without a board still shows its stripe
     assert views[1].stripe["FOUND"] > 300
-    assert "rejected (no fully visible" in views[1].line()
+    assert views[1].line().startswith("v001: used (laser only, no board seen), 0 corners")
     assert views[0].line().startswith(f"v000: used, {n} corners, stripe FOUND ")
     for v, view_truth in zip(views, truth["views"]):
         img = cv2.imread(str(v.image))
@@ -54,7 +56,7 @@ def test_inspect_draws_each_view_and_says_which_are_used(session, tmp_path):
         yellow = np.all(img == CORNER_COLOUR, axis=2)
         near = [yellow[max(int(y) - 6, 0):int(y) + 7, max(int(x) - 6, 0):int(x) + 7].any()
                 for x, y in view_truth["corners"]]
-        if v.used:
+        if v.corners:
             assert np.mean(near) > 0.95, v.id
         else:
             assert not yellow[40:].any(), v.id  # (the title is white)
@@ -75,9 +77,9 @@ def test_inspect_command_prints_one_line_per_view(session, tmp_path, capsys):
     assert e.value.code in (0, None)
     lines = out.strip().splitlines()
     assert lines[0].startswith("v000: used, ")
-    assert lines[1].startswith("v001: rejected (no fully visible") and "0 corners" in lines[1]
+    assert lines[1].startswith("v001: used (laser only, no board seen), 0 corners")
     assert lines[2].startswith("v002: used, ")
-    assert lines[3] == f"2 of 3 views used; pictures in {tmp_path / 'pics'}"
+    assert lines[3] == f"3 of 3 views used; pictures in {tmp_path / 'pics'}"
     assert sorted(p.name for p in (tmp_path / "pics").iterdir()) == \
         ["v000.png", "v001.png", "v002.png"]
 

@@ -346,10 +346,54 @@ def test_views_whose_stripe_leaves_or_misses_the_board(robust):
                         np.vstack([leaves.laser_pixels,
                                    _off_board_pixels(t, board, leaves.base_from_hand)]),
                         leaves.base_from_hand)
-    r = calibrate_joint(views, board, (1024, 768), robust=robust)
+    # (only the stripe on the printed board is used: margin 0.5 squares, as before the
+    # stripe on the sheet around it was used by default)
+    r = calibrate_joint(views, board, (1024, 768), robust=robust, stripe_margin=0.5)
     assert r.per_view[missed.id]["laser_pixels"] == 0
     # the off-board pixels of the other view are left out, its stripe on the board is kept
     assert 0 < r.per_view[leaves.id]["laser_pixels"] <= len(leaves.laser_pixels)
     normal = r.sensor.laser_plane[:3] / np.linalg.norm(r.sensor.laser_plane[:3])
     assert abs(normal @ t.plane[:3]) > math.cos(math.radians(0.2))
     assert r.corner_rms_px < 0.2 and r.laser_rms_mm < 0.2
+
+
+def _laser_line_pixels(t, board, bfh, beyond=4.0, n=300):
+    """Pixels of the laser line on the board's plane, from ``beyond`` squares before the
+    first row of corners to as far past the last: the stripe on the sheet around the print."""
+    cb = np.linalg.inv(t.hand_from_camera) @ np.linalg.inv(bfh) @ t.base_from_board
+    sq, nrm, d = board.square, t.plane[:3], t.plane[3]
+    xs = np.linspace(-beyond * sq, (board.rows - 1 + beyond) * sq, n)
+    ys = -(nrm @ (np.outer(cb[:3, 0], xs) + cb[:3, 3:4]) + d) / (nrm @ cb[:3, 1])
+    cam = np.outer(xs, cb[:3, 0]) + np.outer(ys, cb[:3, 1]) + cb[:3, 3]
+    return project(t, cam)
+
+
+def test_the_stripe_on_the_sheet_around_the_board_is_used():
+    # the default: every stripe pixel whose ray meets the board's plane (the sheet the
+    # pattern is printed on); a laser-only view (no corners) joins through its robot pose
+    views, board, t, _ = make_views(5, n_views=6)
+    rng = np.random.default_rng(0)
+    wide = [ViewData(v.id, v.corner_pixels, v.corner_index,
+                     _laser_line_pixels(t, board, v.base_from_hand)
+                     + rng.normal(0, 0.1, (300, 2)), v.base_from_hand) for v in views]
+    bfh = views[2].base_from_hand @ transform([0.05, -0.04, 0.02], [3.0, -4.0, 2.0])
+    dark = ViewData("dark", np.zeros((0, 2)), np.zeros(0, int),
+                    _laser_line_pixels(t, board, bfh) + rng.normal(0, 0.1, (300, 2)), bfh)
+    r = calibrate_joint(wide + [dark], board, (1024, 768))
+    assert all(r.per_view[v.id]["laser_pixels"] > 280 for v in wide)
+    assert r.per_view["dark"]["laser_pixels"] > 280 and r.per_view["dark"]["corners"] == 0
+    plain = calibrate_joint(views, board, (1024, 768), stripe_margin=0.5)
+    for cal in (r, plain):
+        normal = cal.sensor.laser_plane[:3]
+        assert abs(normal @ t.plane[:3]) > math.cos(math.radians(0.2))
+    # the longer stripe (and the laser-only view) pins the plane better than the stripe on
+    # the print alone
+    assert r.std["plane_d"] < plain.std["plane_d"]
+    assert r.std["plane_n1"] < plain.std["plane_n1"] and r.std["plane_n2"] < plain.std["plane_n2"]
+
+
+def test_a_laser_only_view_needs_robot_poses():
+    views, board, _, _ = make_views(6, n_views=4)
+    dark = ViewData("dark", np.zeros((0, 2)), np.zeros(0, int), views[0].laser_pixels, None)
+    with pytest.raises(ValueError, match="view dark has no corners: a laser-only view needs"):
+        calibrate_joint(views + [dark], board, (1024, 768))

@@ -50,6 +50,8 @@ void BindGeneral(py::module_& m) {
       .def_readwrite("board_pose_known", &JointOptions::board_pose_known)
       .def_readwrite("hand_eye_known", &JointOptions::hand_eye_known)
       .def_readwrite("laser", &JointOptions::laser)
+      .def_readwrite("pose_sigma_t", &JointOptions::pose_sigma_t)
+      .def_readwrite("pose_sigma_r", &JointOptions::pose_sigma_r)
       .def_readwrite("fixed", &JointOptions::fixed)
       .def_readwrite("corner_sigma", &JointOptions::corner_sigma)
       .def_readwrite("laser_sigma", &JointOptions::laser_sigma)
@@ -75,6 +77,12 @@ void BindGeneral(py::module_& m) {
       [](const std::vector<JointView>& views, const JointState& state, const JointOptions& o) {
         JointResiduals r = EvaluateJoint(views, state, o);
         return std::make_pair(std::move(r.corners), std::move(r.laser));
+      },
+      py::arg("views"), py::arg("state"), py::arg("options"), release);
+  m.def(
+      "_joint_pose_errors",
+      [](const std::vector<JointView>& views, const JointState& state, const JointOptions& o) {
+        return EvaluateJoint(views, state, o).pose;
       },
       py::arg("views"), py::arg("state"), py::arg("options"), release);
   m.def(

@@ -530,6 +530,8 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
             for r in reports:
                 typer.echo(f"{r.id}: rejected: {r.reason}" if not r.ok else
                            f"{r.id}: {r.corners} corners, stripe in "
+                           f"{r.stripe.get('FOUND', 0)} scan lines" if r.corners else
+                           f"{r.id}: laser only (no board seen), stripe in "
                            f"{r.stripe.get('FOUND', 0)} scan lines")
         if not views:
             raise ValueError("no view has both the whole board and a stripe:\n" + "\n".join(

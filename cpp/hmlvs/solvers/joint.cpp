@@ -1,10 +1,12 @@
 #include "hmlvs/solvers/joint.h"
 
 #include <ceres/ceres.h>
+#include <ceres/rotation.h>
 #include <ceres/sphere_manifold.h>
 
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -71,6 +73,43 @@ struct ChainCorners {
     CameraFromBoard(q_hc, t_hc, view->base_from_hand.topLeftCorner<3, 3>().eval(),
                     view->base_from_hand.topRightCorner<3, 1>().eval(), q_bb, t_bb, &r, &t);
     return CornerResiduals(in, r, t, *view, inv_sigma, residuals);
+  }
+};
+
+// The robot pose error a view's own board pose implies (JointOptions::pose_sigma_t):
+// E = hand_from_camera camera_from_board_chain inv(camera_from_board) inv(hand_from_camera),
+// as (rotation vector, translation) in the hand frame.
+template <typename T>
+void PoseError(const T* q_cb, const T* t_cb, const T* q_hc, const T* t_hc, const T* q_bb,
+               const T* t_bb, const Eigen::Matrix4d& base_from_hand, T* out) {
+  Mat3<T> rp, rf, rh;
+  Vec3<T> tp, tf, th;
+  CameraFromBoard(q_hc, t_hc, base_from_hand.topLeftCorner<3, 3>().eval(),
+                  base_from_hand.topRightCorner<3, 1>().eval(), q_bb, t_bb, &rp, &tp);
+  QuaternionPose(q_cb, t_cb, &rf, &tf);
+  QuaternionPose(q_hc, t_hc, &rh, &th);
+  // chain * inv(free): rotation rp rf^T, translation tp - rp rf^T tf
+  const Mat3<T> rd = rp * rf.transpose();
+  const Vec3<T> td = tp - rd * tf;
+  // hand_from_camera * D * inv(hand_from_camera)
+  const Mat3<T> re = rh * rd * rh.transpose();
+  const Vec3<T> te = rh * td + th - re * th;
+  ceres::RotationMatrixToAngleAxis(re.data(), out);
+  for (int k = 0; k < 3; ++k) out[3 + k] = te[k];
+}
+
+struct PosePrior {
+  const JointView* view;
+  double w_r, w_t;
+  template <typename T>
+  bool operator()(const T* q_cb, const T* t_cb, const T* q_hc, const T* t_hc, const T* q_bb,
+                  const T* t_bb, T* residuals) const {
+    PoseError(q_cb, t_cb, q_hc, t_hc, q_bb, t_bb, view->base_from_hand, residuals);
+    for (int k = 0; k < 3; ++k) {
+      residuals[k] *= w_r;
+      residuals[3 + k] *= w_t;
+    }
+    return true;
   }
 };
 
@@ -235,7 +274,16 @@ void CheckTransform(const Eigen::Matrix4d& m, const std::string& name) {
 }
 
 void CheckInput(const std::vector<JointView>& views, const JointState& s, const JointOptions& o) {
+  if (!(o.pose_sigma_t >= 0.0 && o.pose_sigma_r >= 0.0) ||
+      ((o.pose_sigma_t > 0.0) != (o.pose_sigma_r > 0.0))) {
+    throw std::invalid_argument(
+        "pose_sigma_t and pose_sigma_r must both be > 0 (uncertain robot poses) or both 0");
+  }
   if (views.empty()) throw std::invalid_argument("the joint calibration needs at least one view");
+  if (std::none_of(views.begin(), views.end(),
+                   [](const JointView& v) { return v.corner_pixels.rows() > 0; })) {
+    throw std::invalid_argument("the joint calibration needs at least one view with corners");
+  }
   ValidateIntrinsics(s.intrinsics);
   if (!(o.corner_sigma > 0.0) || !(o.laser_sigma > 0.0)) {
     throw std::invalid_argument("corner_sigma and laser_sigma must be > 0");
@@ -251,18 +299,28 @@ void CheckInput(const std::vector<JointView>& views, const JointState& s, const 
                   (name + " corner points").c_str());
     RequireFinite(v.laser_pixels.data(), v.laser_pixels.rows(), 2,
                   (name + " laser pixels").c_str());
-    if (v.corner_pixels.rows() < 4) {
+    // In chain mode a view without corners (a laser-only frame: the stripe on the board's
+    // plane, the board unseen) sees its board through base_from_board and the robot pose.
+    // (Its stripe pixels may all have been dropped as outliers: then it adds nothing.)
+    const bool laser_only = o.chain && v.corner_pixels.rows() == 0;
+    if (v.corner_pixels.rows() < 4 && !laser_only) {
       throw std::invalid_argument(name + " has " + std::to_string(v.corner_pixels.rows()) +
-                                  " corners; each view needs at least 4");
+                                  " corners; each view needs at least 4" +
+                                  (o.chain ? " (or none: a laser-only view)"
+                                           : ""));
     }
     if (o.chain) CheckTransform(v.base_from_hand, name + " base_from_hand");
   }
+  const bool soft = SoftChain(o);
   if (o.chain) {
     CheckTransform(s.hand_from_camera, "hand_from_camera");
     CheckTransform(s.base_from_board, "base_from_board");
-  } else {
+  }
+  if (!o.chain || soft) {
     if (s.camera_from_board.size() != views.size()) {
-      throw std::invalid_argument("camera mode needs one initial camera_from_board per view, got " +
+      throw std::invalid_argument(std::string(soft ? "uncertain robot poses need"
+                                                   : "camera mode needs") +
+                                  " one initial camera_from_board per view, got " +
                                   std::to_string(s.camera_from_board.size()) + " for " +
                                   std::to_string(views.size()) + " views");
     }
@@ -297,7 +355,8 @@ class JointProblem {
     const double n = s.laser_plane.head<3>().norm();
     normal_ = s.laser_plane.head<3>() / n;
     offset_ = s.laser_plane[3] / n;
-    if (!o.chain) {
+    const bool soft = SoftChain(o);
+    if (!o.chain || soft) {
       for (const auto& m : s.camera_from_board) views_pose_.emplace_back(m);
     }
     ceres::Problem::Options popt;
@@ -309,12 +368,30 @@ class JointProblem {
       const JointView* v = &views[i];
       const int nc = 2 * static_cast<int>(v->corner_pixels.rows());
       const int nl = static_cast<int>(v->laser_pixels.rows());
-      if (o.chain) {
-        AddBlock(new ceres::AutoDiffCostFunction<ChainCorners, ceres::DYNAMIC, 9, 4, 3, 4, 3>(
-                     new ChainCorners{v, wc}, nc),
-                 {intrinsics_.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
+      if (soft) {
+        PoseBlocks& p = views_pose_[i];
+        if (nc > 0) {
+          AddBlock(new ceres::AutoDiffCostFunction<FreeCorners, ceres::DYNAMIC, 9, 4, 3>(
+                       new FreeCorners{v, wc}, nc),
+                   {intrinsics_.data(), p.q.data(), p.t.data()}, nc);
+        }
+        if (o.laser && nl > 0) {
+          AddBlock(new LaserCost<false>(v, wl),
+                   {intrinsics_.data(), p.q.data(), p.t.data(), normal_.data(), &offset_}, nl);
+        }
+        AddBlock(new ceres::AutoDiffCostFunction<PosePrior, 6, 4, 3, 4, 3, 4, 3>(
+                     new PosePrior{v, 1.0 / o.pose_sigma_r, 1.0 / o.pose_sigma_t}),
+                 {p.q.data(), p.t.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
                   board_.t.data()},
-                 nc);
+                 6);
+      } else if (o.chain) {
+        if (nc > 0) {  // none in a laser-only view
+          AddBlock(new ceres::AutoDiffCostFunction<ChainCorners, ceres::DYNAMIC, 9, 4, 3, 4, 3>(
+                       new ChainCorners{v, wc}, nc),
+                   {intrinsics_.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
+                    board_.t.data()},
+                   nc);
+        }
         if (o.laser && nl > 0) {
           AddBlock(new LaserCost<true>(v, wl),
                    {intrinsics_.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
@@ -365,10 +442,9 @@ class JointProblem {
     if (o.chain) {
       add_pose(hand_eye_, o.hand_eye_known, "hand_");
       add_pose(board_, o.board_pose_known, "board_");
-    } else {
-      for (std::size_t i = 0; i < views_pose_.size(); ++i) {
-        add_pose(views_pose_[i], false, "view" + std::to_string(i) + "_");
-      }
+    }
+    for (std::size_t i = 0; i < views_pose_.size(); ++i) {
+      add_pose(views_pose_[i], false, "view" + std::to_string(i) + "_");
     }
     if (o.laser && problem_->HasParameterBlock(normal_.data())) {
       problem_->SetManifold(normal_.data(), new ceres::SphereManifold<3>());
@@ -438,6 +514,9 @@ JointResult SolveJoint(const std::vector<JointView>& views, const JointState& in
   }
   ceres::Solver::Options sopt;
   sopt.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+  // Uncertain robot poses tie every view's pose to the chain's: dense QR, which, unlike the
+  // Schur complement's Cholesky factorisation, copes with the poorly conditioned systems of
+  // laser-only views (whose poses the priors and a stripe alone determine).
   sopt.linear_solver_type = options.chain ? ceres::DENSE_QR : ceres::DENSE_SCHUR;
   sopt.max_num_iterations = options.max_iterations;
   sopt.function_tolerance = options.function_tolerance;
@@ -460,19 +539,31 @@ JointResult SolveJoint(const std::vector<JointView>& views, const JointState& in
   return r;
 }
 
+bool SoftChain(const JointOptions& o) {
+  return o.chain && o.pose_sigma_t > 0.0 && o.pose_sigma_r > 0.0;
+}
+
 JointResiduals EvaluateJoint(const std::vector<JointView>& views, const JointState& s,
                              const JointOptions& o) {
   CheckInput(views, s, o);
+  const bool soft = SoftChain(o);
   JointResiduals out;
   const Eigen::Vector3d normal = s.laser_plane.head<3>() / s.laser_plane.head<3>().norm();
   const double offset = s.laser_plane[3] / s.laser_plane.head<3>().norm();
   for (std::size_t i = 0; i < views.size(); ++i) {
     const JointView& v = views[i];
     Eigen::Matrix4d cb;
-    if (o.chain) {
+    if (o.chain && !soft) {
       cb = s.hand_from_camera.inverse() * v.base_from_hand.inverse() * s.base_from_board;
     } else {
       cb = s.camera_from_board[i];
+    }
+    if (soft) {
+      const PoseBlocks f(cb), h(s.hand_from_camera), b(s.base_from_board);
+      Vector6d e;
+      PoseError(f.q.data(), f.t.data(), h.q.data(), h.t.data(), b.q.data(), b.t.data(),
+                v.base_from_hand, e.data());
+      out.pose.push_back(e);
     }
     const Eigen::Matrix3d r = cb.topLeftCorner<3, 3>();
     const Eigen::Vector3d t = cb.topRightCorner<3, 1>();
@@ -502,15 +593,20 @@ Eigen::MatrixXd JointJacobian(const std::vector<JointView>& views, const JointSt
   eopt.apply_loss_function = false;
   std::vector<ceres::ResidualBlockId> blocks;
   jp.problem().GetResidualBlocks(&blocks);
-  // Corners of every view first, then the laser pixels (see the header).
+  // Corners of every view first, then the laser pixels, then the robot pose errors (see the
+  // header); the kind of a block by its number of parameter blocks.
+  const bool soft = SoftChain(options);
+  const std::size_t corner_blocks = options.chain && !soft ? 5u : 3u;
+  const std::size_t pose_blocks = 6u;
+  auto kind = [&](ceres::ResidualBlockId b) {
+    const std::size_t n =
+        jp.problem().GetCostFunctionForResidualBlock(b)->parameter_block_sizes().size();
+    return n == corner_blocks ? 0 : (soft && n == pose_blocks) ? 2 : 1;
+  };
   std::vector<ceres::ResidualBlockId> ordered;
-  const int per_view = options.laser ? 2 : 1;
-  for (int pass = 0; pass < per_view; ++pass) {
+  for (int pass = 0; pass < 3; ++pass) {
     for (ceres::ResidualBlockId b : blocks) {
-      const bool is_corner =
-          jp.problem().GetCostFunctionForResidualBlock(b)->parameter_block_sizes().size() ==
-          (options.chain ? 5u : 3u);
-      if ((pass == 0) == is_corner) ordered.push_back(b);
+      if (kind(b) == pass) ordered.push_back(b);
     }
   }
   eopt.residual_blocks = ordered;

@@ -9,6 +9,8 @@
 //   camera_from_board_i = inv(hand_from_camera) inv(base_from_hand_i) base_from_board
 // (chain mode: hand_from_camera and base_from_board are unknowns, base_from_hand_i known), or
 // from a free per-view pose (camera mode: camera_from_board_i are unknowns; no robot needed).
+// Chain mode with uncertain robot poses (JointOptions::pose_sigma_t) keeps both: free per-view
+// board poses, each tied to the chain's by a residual of the robot pose error it implies.
 // Rotations live on SO(3) (unit quaternions), the laser normal on the unit sphere.
 #pragma once
 
@@ -21,6 +23,8 @@
 #include "hmlvs/solvers/lm.h"
 
 namespace hmlvs::general {
+
+using Vector6d = Eigen::Matrix<double, 6, 1>;
 
 /// The data of one view.
 struct JointView {
@@ -36,7 +40,8 @@ struct JointState {
   Eigen::Vector4d laser_plane = Eigen::Vector4d(0, 1, 0, -100);    ///< (a, b, c, d), unit normal
   Eigen::Matrix4d hand_from_camera = Eigen::Matrix4d::Identity();  ///< chain mode
   Eigen::Matrix4d base_from_board = Eigen::Matrix4d::Identity();   ///< chain mode
-  std::vector<Eigen::Matrix4d> camera_from_board;                  ///< camera mode, per view
+  /// camera mode, and chain mode with uncertain robot poses: per view
+  std::vector<Eigen::Matrix4d> camera_from_board;
 };
 
 struct JointOptions {
@@ -44,6 +49,13 @@ struct JointOptions {
   bool board_pose_known = false;  ///< chain mode: hold base_from_board at its given value
   bool hand_eye_known = false;    ///< chain mode: hold hand_from_camera at its given value
   bool laser = true;              ///< include the laser residuals and the plane
+  /// Chain mode: the robot poses' uncertainty, translation (mm) and rotation (rad), both > 0
+  /// or both 0 (the poses exact). With it every view keeps its own board pose
+  /// (camera_from_board), tied to the chain's by a residual per view: the robot pose error
+  /// E = hand_from_camera camera_from_board_chain inv(camera_from_board) inv(hand_from_camera)
+  /// (rotation vector / pose_sigma_r, translation / pose_sigma_t, in the hand frame).
+  double pose_sigma_t = 0.0;
+  double pose_sigma_r = 0.0;
   std::array<bool, kNumIntrinsics> fixed{};  ///< intrinsics held at their initial values
   double corner_sigma = 0.1;                 ///< pixels
   double laser_sigma = 0.05;                 ///< mm
@@ -73,11 +85,17 @@ JointResult SolveJoint(const std::vector<JointView>& views, const JointState& in
                        const JointOptions& options);
 
 /// Unweighted residuals at `state`: per view, the corner residuals (n x 2, pixels) and the laser
-/// residuals (m, mm; NaN where the ray misses the board plane).
+/// residuals (m, mm; NaN where the ray misses the board plane); with uncertain robot poses
+/// also each view's robot pose error (rotation vector (rad), translation (mm); see
+/// JointOptions::pose_sigma_t), empty otherwise.
 struct JointResiduals {
   std::vector<RowMatX2> corners;
   std::vector<Eigen::VectorXd> laser;
+  std::vector<Vector6d> pose;
 };
+
+/// Whether `o` is chain mode with uncertain robot poses (JointOptions::pose_sigma_t).
+bool SoftChain(const JointOptions& o);
 JointResiduals EvaluateJoint(const std::vector<JointView>& views, const JointState& state,
                              const JointOptions& options);
 

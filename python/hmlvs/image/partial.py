@@ -121,12 +121,12 @@ def partial_view(pid: str, pair: Any, board: Any, whole_error: Exception) -> Par
     no whole board was found (``whole_error`` says so): its corner grid, or the reason why
     there is none."""
     try:
-        grid, reason = detect_grid(pair.off, board), ""
+        grid, reason = detect_grid(pair.board_image, board), ""
     except ValueError:
         grid = None
         reason = (str(whole_error).split("; for a partly visible")[0] + "; nor a partly "
                   "visible one (no regular grid of at least 6 corners)")
-    return PartialView(pid, pair.off, grid, pair.pose, pair.stripe.pixels, reason)
+    return PartialView(pid, pair.board_image, grid, pair.pose, pair.stripe.pixels, reason)
 
 
 def add_partial_views(partial: list[tuple[int, PartialView, Any]], views: list[ViewData],
@@ -143,6 +143,14 @@ def add_partial_views(partial: list[tuple[int, PartialView, Any]], views: list[V
     keyed = list(zip([k for k, r in enumerate(reports) if r is not None and r.ok], full))
     for slot, p, pair in partial:
         corners, why = next(result)
+        if corners is None and p.grid is None and p.base_from_hand is not None:
+            # no board in the image at all: a laser-only view (the stripe on the board's
+            # plane, e.g. taken with the lights off), used through the robot poses
+            keyed.append((slot, ViewData(p.id, np.zeros((0, 2)), np.zeros(0, int), p.stripe,
+                                         p.base_from_hand)))
+            reports[slot] = ImageReport(p.id, slot, pair.on_name, pair.off_name, True, "",
+                                        pair.stripe.counts(), 0, int(pair.stripe.found.sum()))
+            continue
         if corners is None:
             reports[slot] = ImageReport(p.id, slot, pair.on_name, pair.off_name, False, why)
             continue

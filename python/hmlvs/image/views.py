@@ -15,7 +15,7 @@ import numpy as np
 from ..data.manifest import checkerboard_of
 from ..data.views import ViewData
 from ..geometry.board import BoardSpec, CharucoSpec
-from .corners import BoardNotFoundError, detect_board, detect_charuco
+from .corners import BoardNotFoundError, detect_board, detect_charuco, prefer_detected
 from .partial import PartialView, add_partial_views, partial_view
 from .session import (
     ImageReport,
@@ -113,6 +113,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     fit_blur = stripe_options.get("blur_var") is None
     stripe_options["blur_var"] = _blur_var(stripe_options.get("blur_var"))
     edges: dict[str, tuple[Any, np.ndarray]] = {}
+    whole: dict[str, Any] = {}  # the whole boards' Corners, by view id
     for index, rec in enumerate(records):
         pid = _record_id(rec, index)
         on_name, off_name = _record_names(rec)
@@ -123,7 +124,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
             if fit_blur:
                 edges[pid] = (pair.stripe, _edge_shift(pair, normalize, stripe_options))
             try:
-                corners = detect_corners(pair.off, detector_board)
+                corners = detect_corners(pair.board_image, detector_board)
             except BoardNotFoundError as e:
                 if board_spec.unambiguous:
                     raise _Reject(str(e)) from None
@@ -142,6 +143,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         except _Reject as e:
             reports.append(ImageReport(pid, index, on_name, off_name, False, str(e)))
             continue
+        whole[pid] = corners
         views.append(ViewData(pid, np.asarray(corners.pixels, float),
                               np.asarray(corners.index, int), pair.stripe.pixels, pair.pose))
         reports.append(ImageReport(pid, index, pair.on_name, pair.off_name, True, "",
@@ -154,14 +156,39 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         views = [replace(v, laser_pixels=fixed.get(v.id, v.laser_pixels)) for v in views]
         partial = [(slot, replace(p, stripe=fixed.get(p.id, p.stripe)), pair)
                    for slot, p, pair in partial]
+    if size is not None and prefer_detected(list(whole.values()), size)[0]:
+        raw = {k: c.as_detected() for k, c in whole.items()}
+        views = [replace(v, corner_pixels=np.asarray(raw[v.id].pixels, float),
+                         corner_index=np.asarray(raw[v.id].index, int)) if v.id in raw else v
+                 for v in views]
+        reports = [replace(r, corners=len(raw[r.id])) if r is not None and r.id in raw else r
+                   for r in reports]
     if partial:
         add_partial_views(partial, views, reports, board_spec, size, detector_board,
                           board_pose, MIN_CORNERS)
-    reports = [replace(r, blur_var=var) if r.ok else r for r in reports]
+    # the stripe on one line (stripe_on_one_line): light off it is left out and counted
+    off_line: dict[str, int] = {}
+    for k, v in enumerate(views):
+        on_line = stripe_on_one_line(v.laser_pixels)
+        if not on_line.all():
+            off_line[v.id] = int((~on_line).sum())
+            views[k] = replace(v, laser_pixels=np.asarray(v.laser_pixels)[on_line])
+    reports = [replace(r, blur_var=var, stripe=_off_line_counts(r.stripe, off_line.get(r.id, 0)))
+               if r.ok else r for r in reports]
     if size is None:
         raise ValueError("no image pair could be read: " +
                          "; ".join(f"{r.id}: {r.reason}" for r in reports))
     return views, board_spec, size, board_pose, reports
+
+
+def _off_line_counts(counts: dict[str, int], n: int) -> dict[str, int]:
+    """A view's scan-line counts with ``n`` found centres moved to OFF_LINE."""
+    if not n:
+        return counts
+    out = dict(counts)
+    out["FOUND"] = out.get("FOUND", 0) - n
+    out["OFF_LINE"] = n
+    return out
 
 
 def detect_corners(image: np.ndarray, board: Any) -> Any:
@@ -172,3 +199,57 @@ def detect_corners(image: np.ndarray, board: Any) -> Any:
         return detect_charuco(image, board)
     return detect_board(image, board)
 
+
+
+#: stripe pixels farther than this from the smooth curve through a calibration view's stripe
+#: are left out (px); at least 5 robust sigmas of the fit
+LINE_TOLERANCE = 3.0
+
+
+def stripe_on_one_line(pixels: np.ndarray, tolerance: float = LINE_TOLERANCE
+                       ) -> np.ndarray:
+    """Which stripe pixels of a calibration view lie on its one stripe: (m,) bool.
+
+    In a calibration view the laser meets one plane (the board and the sheet it is printed
+    on), so its stripe is the image of a straight line: one smooth curve across the image (a
+    cubic in the scan direction follows a lens' distortion over the image). Light elsewhere
+    that passed the stripe's checks (a reddish edge of the table, a reflection, a square's
+    corner on a laser-on frame alone) lies off it. The curve is grown from each of the three
+    longest runs of neighbouring centres (a run: steps of at most 2 px across and 8 scan
+    lines along), keeping what lies within 8 px of its extension, refitted; the run that
+    gathers most pixels wins, and the pixels within ``tolerance`` (or 5 robust sigmas) of its
+    final cubic are kept."""
+    px = np.asarray(pixels, float).reshape(-1, 2)
+    keep = np.ones(len(px), bool)
+    if len(px) < 10:
+        return keep
+    along = 0 if np.ptp(px[:, 0]) >= np.ptp(px[:, 1]) else 1
+    x, y = px[:, along], px[:, 1 - along]
+    order = np.argsort(x, kind="stable")
+    xs, ys = x[order], y[order]
+    breaks = np.nonzero((np.diff(xs) > 8) | (np.abs(np.diff(ys)) > 2))[0] + 1
+    runs = sorted(np.split(np.arange(len(xs)), breaks), key=len, reverse=True)[:3]
+    span = max(float(np.ptp(xs)), 1.0)
+    scale = (xs - xs.mean()) / span
+
+    def grow(seed: np.ndarray) -> np.ndarray:
+        inl = np.zeros(len(xs), bool)
+        inl[seed] = True
+        for _ in range(6):
+            deg = min(3, 1 + int(np.ptp(xs[inl]) > 0.25 * span) + int(np.ptp(xs[inl]) > 0.5 * span))
+            coef = np.polyfit(scale[inl], ys[inl], deg)
+            new = np.abs(np.polyval(coef, scale) - ys) < 8.0
+            if np.array_equal(new, inl) or new.sum() < len(seed):
+                break
+            inl = new
+        return inl
+
+    best = max((grow(r) for r in runs if len(r) >= 5), key=lambda m: int(m.sum()), default=None)
+    if best is None or best.sum() < 10:
+        return keep
+    coef = np.polyfit(scale[best], ys[best], 3)
+    res = np.polyval(coef, scale) - ys
+    spread = 1.4826 * float(np.median(np.abs(res[best])))
+    ok_sorted = np.abs(res) <= max(tolerance, 5.0 * spread)
+    keep[order] = ok_sorted
+    return keep

@@ -54,7 +54,8 @@ class ViewInspection:
 
     def line(self) -> str:
         """The terminal line: ``v001: used, 63 corners, stripe FOUND 812, MULTIPLE 2``."""
-        state = "used" if self.used else f"rejected ({self.reason})"
+        state = ("used" if self.corners else "used (laser only, no board seen)") if self.used \
+            else f"rejected ({self.reason})"
         stripe = ", ".join(f"{k} {v}" for k, v in self.stripe.items() if v) or "none"
         png = f" -> {self.image.name}" if self.image is not None else ""
         return f"{self.id}: {state}, {self.corners} corners, stripe {stripe}{png}"
@@ -111,9 +112,9 @@ def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = Non
     Returns one :class:`ViewInspection` per manifest entry, in order. Raises ``ValueError``
     for a malformed manifest or one without a board (as :func:`views_from_images`).
     """
-    import cv2
 
     from ..data.manifest import _write_png, read_manifest
+    from ..image.colour import board_gray
     from ..image.session import stripe_from_pair
     from ..image.views import detect_corners, views_from_images
 
@@ -135,43 +136,41 @@ def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = Non
     for entry, rep in zip(entries, reports):
         view = ViewInspection(rep.id, rep.ok, rep.reason, rep.corners, dict(rep.stripe))
         result.append(view)
-        if "on" not in entry or "off" not in entry:
+        if "on" not in entry:
             continue
-        frames = []
-        for key in ("on", "off"):
-            path = Path(entry[key])
-            img = cv2.imread(str(path if path.is_absolute() else folder / path),
-                             cv2.IMREAD_UNCHANGED)
-            frames.append(img)
-        on, off = frames
-        if on is None or off is None:
+        on, off = (_read_image(entry.get(key), folder) for key in ("on", "off"))
+        if on is None or ("off" in entry and off is None):
             continue
         try:
-            on_g = _as_gray(on, "the laser-on image", channel)
-            off_g = _as_gray(off, "the laser-off image", channel)
+            stripe = stripe_from_pair(on, off, normalize=normalize, channel=channel,
+                                      **stripe_options)
         except ValueError:
-            continue
-        stripe = None
-        if on_g.shape == off_g.shape and on_g.dtype == off_g.dtype:
-            try:
-                stripe = stripe_from_pair(on_g, off_g, normalize=normalize, **stripe_options)
-            except ValueError:
-                stripe = None
+            stripe = None
         corners = numbered.get(rep.id) if rep.ok else None
-        if corners is None:
+        if corners is None and not (rep.ok and rep.corners == 0):
             try:
-                corners = detect_corners(off_g, detector_board)
+                corners = detect_corners(board_gray(on if off is None else off),
+                                         detector_board)
             except ValueError:
                 corners = None
         if not rep.ok:  # the pipeline stopped early: report what the images show
             view.corners = 0 if corners is None else len(corners)
             view.stripe = {} if stripe is None else stripe.counts()
         state = "used" if rep.ok else "rejected"
-        picture = draw_view(on_g, corners, stripe,
-                            f"{rep.id}: {state}, {view.corners} corners")
+        picture = draw_view(on, corners, stripe, f"{rep.id}: {state}, {view.corners} corners")
         view.image = out / f"{_safe(rep.id)}.png"
         _write_png(view.image, picture)
     return result
+
+
+def _read_image(name: Any, folder: Path) -> np.ndarray | None:
+    """A manifest entry's image (None when not named or unreadable)."""
+    import cv2
+
+    if name is None:
+        return None
+    path = Path(name)
+    return cv2.imread(str(path if path.is_absolute() else folder / path), cv2.IMREAD_UNCHANGED)
 
 
 @dataclass(frozen=True)
