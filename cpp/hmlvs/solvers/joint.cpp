@@ -306,8 +306,7 @@ void CheckInput(const std::vector<JointView>& views, const JointState& s, const 
     if (v.corner_pixels.rows() < 4 && !laser_only) {
       throw std::invalid_argument(name + " has " + std::to_string(v.corner_pixels.rows()) +
                                   " corners; each view needs at least 4" +
-                                  (o.chain ? " (or none: a laser-only view)"
-                                           : ""));
+                                  (o.chain ? " (or none: a laser-only view)" : ""));
     }
     if (o.chain) CheckTransform(v.base_from_hand, name + " base_from_hand");
   }
@@ -318,11 +317,11 @@ void CheckInput(const std::vector<JointView>& views, const JointState& s, const 
   }
   if (!o.chain || soft) {
     if (s.camera_from_board.size() != views.size()) {
-      throw std::invalid_argument(std::string(soft ? "uncertain robot poses need"
-                                                   : "camera mode needs") +
-                                  " one initial camera_from_board per view, got " +
-                                  std::to_string(s.camera_from_board.size()) + " for " +
-                                  std::to_string(views.size()) + " views");
+      throw std::invalid_argument(
+          std::string(soft ? "uncertain robot poses need" : "camera mode needs") +
+          " one initial camera_from_board per view, got " +
+          std::to_string(s.camera_from_board.size()) + " for " + std::to_string(views.size()) +
+          " views");
     }
     for (std::size_t i = 0; i < views.size(); ++i) {
       CheckTransform(s.camera_from_board[i], "camera_from_board of view " + std::to_string(i));
