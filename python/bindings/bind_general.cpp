@@ -50,6 +50,7 @@ void BindGeneral(py::module_& m) {
       .def_readwrite("board_pose_known", &JointOptions::board_pose_known)
       .def_readwrite("hand_eye_known", &JointOptions::hand_eye_known)
       .def_readwrite("laser", &JointOptions::laser)
+      .def_readwrite("plane_known", &JointOptions::plane_known)
       .def_readwrite("pose_sigma_t", &JointOptions::pose_sigma_t)
       .def_readwrite("pose_sigma_r", &JointOptions::pose_sigma_r)
       .def_readwrite("fixed", &JointOptions::fixed)

@@ -514,16 +514,45 @@ def _resolve_model(model: str, data: Path) -> str:
     return "paper" if isinstance(board, dict) and "origin" in board else "opencv"
 
 
+def _paper_only_options(**given: bool) -> None:
+    """Refuse options that the opencv model does not use (an option that does nothing would
+    be an error the user never hears of)."""
+    names = [k.replace("_", "-") for k, v in given.items() if v]
+    if names:
+        raise ValueError("--" + ", --".join(names) + (" applies" if len(names) == 1 else
+                                                        " apply") +
+                         " to the paper model only (--model paper); the opencv model takes "
+                         "--distortion, --holdout, --initial, --robot, --report and --seed")
+
+
+def _held_camera(initial: Optional[Path]) -> Any:
+    """The sensor of an opencv-model --initial calibration (its camera and laser plane are
+    held), or None."""
+    if initial is None:
+        return None
+    from .data.calibration_file import load_calibration
+
+    cal = load_calibration(initial)
+    if cal.model != "opencv" or cal.sensor is None:
+        raise ValueError(f"{initial}: --initial with the opencv model holds the camera and "
+                         "laser plane of an opencv-model calibration (e.g. a bench session's); "
+                         f"this is a {cal.model}-model calibration")
+    return cal.sensor
+
+
 def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: Optional[Path],
                       distortion: str, report: Optional[Path], quiet: bool,
-                      as_json: bool) -> None:
-    """hmlvs calibrate --model opencv: images -> views -> joint calibration -> file."""
+                      as_json: bool, initial: Optional[Path] = None) -> None:
+    """hmlvs calibrate --model opencv: images -> views -> joint calibration -> file. With
+    ``initial`` (an opencv calibration, e.g. of a bench session) its camera and laser plane
+    are held and the hand-eye transform and board pose calibrated."""
     from .calibration.joint import calibrate_joint
     from .data.calibration_file import Calibration
     from .image.views import views_from_images
 
     with _guard(as_json), _collect_warnings() as caught:
         arm = _load_robot(robot)
+        camera = _held_camera(initial)
         terms = tuple(t.strip() for t in distortion.split(",") if t.strip())
         views, board, size, board_pose, reports = views_from_images(data, robot=arm)
         if not (as_json or quiet):
@@ -548,7 +577,8 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
             test_views = [v for i, v in enumerate(views) if i in pick]
             views = [v for i, v in enumerate(views) if i not in pick]
         result = calibrate_joint(views, board, size, distortion=terms,
-                                 base_from_board=board_pose, test=test_views or None)
+                                 base_from_board=board_pose, test=test_views or None,
+                                 camera=camera)
         report_path = None
         with _outputs(out) as made:
             blur = next((r.blur_var for r in reports if r.ok), None)
@@ -638,7 +668,9 @@ def calibrate(
         "k1,k2,p1,p2,k3", help="opencv model: the distortion terms to estimate (the others "
         "stay 0), e.g. k1,k2."),
     initial: Optional[Path] = typer.Option(
-        None, help="paper model: initial guess, a calibration file of either model (an opencv "
+        None, help="opencv model: a calibration whose camera and laser plane are held (e.g. a "
+        "bench session's), so that only the hand-eye transform and the board pose are "
+        "calibrated. paper model: initial guess, a calibration file of either model (an opencv "
         "one is converted) or a YAML/JSON mapping of parameter names to values "
         "(docs/file-formats.md)."),
     bounds: Optional[Path] = typer.Option(
@@ -672,8 +704,16 @@ def calibrate(
         if mode not in ("corners", "homography"):
             raise ValueError(f"--mode must be corners or homography, got {mode!r}")
         chosen = _resolve_model(model, data)
+        if chosen == "opencv":
+            _paper_only_options(method=method != "pso+lm", fixed=bool(fixed), free=bool(free),
+                                runs=runs != 1, iterations=iterations != 5000,
+                                loss=loss is not None, loss_scale=loss_scale != 1.0,
+                                threads=threads is not None, bounds=bounds is not None,
+                                test=test is not None, save_data=save_data is not None,
+                                mode=mode != "corners")
     if chosen == "opencv":
-        _calibrate_opencv(data, out, holdout, seed, robot, distortion, report, quiet, as_json)
+        _calibrate_opencv(data, out, holdout, seed, robot, distortion, report, quiet, as_json,
+                          initial)
         return
     with _guard(as_json), _collect_warnings() as caught:
         fixed_names, why = _resolve_fixed(fixed, free)

@@ -445,7 +445,10 @@ class JointProblem {
     for (std::size_t i = 0; i < views_pose_.size(); ++i) {
       add_pose(views_pose_[i], false, "view" + std::to_string(i) + "_");
     }
-    if (o.laser && problem_->HasParameterBlock(normal_.data())) {
+    if (o.laser && o.plane_known && problem_->HasParameterBlock(normal_.data())) {
+      problem_->SetParameterBlockConstant(normal_.data());
+      problem_->SetParameterBlockConstant(&offset_);
+    } else if (o.laser && problem_->HasParameterBlock(normal_.data())) {
       problem_->SetManifold(normal_.data(), new ceres::SphereManifold<3>());
       free_.push_back(normal_.data());
       free_.push_back(&offset_);

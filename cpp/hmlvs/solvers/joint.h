@@ -49,6 +49,7 @@ struct JointOptions {
   bool board_pose_known = false;  ///< chain mode: hold base_from_board at its given value
   bool hand_eye_known = false;    ///< chain mode: hold hand_from_camera at its given value
   bool laser = true;              ///< include the laser residuals and the plane
+  bool plane_known = false;       ///< hold the laser plane at its given value
   /// Chain mode: the robot poses' uncertainty, translation (mm) and rotation (rad), both > 0
   /// or both 0 (the poses exact). With it every view keeps its own board pose
   /// (camera_from_board), tied to the chain's by a residual per view: the robot pose error

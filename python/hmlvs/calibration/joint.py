@@ -317,7 +317,8 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
                     max_iterations: int = 100,
                     test: Sequence[ViewData] | None = None,
                     stripe_margin: float | None = None,
-                    robot_poses: str = "exact") -> JointCalibration:
+                    robot_poses: str = "exact",
+                    camera: OpenCvSensor | None = None) -> JointCalibration:
     """Calibrate the general sensor from per-view corners and stripe pixels (module doc).
 
     views : the views (:class:`ViewData`); each needs >= 6 corners, except laser-only views
@@ -344,6 +345,10 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         on renders with robot poses off by 0.3 mm and 0.1 degrees it recovers the focal
         length the exact chain bends by 2 %, but on half of the Blaser sessions' views it
         can still run off to a meaningless hand-eye transform: check ``robot_pose_sigma``)
+    camera : an :class:`OpenCvSensor` whose intrinsics, distortion and laser plane are held
+        (e.g. a bench session's calibration, :func:`calibrate_views` of views without robot
+        poses): only the hand-eye transform and the board's pose are estimated; needs robot
+        poses and the same image size
     """
     start = time.perf_counter()
     board = BoardSpec.of(board)
@@ -369,7 +374,10 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         base_from_board = check_transform(base_from_board, "base_from_board")
         if not chain:
             raise ValueError("a given base_from_board needs robot poses for every view")
-    intr, cam_poses, cv_rms = initial_intrinsics(views, board, image_size, terms)
+    if camera is None:
+        intr, cam_poses, cv_rms = initial_intrinsics(views, board, image_size, terms)
+    else:
+        intr, cam_poses, cv_rms = _held_camera(camera, views, board, image_size, chain)
     corner_index = [np.asarray(v.corner_index, int) for v in views]
     flipped: list[str] = []
     warnings_out: list[str] = []
@@ -430,13 +438,14 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
     if len(all_pts) < 10:
         raise ValueError(f"only {len(all_pts)} stripe pixels fall on the board over all views; "
                          "the laser plane needs stripe points on the board in several views")
-    plane = fit_plane(all_pts)
+    plane = fit_plane(all_pts) if camera is None else np.asarray(camera.laser_plane, float)
     # Stripe pixels far off that plane (reflections, stray light) go before the first solve.
     plane_res = [p @ plane[:3] + plane[3] for p in plane_pts]
     sigma_l0 = robust_sigma(np.concatenate(plane_res))
     if robust and sigma_l0 > 0:
         inlier = [np.abs(r) <= _ROBUST_K * sigma_l0 for r in plane_res]
-        plane = fit_plane(np.concatenate([p[k] for p, k in zip(plane_pts, inlier)]))
+        if camera is None:
+            plane = fit_plane(np.concatenate([p[k] for p, k in zip(plane_pts, inlier)]))
 
     def make_views(keep_c: list[np.ndarray], keep_l: list[np.ndarray]) -> list[Any]:
         out = []
@@ -461,6 +470,9 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
     opts.chain = chain
     opts.board_pose_known = base_from_board is not None
     opts.fixed = [False] * 4 + [name not in terms for name in DISTORTION_NAMES]
+    if camera is not None:
+        opts.fixed = [True] * len(opts.fixed)
+        opts.plane_known = True
     opts.max_iterations = int(max_iterations)
     keep_c = [np.ones(len(ci), bool) for ci in corner_index]
     keep_l = [np.ones(len(p), bool) for p in laser_px]
@@ -533,6 +545,37 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
                           "laser_pixels": laser_px[i][keep_l[i]],
                           "laser_residuals": np.asarray(laser_r[i])}
                    for i, v in enumerate(views)}, rejected=rejected)
+
+
+def _held_camera(camera: OpenCvSensor, views: Sequence[ViewData], board: BoardSpec,
+                 image_size: tuple[int, int], chain: bool
+                 ) -> tuple[np.ndarray, list[np.ndarray], float]:
+    """``calibrate_joint``'s set-up with a given camera (``camera``): its intrinsics, each
+    view's board pose from its corners (``solvePnP``) and their RMS reprojection (px)."""
+    import cv2
+
+    if not isinstance(camera, OpenCvSensor):
+        raise ValueError(f"camera must be an OpenCvSensor (an opencv-model calibration's "
+                         f"sensor), got {type(camera).__name__}")
+    if tuple(camera.image_size) != tuple(int(x) for x in image_size):
+        raise ValueError(f"the held camera was calibrated on {camera.image_size[0]} x "
+                         f"{camera.image_size[1]} images, these are {image_size[0]} x "
+                         f"{image_size[1]}")
+    if not chain:
+        raise ValueError("a held camera and laser plane leave only the hand-eye transform to "
+                         "calibrate, which needs the robot pose of every view")
+    poses, res = [], []
+    for v in views:
+        obj = board.points(v.corner_index)
+        px = np.asarray(v.corner_pixels, float)
+        ok, rvec, tvec = cv2.solvePnP(obj, px, camera.camera_matrix, camera.dist_coeffs)
+        if not ok:
+            raise ValueError(f"view {v.id}: its board pose cannot be found with the held camera")
+        proj, _ = cv2.projectPoints(obj, rvec, tvec, camera.camera_matrix, camera.dist_coeffs)
+        res.append(proj.reshape(-1, 2) - px)
+        poses.append(_transform(_rodrigues(rvec), tvec))
+    rms = float(np.sqrt(np.mean(np.sum(np.concatenate(res) ** 2, axis=1))))
+    return camera.intrinsics_vector(), poses, rms
 
 
 def _solve_weighted(make_views: Any, state: Any, opts: Any, keep_c: list[np.ndarray],

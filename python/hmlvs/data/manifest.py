@@ -136,6 +136,10 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
     file_poses = _pose_file(doc, fmt, path) if doc.get("pose_file") is not None else None
     out: list[dict[str, Any]] = []
     seen: dict[str, int] = {}
+    # a bench session: no entry has a robot pose (the sensor on a bench, the board moved by
+    # hand); decided by the first entry, every other must agree
+    bench = file_poses is None and bool(entries) and isinstance(entries[0], dict) and \
+        "joints" not in entries[0] and "pose" not in entries[0]
     for i, e in enumerate(entries):
         where = f"{path}: entry {i}"
         if not isinstance(e, dict):
@@ -157,8 +161,17 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
                 raise ValueError(f"{where} has '{'joints' if 'joints' in e else 'pose'}' but "
                                  f"the manifest gives every pose in its pose_file "
                                  f"{doc['pose_file']}")
-        elif ("joints" in e) == ("pose" in e):
+        elif "joints" in e and "pose" in e:
             raise ValueError(f"{where} must have either 'joints' or 'pose' (not both)")
+        elif not bench and "joints" not in e and "pose" not in e:
+            raise ValueError(f"{where} has neither 'joints' nor 'pose', but other entries "
+                             "do: give every entry its robot pose, or none (a bench session: "
+                             "the camera and laser plane alone)")
+        elif bench and ("joints" in e or "pose" in e):
+            raise ValueError(f"{where} has '{'joints' if 'joints' in e else 'pose'}', but "
+                             "other entries have no robot pose: give every entry its robot "
+                             "pose, or none (a bench session: the camera and laser plane "
+                             "alone)")
         if "pose" in e:
             try:
                 e["pose"] = pose_from_entry(e["pose"], fmt)

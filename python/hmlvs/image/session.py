@@ -188,6 +188,9 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
         raise ValueError(f"joint_unit must be 'rad' or 'deg', got {unit!r}")
     if not records:
         raise ValueError("the session has no image pairs")
+    _require_poses(records, "the paper model's calibration points need the robot pose of "
+                   "every view: calibrate a bench session with the opencv model (--model "
+                   "opencv)")
     robot = Robot.scorbot_er7() if robot is None else robot
     board = Checkerboard() if board is None else board
     approx = Parameters.nominal() if params is None else params
@@ -387,6 +390,8 @@ def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | Non
         raise ValueError(f"joint_unit must be 'rad' or 'deg', got {unit!r}")
     if not records:
         raise ValueError("the scan has no image pairs")
+    _require_poses(records, "measuring in the robot's base frame needs the robot pose of "
+                   "every frame")
     robot = Robot.scorbot_er7() if robot is None else robot
     # option typos fail here
     extract_stripe(np.zeros((4, 4), np.uint8), **_core_options(stripe_options))
@@ -438,7 +443,7 @@ class _Pair:
     on_name: str
     off_name: str
     joints: np.ndarray | None  # rad; None when the entry gives a pose
-    pose: np.ndarray  # base_from_hand (4, 4)
+    pose: np.ndarray | None  # base_from_hand (4, 4); None in a bench session
     on: np.ndarray | None  # None once the stripe and corners are found
     off: np.ndarray | None  # the laser-off frame, or the background estimated from the
     # laser-on one
@@ -968,9 +973,16 @@ def _manifest_robot(doc: dict[str, Any], robot: Any, source: Any) -> Any:
     return robot_from_description(doc["robot"], str(source))
 
 
-def _record_pose(rec: dict[str, Any], robot: Any, unit: str) -> tuple[np.ndarray | None,
-                                                                     np.ndarray]:
-    """(joints in rad or None, base_from_hand pose in mm) of a record; raises _Reject.
+def _require_poses(records: list[Any], why: str) -> None:
+    """Refuse a bench session (records without a robot pose) where poses are needed."""
+    if any(isinstance(r, dict) and "pose" not in r and "joints" not in r for r in records):
+        raise ValueError(f"the session has no robot poses (a bench session): {why}")
+
+
+def _record_pose(rec: dict[str, Any], robot: Any, unit: str
+                 ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(joints in rad or None, base_from_hand pose in mm) of a record, (None, None) for a
+    bench session's record (neither ``pose`` nor ``joints``); raises _Reject.
 
     A ``pose`` is a 4x4 matrix (mm) or a mapping ``{position, quaternion | rotation_vector}``
     (see :func:`hmlvs.data.poses.pose_from_entry`; records from a manifest come with their
@@ -984,7 +996,7 @@ def _record_pose(rec: dict[str, Any], robot: Any, unit: str) -> tuple[np.ndarray
         except ValueError as e:
             raise _Reject(str(e)) from None
     if "joints" not in rec:
-        raise _Reject("the record lacks 'joints' (or 'pose')")
+        return None, None  # a bench session's record: no robot pose
     joints = np.asarray(rec["joints"], dtype=float).reshape(-1)
     if joints.shape != (robot.dof,) or not np.all(np.isfinite(joints)):
         raise _Reject(f"joint readings must be {robot.dof} finite numbers, got "

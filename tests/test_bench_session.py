@@ -1,0 +1,99 @@
+"""Bench sessions: the sensor on a bench, the board held in front of it in several poses and no
+robot poses, calibrate the camera and the laser plane (camera mode); a robot session then
+holds them (`--initial`) and calibrates the hand-eye transform and the board's pose."""
+
+from __future__ import annotations
+
+import json
+
+from hmlvs.cli import main
+from hmlvs.data.calibration_file import load_calibration
+from hmlvs.image.session import stripes_from_images
+from hmlvs.sim.general import general_session, render_general_session
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.scene  # rendered images
+
+
+@pytest.fixture(scope="module")
+def sessions(tmp_path_factory):
+    """A rendered session of the general sensor twice: with its robot poses, and as a bench
+    session (the same images, the manifest without poses)."""
+    robot = tmp_path_factory.mktemp("robot")
+    s = general_session(views=10, seed=5)
+    render_general_session(s, robot)
+    bench = tmp_path_factory.mktemp("bench")
+    doc = json.loads((robot / "manifest.json").read_text())
+    for e in doc["poses"]:
+        del e["pose"]
+        e["on"], e["off"] = (str(robot / e[k]) for k in ("on", "off"))
+    (bench / "manifest.json").write_text(json.dumps(doc))
+    return s, robot, bench
+
+
+def _cli(argv, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    out = capsys.readouterr()
+    return e.value.code, out.out, out.err
+
+
+def test_a_bench_session_calibrates_camera_and_laser_plane(sessions, tmp_path, capsys):
+    s, _, bench = sessions
+    code, out, err = _cli(["calibrate", str(bench), "--out", str(tmp_path / "b.yaml")], capsys)
+    assert code in (0, None), err
+    assert "camera mode" in out
+    cal = load_calibration(tmp_path / "b.yaml")
+    t = s.sensor
+    assert abs(cal.sensor.fx / t.camera_matrix[0, 0] - 1) < 2e-3
+    normal = cal.sensor.laser_plane[:3]
+    assert abs(normal @ t.laser_plane[:3]) > np.cos(np.radians(0.1))
+    assert abs(cal.sensor.laser_plane[3] - t.laser_plane[3]) < 0.2
+
+
+def test_a_robot_session_holds_the_bench_camera_and_finds_the_hand_eye(sessions, tmp_path,
+                                                                      capsys):
+    s, robot, bench = sessions
+    _cli(["calibrate", str(bench), "--out", str(tmp_path / "b.yaml")], capsys)
+    code, out, err = _cli(["calibrate", str(robot), "--initial", str(tmp_path / "b.yaml"),
+                           "--out", str(tmp_path / "r.yaml")], capsys)
+    assert code in (0, None), err
+    b, r = (load_calibration(tmp_path / n).sensor for n in ("b.yaml", "r.yaml"))
+    # held: the bench calibration's camera and plane, unchanged
+    np.testing.assert_array_equal(r.intrinsics_vector(), b.intrinsics_vector())
+    np.testing.assert_allclose(r.laser_plane, b.laser_plane, rtol=0, atol=1e-12)
+    # calibrated: the hand-eye transform
+    d = np.linalg.inv(s.sensor.hand_from_camera) @ r.hand_from_camera
+    assert np.linalg.norm(d[:3, 3]) < 0.5
+    assert np.degrees(np.arccos(np.clip((np.trace(d[:3, :3]) - 1) / 2, -1, 1))) < 0.1
+
+
+def test_bench_and_robot_poses_cannot_be_mixed(sessions, tmp_path, capsys):
+    _, robot, _ = sessions
+    doc = json.loads((robot / "manifest.json").read_text())
+    del doc["poses"][3]["pose"]
+    for e in doc["poses"]:
+        e["on"], e["off"] = (str(robot / e[k]) for k in ("on", "off"))
+    (tmp_path / "manifest.json").write_text(json.dumps(doc))
+    code, _, err = _cli(["calibrate", str(tmp_path), "--out", str(tmp_path / "x.yaml")],
+                        capsys)
+    assert code == 2 and "entry 3 (id v003) has neither 'joints' nor 'pose'" in err
+    assert not (tmp_path / "x.yaml").exists()
+
+
+def test_a_bench_session_is_refused_where_poses_are_needed(sessions, tmp_path, capsys):
+    _, _, bench = sessions
+    with pytest.raises(ValueError, match="no robot poses .* measuring in the robot's base"):
+        stripes_from_images(bench)
+    code, _, err = _cli(["calibrate", str(bench), "--model", "paper", "--out",
+                         str(tmp_path / "p.yaml")], capsys)
+    assert code == 2 and "bench session" in err and "--model opencv" in err
+
+
+def test_opencv_options_that_do_nothing_are_refused(sessions, tmp_path, capsys):
+    _, robot, _ = sessions
+    code, _, err = _cli(["calibrate", str(robot), "--method", "lm", "--fixed", "f", "--out",
+                         str(tmp_path / "x.yaml")], capsys)
+    assert code == 2 and "--method, --fixed apply to the paper model only" in err
+    assert not (tmp_path / "x.yaml").exists()
