@@ -66,8 +66,8 @@ def _write(path, doc):
         (lambda d: d["poses"][2].pop("id"), r"manifest2.json: entry 2 has no id"),
         (lambda d: d["poses"][3].update(id="p000"), r"entry 3 \(id p000\) repeats the id of "
                                                     "entry 0"),
-        (lambda d: d["poses"][1].pop("joints"), r"entry 1 \(id p001\) must have either 'joints'"
-                                                " or 'pose'"),
+        (lambda d: d["poses"][1].pop("joints"), r"entry 1 \(id p001\) has neither 'joints' nor "
+                                                "'pose', but other entries do"),
         (lambda d: d["poses"][0].update(stripe="x.csv"), r"entry 0 \(id p000\) must name either "
                                                          "an image pair"),
         # (an entry with 'on' and no 'off' is a laser-on image alone, issue 14: valid)

@@ -718,10 +718,16 @@ def calibrate(
     with _guard(as_json), _collect_warnings() as caught:
         fixed_names, why = _resolve_fixed(fixed, free)
         arm = _load_robot(robot)
+        guess = bounds_obj = None
+        if initial is not None:
+            from .data.guess import read_initial
+
+            guess = read_initial(initial)
         if _is_manifest(data):
             from .image.session import dataset_from_images
 
-            ds, image_reports = dataset_from_images(data, mode=mode, robot=arm)
+            # the corners are numbered with the given initial guess, else the nominal values
+            ds, image_reports = dataset_from_images(data, mode=mode, robot=arm, params=guess)
             if not (as_json or quiet):
                 for r in image_reports:
                     typer.echo(str(r))
@@ -732,11 +738,6 @@ def calibrate(
         test_ds = Dataset.load(test) if test is not None else None
         if test_ds is None and holdout > 0:
             ds, test_ds = ds.split(1.0 - holdout, seed=seed, by_pose=True)
-        guess = bounds_obj = None
-        if initial is not None:
-            from .data.guess import read_initial
-
-            guess = read_initial(initial)
         if bounds is not None:
             from .data.guess import read_bounds
             from .models.params import Parameters

@@ -1050,6 +1050,79 @@ def number_grid(image: np.ndarray, grid: CornerGrid, board: Any, expected: np.nd
                               x_check=True, refine=options.refine)
 
 
+def place_by_pose(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any,
+                  camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
+                  base_from_camera: np.ndarray, base_from_board: np.ndarray,
+                  ratio: float = 3.0, what: str = "the corners found") -> np.ndarray:
+    """Board indices of corners ``px`` found at grid positions (``i``, ``j``), from the robot
+    chain rather than from predicted pixels.
+
+    A partly visible board's numbering is fixed only up to whole-square shifts and a half
+    turn (:func:`_placements`). Under each placement the corners give the view's board pose
+    (``solvePnP`` with the camera), and with the view's ``base_from_camera`` (robot pose times
+    hand-eye) the board's pose in the base, which every view must agree on: the placement
+    whose board lies nearest ``base_from_board`` (the RMS distance of the board's corners
+    under the two poses, mm) is taken when the second nearest is at least ``ratio`` times
+    farther and the nearest within half a square; otherwise :class:`NumberingError` says
+    why. A placement one square off moves the board by a square, far more than a robot's
+    and a calibration's errors, so this holds where a pixel prediction from approximate
+    parameters (off by a third of a square) does not."""
+    import cv2
+
+    bxy = board.board_coordinates()
+    pts = np.c_[bxy, np.zeros(len(bxy))]
+    ref = pts @ base_from_board[:3, :3].T + base_from_board[:3, 3]
+    k = np.asarray(camera_matrix, float)
+    d = np.asarray(dist_coeffs, float)
+    scored = []
+    for idx, desc in _placements(i, j, board, px):
+        ok, rvec, tvec = cv2.solvePnP(pts[idx], np.asarray(px, float), k, d)
+        if not ok:
+            continue
+        cfb = np.eye(4)
+        cfb[:3, :3] = cv2.Rodrigues(rvec)[0]
+        cfb[:3, 3] = tvec.ravel()
+        est = base_from_camera @ cfb
+        moved = pts @ est[:3, :3].T + est[:3, 3]
+        scored.append((float(np.sqrt(np.mean(np.sum((moved - ref) ** 2, axis=1)))), desc,
+                       idx))
+    if not scored:
+        raise NumberingError(f"{what} cannot be placed on the {board.rows} x {board.cols} "
+                             "board")
+    scored.sort(key=lambda x: x[0])
+    best, desc, idx = scored[0]
+    second = scored[1][0] if len(scored) > 1 else np.inf
+    if best > 0.5 * board.square:
+        raise NumberingError(
+            f"partly visible board: under its best numbering ({desc}) the board would lie "
+            f"{best:.1f} mm from where the other views put it, more than half a square: the "
+            "board moved, or the robot pose does not belong to this image")
+    if second < ratio * best:
+        raise NumberingError(
+            f"partly visible board: its numbering is ambiguous: as {desc} the board lies "
+            f"{best:.2f} mm from where the other views put it, as {scored[1][1]} "
+            f"{second:.2f} mm (the best must be {ratio:g} x closer)")
+    return idx
+
+
+def number_grid_by_pose(image: np.ndarray, grid: CornerGrid, board: Any,
+                        camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
+                        base_from_camera: np.ndarray, base_from_board: np.ndarray,
+                        ratio: float = 3.0, options: CornerOptions | None = None) -> Corners:
+    """:func:`number_grid` with the numbering from the robot chain (:func:`place_by_pose`)
+    instead of predicted pixels; then refined and extended the same way
+    (``Corners.rule == "pose"``)."""
+    options = CornerOptions() if options is None else options
+    gray = _to_8bit(_as_gray(image, "the image", None))
+    m, n = grid.shape
+    px = grid.pixels.reshape(-1, 2)
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(m), np.arange(n), indexing="ij"))
+    idx = place_by_pose(px, i, j, board, camera_matrix, dist_coeffs, base_from_camera,
+                        base_from_board, ratio, f"the {m} x {n} corners found")
+    return _refine_and_extend(gray, px, idx, board, grid.spacing, options.extend, "pose",
+                              x_check=True, refine=options.refine)
+
+
 def detect_charuco(image: np.ndarray, board: Any, min_corners: int = 4) -> Corners:
     """The chessboard corners of a ChArUco board (:class:`hmlvs.geometry.board.CharucoSpec`),
     numbered by the board's own marker ids: whole or partly visible, at any rotation.

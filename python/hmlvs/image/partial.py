@@ -1,13 +1,15 @@
 """Views of a partly visible plain checkerboard, numbered from the robot's pose.
 
 A plain checkerboard cut by the image border shows the same pattern wherever it is cut: its
-corners (:func:`hmlvs.image.corners.detect_grid`) could be any rows and columns of the board.
-The views of the whole board give a first calibration (:func:`calibrate_joint`); with it and
-a partial view's robot pose every board corner is predicted in that view, and the grid is
-placed where its corners land nearest, when that placement is clearly better than every
-other (:func:`hmlvs.image.corners.number_grid`). A view that cannot be numbered so is
-rejected with the reason, never guessed.
-"""
+corners (:func:`hmlvs.image.corners.detect_grid`) could be any rows and columns of the board,
+and turned by half a turn. The views of the whole board give a first calibration
+(:func:`calibrate_joint`); under each placement of a partial view's grid its corners give the
+board's pose, and through the view's robot pose and that calibration's hand-eye transform the
+board's pose in the base, where the other views put it: the placement that agrees, clearly
+better than every other, is taken (:func:`hmlvs.image.corners.number_grid_by_pose`). A view
+without a grid (a few X-junctions at the board's edge) is numbered by the pixels the first
+calibration predicts. A view that cannot be numbered so is rejected with the reason, never
+guessed."""
 
 from __future__ import annotations
 
@@ -17,7 +19,14 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..data.views import ViewData
-from .corners import BoardNotFoundError, CornerGrid, Corners, detect_grid, find_corners, number_grid
+from .corners import (
+    BoardNotFoundError,
+    CornerGrid,
+    Corners,
+    detect_grid,
+    find_corners,
+    number_grid_by_pose,
+)
 from .session import ImageReport
 
 
@@ -63,7 +72,8 @@ def number_partial_views(full: Sequence[ViewData], partial: Sequence[PartialView
                          base_from_board: np.ndarray | None = None, min_corners: int = 6
                          ) -> tuple[list[Corners | None], list[str]]:
     """Number each partial view's corners from a first calibration on the ``full`` views:
-    its grid (:func:`number_grid`), or for a view without one (``grid`` None) the image's
+    its grid placed where the robot chain puts the board (:func:`number_grid_by_pose`), or
+    for a view without one (``grid`` None) the image's
     X-junctions near the predicted board (:func:`find_corners` with ``expected``).
 
     Returns per partial view its :class:`Corners` (``rule == "predicted"``) or None, and the
@@ -95,9 +105,14 @@ def number_partial_views(full: Sequence[ViewData], partial: Sequence[PartialView
             reasons[k] = "a partly visible board needs the view's robot pose to be numbered"
             continue
         expected = predicted_board_pixels(first.sensor, p.base_from_hand, board)
+        sensor = first.sensor
         try:
             if p.grid is not None:
-                corners = number_grid(p.image, p.grid, detector_board, expected)
+                # numbered by where the chain puts the board (AX = XB), not by pixels
+                # predicted from a first calibration
+                corners = number_grid_by_pose(
+                    p.image, p.grid, detector_board, sensor.camera_matrix, sensor.dist_coeffs,
+                    p.base_from_hand @ sensor.hand_from_camera, sensor.base_from_board)
             else:
                 # no grid OpenCV could follow (a close view of the board's edge): the
                 # X-junctions where the first calibration predicts the board
