@@ -367,23 +367,7 @@ class JointProblem {
       const JointView* v = &views[i];
       const int nc = 2 * static_cast<int>(v->corner_pixels.rows());
       const int nl = static_cast<int>(v->laser_pixels.rows());
-      if (soft) {
-        PoseBlocks& p = views_pose_[i];
-        if (nc > 0) {
-          AddBlock(new ceres::AutoDiffCostFunction<FreeCorners, ceres::DYNAMIC, 9, 4, 3>(
-                       new FreeCorners{v, wc}, nc),
-                   {intrinsics_.data(), p.q.data(), p.t.data()}, nc);
-        }
-        if (o.laser && nl > 0) {
-          AddBlock(new LaserCost<false>(v, wl),
-                   {intrinsics_.data(), p.q.data(), p.t.data(), normal_.data(), &offset_}, nl);
-        }
-        AddBlock(new ceres::AutoDiffCostFunction<PosePrior, 6, 4, 3, 4, 3, 4, 3>(
-                     new PosePrior{v, 1.0 / o.pose_sigma_r, 1.0 / o.pose_sigma_t}),
-                 {p.q.data(), p.t.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
-                  board_.t.data()},
-                 6);
-      } else if (o.chain) {
+      if (o.chain && !soft) {
         if (nc > 0) {  // none in a laser-only view
           AddBlock(new ceres::AutoDiffCostFunction<ChainCorners, ceres::DYNAMIC, 9, 4, 3, 4, 3>(
                        new ChainCorners{v, wc}, nc),
@@ -397,15 +381,25 @@ class JointProblem {
                     board_.t.data(), normal_.data(), &offset_},
                    nl);
         }
-      } else {
-        PoseBlocks& p = views_pose_[i];
+        continue;
+      }
+      // The view's own board pose: camera mode, or uncertain robot poses (tied to the chain).
+      PoseBlocks& p = views_pose_[i];
+      if (nc > 0) {  // none in a laser-only view
         AddBlock(new ceres::AutoDiffCostFunction<FreeCorners, ceres::DYNAMIC, 9, 4, 3>(
                      new FreeCorners{v, wc}, nc),
                  {intrinsics_.data(), p.q.data(), p.t.data()}, nc);
-        if (o.laser && nl > 0) {
-          AddBlock(new LaserCost<false>(v, wl),
-                   {intrinsics_.data(), p.q.data(), p.t.data(), normal_.data(), &offset_}, nl);
-        }
+      }
+      if (o.laser && nl > 0) {
+        AddBlock(new LaserCost<false>(v, wl),
+                 {intrinsics_.data(), p.q.data(), p.t.data(), normal_.data(), &offset_}, nl);
+      }
+      if (soft) {
+        AddBlock(new ceres::AutoDiffCostFunction<PosePrior, 6, 4, 3, 4, 3, 4, 3>(
+                     new PosePrior{v, 1.0 / o.pose_sigma_r, 1.0 / o.pose_sigma_t}),
+                 {p.q.data(), p.t.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
+                  board_.t.data()},
+                 6);
       }
     }
     // Manifolds and what is held fixed, in the order of the Jacobian's columns.

@@ -985,6 +985,15 @@ def _placements(i: np.ndarray, j: np.ndarray, board: Any, px: np.ndarray
     return out
 
 
+def _two_best(scored: list[tuple[float, str, np.ndarray]]
+              ) -> tuple[tuple[float, str, np.ndarray], tuple[float, str]]:
+    """The best-scored placement (score, description, indices) and the second best's score
+    and description (inf, "" when there is none)."""
+    scored = sorted(scored, key=lambda x: x[0])
+    second = (scored[1][0], scored[1][1]) if len(scored) > 1 else (np.inf, "")
+    return scored[0], second
+
+
 def _place(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any, expected: np.ndarray,
            spacing: float, ratio: float, max_error: float, what: str) -> np.ndarray:
     """Board indices of corners ``px`` found at grid positions (``i``, ``j``) whose place on
@@ -1002,9 +1011,7 @@ def _place(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any, expected: n
     if not scored:
         raise NumberingError(f"{what} cannot be placed on the {board.rows} x {board.cols} "
                              "board where the prediction sees it")
-    scored.sort(key=lambda x: x[0])
-    best, desc, idx = scored[0]
-    second = scored[1][0] if len(scored) > 1 else np.inf
+    (best, desc, idx), (second, second_desc) = _two_best(scored)
     if best > max_error * spacing:
         raise NumberingError(
             f"partly visible board: {what} lie {best:.1f} px RMS from the nearest placement "
@@ -1014,7 +1021,7 @@ def _place(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any, expected: n
     if second < ratio * best:
         raise NumberingError(
             f"partly visible board: its numbering is ambiguous: {what} lie {best:.1f} px "
-            f"RMS from the predicted board as {desc} and {second:.1f} px as {scored[1][1]} "
+            f"RMS from the predicted board as {desc} and {second:.1f} px as {second_desc} "
             f"(the best must be {ratio:g} x closer)")
     return idx
 
@@ -1089,9 +1096,7 @@ def place_by_pose(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any,
     if not scored:
         raise NumberingError(f"{what} cannot be placed on the {board.rows} x {board.cols} "
                              "board")
-    scored.sort(key=lambda x: x[0])
-    best, desc, idx = scored[0]
-    second = scored[1][0] if len(scored) > 1 else np.inf
+    (best, desc, idx), (second, second_desc) = _two_best(scored)
     if best > 0.5 * board.square:
         raise NumberingError(
             f"partly visible board: under its best numbering ({desc}) the board would lie "
@@ -1100,7 +1105,7 @@ def place_by_pose(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any,
     if second < ratio * best:
         raise NumberingError(
             f"partly visible board: its numbering is ambiguous: as {desc} the board lies "
-            f"{best:.2f} mm from where the other views put it, as {scored[1][1]} "
+            f"{best:.2f} mm from where the other views put it, as {second_desc} "
             f"{second:.2f} mm (the best must be {ratio:g} x closer)")
     return idx
 
