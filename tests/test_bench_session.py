@@ -97,3 +97,12 @@ def test_opencv_options_that_do_nothing_are_refused(sessions, tmp_path, capsys):
                          str(tmp_path / "x.yaml")], capsys)
     assert code == 2 and "--method, --fixed apply to the paper model only" in err
     assert not (tmp_path / "x.yaml").exists()
+
+
+def test_a_bench_calibration_does_not_measure_in_the_base_frame(sessions, tmp_path, capsys):
+    s, robot, bench = sessions
+    _cli(["calibrate", str(bench), "--out", str(tmp_path / "b.yaml")], capsys)
+    code, _, err = _cli(["measure", str(tmp_path / "b.yaml"), str(robot), "--out",
+                         str(tmp_path / "c.ply")], capsys)
+    assert code == 2 and "bench session's (camera mode)" in err
+    assert not (tmp_path / "c.ply").exists()

@@ -118,6 +118,17 @@ def read_ply(path: str | os.PathLike) -> dict[str, np.ndarray]:
     return {name: rec[name].copy() for name, _ in fields}
 
 
+def _require_hand_eye(calibration: Any) -> None:
+    """Refuse to measure in the base frame with a bench session's calibration (camera mode:
+    the camera and laser plane only, its hand_from_camera not calibrated)."""
+    method = getattr(calibration, "method", None) or ""
+    if getattr(calibration, "mode", None) == "camera" or str(method).endswith("(camera)"):
+        raise ValueError("this calibration is a bench session's (camera mode): it holds the "
+                         "camera and laser plane but no hand-eye transform; calibrate that "
+                         "with a robot session first (hmlvs calibrate ROBOT_SESSION --initial "
+                         "THIS_FILE)")
+
+
 def sensor_model(calibration: Any) -> SensorModel:
     """The :class:`~hmlvs.models.base.SensorModel` of a calibration of either model: a
     :class:`Calibration`, a calibration result, :class:`Parameters`, an :class:`OpenCvSensor`
@@ -160,6 +171,9 @@ def measure(calibration: Any, stripes: Sequence[Any] | np.ndarray, poses: Any = 
     -------
     PointCloud
     """
+    if isinstance(calibration, (str, os.PathLike)):
+        calibration = Calibration.load(calibration)
+    _require_hand_eye(calibration)
     model = sensor_model(calibration)
     stripes = list(stripes) if not isinstance(stripes, np.ndarray) or stripes.ndim != 2 \
         else [stripes]
