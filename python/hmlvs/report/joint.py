@@ -93,7 +93,8 @@ def render_joint_report(result: Any, image_reports: Any = None,
                      f"{bt[2]:.3f}) mm</td></tr>")
     view_rows = []
     for vid, pv in result.per_view.items():
-        view_rows.append(f"<tr><td>{html.escape(str(vid))}</td><td>used</td>"
+        used = "used" if pv["corners"] else "used (laser only, no board seen)"
+        view_rows.append(f"<tr><td>{html.escape(str(vid))}</td><td>{used}</td>"
                          f"<td>{pv['corners']}</td><td>{_fmt(pv['corner_rms_px'])}</td>"
                          f"<td>{pv['laser_pixels']}</td><td>{_fmt(pv['laser_rms_mm'], '.4f')}"
                          "</td><td></td></tr>")
