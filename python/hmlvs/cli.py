@@ -495,6 +495,21 @@ def _outputs(*targets: Path) -> Iterator[list]:
         raise
 
 
+def _check_suffix(option: str, path: Optional[Path], allowed: tuple[str, ...],
+                  what: str) -> None:
+    """Refuse an output whose name does not say the kind of file it will be."""
+    if path is not None and path.suffix.lower() not in allowed:
+        raise ValueError(f"{option} {path}: {what} is written as " + " or ".join(allowed))
+
+
+def _inputs_of(data: Path) -> list[Path]:
+    """The files a data argument stands for: an image session's manifest and the files it
+    names, or the file itself."""
+    from .guard import session_files
+
+    return session_files(data) if _is_manifest(data) else [data]
+
+
 def _resolve_model(model: str, data: Path) -> str:
     """The sensor model to calibrate: as asked, or (auto) opencv for an image manifest without
     a measured board pose, paper otherwise."""
@@ -703,6 +718,14 @@ def calibrate(
             raise ValueError(f"--holdout must be a fraction in [0, 1), got {holdout}")
         if mode not in ("corners", "homography"):
             raise ValueError(f"--mode must be corners or homography, got {mode!r}")
+        from .guard import refuse_overwrite
+
+        refuse_overwrite([*_inputs_of(data), test, initial, bounds, robot],
+                         [("--out", out), ("--report", report), ("--save-data", save_data)])
+        # every output's kind checked before the first is written
+        _check_suffix("--out", out, (".yaml", ".yml", ".json"), "a calibration file")
+        _check_suffix("--report", report, (".html", ".htm"), "an HTML report")
+        _check_suffix("--save-data", save_data, (".npz", ".json"), "a data set")
         chosen = _resolve_model(model, data)
         if chosen == "opencv":
             _paper_only_options(method=method != "pso+lm", fixed=bool(fixed), free=bool(free),
@@ -924,6 +947,9 @@ def measure(
     from .measurement.measure import measure_images
 
     with _guard(as_json):
+        from .guard import refuse_overwrite
+
+        refuse_overwrite([calibration, *_inputs_of(source), robot], [("--out", out)])
         cal = Calibration.load(calibration)
         if _is_manifest(source):
             result = measure_images(cal, source, robot=_load_robot(robot))
@@ -977,6 +1003,9 @@ def inspect_images(
     from .report.inspect import inspect_session
 
     with _guard(as_json):
+        from .guard import refuse_overwrite
+
+        refuse_overwrite([*_inputs_of(data), robot], [], [("--out", out)])
         views = inspect_session(data, out, robot=_load_robot(robot))
     if as_json:
         _echo_json([{"id": v.id, "used": v.used, "reason": v.reason, "corners": v.corners,
@@ -1012,6 +1041,9 @@ def export_calibration(
     from .data.export import export, export_text
 
     with _guard():
+        from .guard import refuse_overwrite
+
+        refuse_overwrite([calibration], [("--out", out)])
         if out is None:
             text = export_text(calibration, fmt, image_size=image_size,
                                camera_name=camera_name)
