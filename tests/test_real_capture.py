@@ -120,6 +120,11 @@ def test_uncertain_robot_poses_are_estimated_and_keep_the_camera(seed):
     # the focal length: the exact chain bends it to absorb the poses' errors
     assert abs(soft.sensor.fx - f_true) < abs(exact.sensor.fx - f_true) + 0.5
     assert soft.corner_rms_px < 0.5 * exact.corner_rms_px
+    # the exact chain says the poses disagree with the images; exact poses say nothing
+    assert any("robot poses disagree with the images" in w for w in exact.warnings)
+    assert not any("robot poses disagree" in w for w in soft.warnings)
+    clean = calibrate_joint(views, board, (1024, 768))
+    assert not any("robot poses disagree" in w for w in clean.warnings)
     assert all("robot_pose_error_mm" in pv for pv in soft.per_view.values())
 
 
