@@ -9,6 +9,7 @@ import hashlib
 import json
 from pathlib import Path
 
+import hmlvs
 from hmlvs.cli import main
 from hmlvs.sim.general import general_session, render_general_session
 import pytest
@@ -29,9 +30,7 @@ def _digest(folder: Path) -> dict[str, str]:
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     d = tmp_path_factory.mktemp("sacred")
-    ds = d / "sim.npz"
-    with pytest.raises(SystemExit):
-        main(["simulate", str(ds), "--poses", "8", "--seed", "1"])
+    ds = hmlvs.simulate.session(num_poses=8, seed=1).dataset.save(d / "sim.npz")
     cal = d / "cal.yaml"
     with pytest.raises(SystemExit):
         main(["calibrate", str(ds), "--method", "lm", "--out", str(cal), "-q"])

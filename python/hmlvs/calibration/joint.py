@@ -30,7 +30,7 @@ import numpy as np
 from .. import _core
 from .._arrays import check_transform, robust_sigma
 from ..data.views import ViewData
-from ..geometry.board import BoardSpec
+from ..geometry.board import BoardSpec, board_pose_from_corners
 from ..models.opencv import DISTORTION_NAMES, OpenCvSensor
 
 _ROBUST_K = 5.0  # residuals beyond this many robust sigmas are dropped (Gaussian: 6e-7)
@@ -560,8 +560,6 @@ def _held_camera(camera: OpenCvSensor, views: Sequence[ViewData], board: BoardSp
                  ) -> tuple[np.ndarray, list[np.ndarray], float]:
     """``calibrate_joint``'s set-up with a given camera (``camera``): its intrinsics, each
     view's board pose from its corners (``solvePnP``) and their RMS reprojection (px)."""
-    import cv2
-
     if not isinstance(camera, OpenCvSensor):
         raise ValueError(f"camera must be an OpenCvSensor (an opencv-model calibration's "
                          f"sensor), got {type(camera).__name__}")
@@ -576,12 +574,12 @@ def _held_camera(camera: OpenCvSensor, views: Sequence[ViewData], board: BoardSp
     for v in views:
         obj = board.points(v.corner_index)
         px = np.asarray(v.corner_pixels, float)
-        ok, rvec, tvec = cv2.solvePnP(obj, px, camera.camera_matrix, camera.dist_coeffs)
-        if not ok:
+        pose = board_pose_from_corners(obj, px, camera.camera_matrix, camera.dist_coeffs)
+        if pose is None:
             raise ValueError(f"view {v.id}: its board pose cannot be found with the held camera")
-        proj, _ = cv2.projectPoints(obj, rvec, tvec, camera.camera_matrix, camera.dist_coeffs)
-        res.append(proj.reshape(-1, 2) - px)
-        poses.append(_transform(_rodrigues(rvec), tvec))
+        proj, _ = camera.project(obj @ pose[:3, :3].T + pose[:3, 3])
+        res.append(proj - px)
+        poses.append(pose)
     rms = float(np.sqrt(np.mean(np.sum(np.concatenate(res) ** 2, axis=1))))
     return camera.intrinsics_vector(), poses, rms
 
@@ -703,7 +701,6 @@ def board_plane_errors(sensor: OpenCvSensor, views: Sequence[ViewData], board: A
     With robot poses (and the sensor's ``base_from_board``) the stripe points are mapped to the
     base and compared with the one static board plane; without them, with the board plane of
     the view's own corners (``solvePnP`` with the calibrated intrinsics)."""
-    import cv2
 
     board = BoardSpec.of(board)
     out: dict[str, np.ndarray] = {}
@@ -714,12 +711,10 @@ def board_plane_errors(sensor: OpenCvSensor, views: Sequence[ViewData], board: A
         if chain:
             cb = _inv(sensor.hand_from_camera) @ _inv(v.base_from_hand) @ sensor.base_from_board
         else:
-            ok, rvec, tvec = cv2.solvePnP(board.points(v.corner_index),
-                                          np.asarray(v.corner_pixels, float),
-                                          sensor.camera_matrix, sensor.dist_coeffs)
-            if not ok:
+            cb = board_pose_from_corners(board.points(v.corner_index), v.corner_pixels,
+                                         sensor.camera_matrix, sensor.dist_coeffs)
+            if cb is None:
                 continue
-            cb = _transform(_rodrigues(rvec), tvec)
         _, xy = _board_plane_points(intr, cb, px) if len(px) else (None, np.empty((0, 2)))
         keep = on_board(board, xy) if len(px) else np.zeros(0, bool)
         pts, valid = sensor.points_in_camera(px[keep], on_invalid="mask") if keep.any() else (

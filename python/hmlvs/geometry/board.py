@@ -8,6 +8,24 @@ from typing import Any
 import numpy as np
 
 
+def board_pose_from_corners(board_points: np.ndarray, pixels: np.ndarray,
+                            camera_matrix: np.ndarray, dist_coeffs: np.ndarray
+                            ) -> np.ndarray | None:
+    """camera_from_board (4x4, mm) of board corners at ``board_points`` (k, 3, board frame)
+    seen at ``pixels`` (k, 2) by a camera (OpenCV's model): ``cv2.solvePnP``; None when it
+    finds no pose."""
+    import cv2
+
+    ok, rvec, tvec = cv2.solvePnP(np.asarray(board_points, float), np.asarray(pixels, float),
+                                  np.asarray(camera_matrix, float), np.asarray(dist_coeffs, float))
+    if not ok:
+        return None
+    pose = np.eye(4)
+    pose[:3, :3] = cv2.Rodrigues(rvec)[0]
+    pose[:3, 3] = np.ravel(tvec)
+    return pose
+
+
 @dataclass(frozen=True)
 class Checkerboard:
     """A checkerboard lying in the robot's workspace, described in the base frame (mm).

@@ -1074,7 +1074,7 @@ def place_by_pose(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any,
     why. A placement one square off moves the board by a square, far more than a robot's
     and a calibration's errors, so this holds where a pixel prediction from approximate
     parameters (off by a third of a square) does not."""
-    import cv2
+    from ..geometry.board import board_pose_from_corners
 
     bxy = board.board_coordinates()
     pts = np.c_[bxy, np.zeros(len(bxy))]
@@ -1083,12 +1083,9 @@ def place_by_pose(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any,
     d = np.asarray(dist_coeffs, float)
     scored = []
     for idx, desc in _placements(i, j, board, px):
-        ok, rvec, tvec = cv2.solvePnP(pts[idx], np.asarray(px, float), k, d)
-        if not ok:
+        cfb = board_pose_from_corners(pts[idx], px, k, d)
+        if cfb is None:
             continue
-        cfb = np.eye(4)
-        cfb[:3, :3] = cv2.Rodrigues(rvec)[0]
-        cfb[:3, 3] = tvec.ravel()
         est = base_from_camera @ cfb
         moved = pts @ est[:3, :3].T + est[:3, 3]
         scored.append((float(np.sqrt(np.mean(np.sum((moved - ref) ** 2, axis=1)))), desc,

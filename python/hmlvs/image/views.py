@@ -200,7 +200,6 @@ def detect_corners(image: np.ndarray, board: Any) -> Any:
     return detect_board(image, board)
 
 
-
 #: stripe pixels farther than this from the smooth curve through a calibration view's stripe
 #: are left out (px); at least 5 robust sigmas of the fit
 LINE_TOLERANCE = 3.0
