@@ -328,36 +328,82 @@ def add_partial_views(session: GeneralSession, views: int, seed: int = 0, *,
     line must cross the board inside the image over at least a fifth of the image width.
     ``distance`` is the range of the distance (mm) from the camera to the aimed-at point. The
     new views come last; their truth is computed as :func:`general_session`'s."""
+    w, h = session.sensor.image_size
+    m = image_margin
+
+    def board_seen(px: np.ndarray, edge: np.ndarray) -> bool:
+        inside = ((px[:, 0] >= m) & (px[:, 0] <= w - 1 - m) & (px[:, 1] >= m)
+                  & (px[:, 1] <= h - 1 - m))
+        out = ((px[:, 0] < 0) | (px[:, 0] > w - 1) | (px[:, 1] < 0) | (px[:, 1] > h - 1))
+        return bool(visible[0] <= inside.mean() <= visible[1] and out.any())
+
+    return _add_views(session, views, np.random.default_rng([int(seed), 7919]), board_seen,
+                      lambda v, on: bool(on.sum() >= 0.2 * w), tilt_deg, roll_deg, distance,
+                      max_tries, "partial")
+
+
+def add_stripe_off_board_views(session: GeneralSession, views: int, seed: int = 0, *,
+                               on_board: tuple[float, float] = (0.0, 0.0),
+                               tilt_deg: tuple[float, float] = (10.0, 35.0),
+                               roll_deg: tuple[float, float] = (-60.0, 60.0),
+                               distance: tuple[float, float] = (300.0, 520.0),
+                               image_margin: float = 20.0,
+                               max_tries: int = 50000) -> GeneralSession:
+    """``session`` with ``views`` more views that see the whole board (its outline with one
+    square of white border ``image_margin`` px inside the image) while the laser line runs
+    off its pattern: the fraction of the line's image columns that lie on the pattern is
+    within ``on_board`` ((0, 0): the line misses the pattern and lies on the white border or
+    the table around it, in the board's plane; e.g. (0.1, 0.6): it leaves the pattern). The
+    line is in the image over at least a third of its width. The new views come last."""
+    w, h = session.sensor.image_size
+    m = image_margin
+
+    def board_seen(px: np.ndarray, edge: np.ndarray) -> bool:
+        return bool(((edge[:, 0] >= m) & (edge[:, 0] <= w - 1 - m) & (edge[:, 1] >= m)
+                     & (edge[:, 1] <= h - 1 - m)).all())
+
+    def stripe_off(v: np.ndarray, on: np.ndarray) -> bool:
+        seen = np.isfinite(v)
+        return bool(seen.sum() >= w / 3 and on_board[0] <= on[seen].mean() <= on_board[1])
+
+    return _add_views(session, views, np.random.default_rng([int(seed), 104729]), board_seen,
+                      stripe_off, tilt_deg, roll_deg, distance, max_tries, "stripe-off-board",
+                      look_range=(-0.6, 1.6))
+
+
+def _add_views(session: GeneralSession, views: int, rng: np.random.Generator,
+               board_seen: Any, stripe_ok: Any, tilt_deg: tuple[float, float],
+               roll_deg: tuple[float, float], distance: tuple[float, float],
+               max_tries: int, what: str, *,
+               look_range: tuple[float, float] = (-0.4, 1.4)) -> GeneralSession:
+    """``session`` with ``views`` more random views aimed at points within ``look_range`` of
+    the board's extent, each kept when ``board_seen(corner pixels, outline pixels)`` and
+    ``stripe_ok(stripe rows, stripe on pattern)`` hold; their truth is computed as
+    :func:`general_session`'s."""
     truth, placed = session.sensor, session.board
-    w, h = truth.image_size
-    rng = np.random.default_rng([int(seed), 7919])
     bxy = placed.board_coordinates()
     corners_b = np.hstack([bxy, np.zeros((len(bxy), 1))])
     outline = _board_outline(placed, 1.0)
     bfb = truth.base_from_board
-    sq = placed.square
     poses, cams, corners, stripes, on_board = [], [], [], [], []
     tries = 0
     while len(poses) < views:
         tries += 1
         if tries > max_tries:
-            raise ValueError(f"only {len(poses)} of {views} partial views fit after "
+            raise ValueError(f"only {len(poses)} of {views} {what} views fit after "
                              f"{max_tries} tries")
-        bfc, cfb = _random_view(rng, placed, sq, (-0.4, 1.4), tilt_deg, roll_deg, distance)
+        bfc, cfb = _random_view(rng, placed, placed.square, look_range, tilt_deg, roll_deg,
+                                distance)
         if np.any(outline @ cfb[2, :3] + cfb[2, 3] <= 0):
             continue
         px = _project(truth, cfb, corners_b)
-        m = image_margin
-        inside = ((px[:, 0] >= m) & (px[:, 0] <= w - 1 - m) & (px[:, 1] >= m)
-                  & (px[:, 1] <= h - 1 - m))
-        out = ((px[:, 0] < 0) | (px[:, 0] > w - 1) | (px[:, 1] < 0) | (px[:, 1] > h - 1))
-        if not (visible[0] <= inside.mean() <= visible[1] and out.any()):
+        if not board_seen(px, _project(truth, cfb, outline)):
             continue
         try:
             v, on = _true_stripe(truth, bfc, placed)
         except ValueError:
             continue
-        if on.sum() < 0.2 * w:
+        if not stripe_ok(v, on):
             continue
         poses.append(bfb @ bfc @ np.linalg.inv(truth.hand_from_camera))
         cams.append(bfc)
