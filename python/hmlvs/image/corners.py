@@ -962,7 +962,7 @@ def detect_grid(image: np.ndarray, board: Any = None) -> CornerGrid:
                              f"found no regular grid of at least 6 corners{extra})")
 
 
-def _placements(i: np.ndarray, j: np.ndarray, board: Any, px: np.ndarray
+def grid_placements(i: np.ndarray, j: np.ndarray, board: Any, px: np.ndarray
                 ) -> list[tuple[np.ndarray, str]]:
     """Every way corners at grid positions (``i``, ``j``) (integers, one row or column apart
     per square) can lie on the board with the board's handedness: (board indices of the
@@ -997,13 +997,13 @@ def _two_best(scored: list[tuple[float, str, np.ndarray]]
 def _place(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any, expected: np.ndarray,
            spacing: float, ratio: float, max_error: float, what: str) -> np.ndarray:
     """Board indices of corners ``px`` found at grid positions (``i``, ``j``) whose place on
-    the board is not known: every placement (:func:`_placements`) is scored by the RMS
+    the board is not known: every placement (:func:`grid_placements`) is scored by the RMS
     distance of the corners from the ``expected`` pixels of the board corners it assigns.
     The best is taken only within ``max_error`` corner spacings and when the second best is
     at least ``ratio`` times farther; otherwise :class:`NumberingError` says why. ``what``
     names the corners in the messages (e.g. "the 2 x 4 corners found")."""
     scored = []
-    for idx, desc in _placements(i, j, board, px):
+    for idx, desc in grid_placements(i, j, board, px):
         e = expected[idx]
         if not np.isfinite(e).all():
             continue
@@ -1065,7 +1065,7 @@ def place_by_pose(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any,
     chain rather than from predicted pixels.
 
     A partly visible board's numbering is fixed only up to whole-square shifts and a half
-    turn (:func:`_placements`). Under each placement the corners give the view's board pose
+    turn (:func:`grid_placements`). Under each placement the corners give the view's board pose
     (``solvePnP`` with the camera), and with the view's ``base_from_camera`` (robot pose times
     hand-eye) the board's pose in the base, which every view must agree on: the placement
     whose board lies nearest ``base_from_board`` (the RMS distance of the board's corners
@@ -1082,7 +1082,7 @@ def place_by_pose(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any,
     k = np.asarray(camera_matrix, float)
     d = np.asarray(dist_coeffs, float)
     scored = []
-    for idx, desc in _placements(i, j, board, px):
+    for idx, desc in grid_placements(i, j, board, px):
         cfb = board_pose_from_corners(pts[idx], px, k, d)
         if cfb is None:
             continue

@@ -10,7 +10,7 @@ import numpy as np
 
 from .. import _core
 from .colour import board_gray, colour_stripe, is_colour
-from .corners import find_corners
+from .corners import BoardNotFoundError, find_corners
 from .points import Mode, calibration_points, fit_division_distortion
 from .stripe import (
     StripeResult,
@@ -210,6 +210,17 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     # fitted to the corners of all views (one lens: views with few corners need it), and the
     # calibration points.
     found: list[ImageReport | tuple[Any, ...]] = []
+
+    def accept(pid: str, index: int, pair: _Pair, corners: Any, info: dict[str, Any]
+               ) -> tuple[Any, ...]:
+        if not _pending(pair):
+            if fit_blur:
+                info["edge"] = _edge_shift(pair, normalize, stripe_options)
+            pair = replace(pair, on=None, off=None)  # the images are no longer needed
+        return (pid, index, pair, corners, info)
+
+    # pairs whose board the prediction could not number: (place in found, pair, info, error)
+    unnumbered: list[tuple[int, _Pair, dict[str, Any], str]] = []
     for index, rec in enumerate(records):
         pid = _record_id(rec, index)
         on_name, off_name = _record_names(rec)
@@ -222,19 +233,23 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
             try:
                 corners = find_corners(pair.board_image, board, expected=predicted_corners(
                     approx, pair.pose, board))
-            except ValueError as e:
+            except BoardNotFoundError as e:
                 raise _Reject(f"checkerboard: {e}") from None
+            except ValueError as e:
+                # numbered again once the views' agreement fixes the hand-eye (below)
+                unnumbered.append((len(found), pair, info, f"checkerboard: {e}"))
+                found.append(ImageReport(pid, index, str(on_name), str(off_name), False,
+                                         f"checkerboard: {e}", info["stripe"], 0))
+                continue
             except cv2.error as e:
                 raise _opencv_failure(e, "checkerboard") from None
         except _Reject as e:
             found.append(ImageReport(pid, index, str(on_name), str(off_name), False, str(e),
                                      info.get("stripe", {}), info.get("corners", 0)))
             continue
-        if not _pending(pair):
-            if fit_blur:
-                info["edge"] = _edge_shift(pair, normalize, stripe_options)
-            pair = replace(pair, on=None, off=None)  # the images are no longer needed
-        found.append((pid, index, pair, corners, info))
+        found.append(accept(pid, index, pair, corners, info))
+    if unnumbered:
+        _number_by_agreement(found, unnumbered, board, approx, accept)
     # One board print and one laser: a pair whose stripe lies on one level of the board only
     # (along a row of light squares) cannot fit the albedo offset; it takes the session's,
     # the median of the other pairs' (with 0 instead, its stripe would be lost on the
@@ -338,6 +353,68 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                            "centre_px": [float(x) for x in distortion[0]],
                            "k_per_px2": float(distortion[1])}})})
     return ds, reports
+
+
+def _number_by_agreement(found: list[Any], unnumbered: list[tuple[int, Any, dict, str]],
+                         board: Any, approx: Any, accept: Any) -> None:
+    """Number again the boards the approximate parameters could not (partly visible ones,
+    predicted a third of a square or more off): with the camera and hand-eye on which all
+    views' corners agree (:mod:`hmlvs.image.consensus`), the board is predicted within a few
+    pixels. ``found`` entries are replaced in place (by ``accept``'s tuple, or by a report
+    saying why the view stays unnumbered)."""
+    import cv2
+
+    from .._arrays import as_params
+    from .consensus import MIN_VIEWS, consensus_hand_eye, grid_intrinsics
+    from .corners import detect_grid
+
+    grids: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    for item in found:
+        if not isinstance(item, ImageReport):
+            c = item[3]
+            grids.append((c.pixels, np.c_[c.index // board.cols, c.index % board.cols],
+                          item[2].pose))
+    for _, pair, _, _ in unnumbered:
+        try:
+            g = detect_grid(pair.board_image, board)
+        except ValueError:
+            continue
+        m, n = g.shape
+        ij = np.stack([a.ravel() for a in np.meshgrid(np.arange(m), np.arange(n),
+                                                      indexing="ij")], axis=1)
+        grids.append((g.pixels.reshape(-1, 2), ij, pair.pose))
+    q = as_params(approx)
+    why = ""
+    if len(grids) < MIN_VIEWS:
+        why = (f"only {len(grids)} views show a grid of corners, too few to number partly "
+               "visible boards by their agreement")
+    else:
+        try:
+            k0 = np.array([[q[0] / q[1], 0.0, q[3]], [0.0, q[0] / q[2], q[4]], [0, 0, 1.0]])
+            size = unnumbered[0][1].size
+            k, d = grid_intrinsics([(px, ij) for px, ij, _ in grids], board.square, size, k0)
+            hand_eye = consensus_hand_eye(grids, board, k, d)
+        except (ValueError, cv2.error) as e:
+            why = str(e)
+    corners_base = board.corners()
+    for place, pair, info, error in unnumbered:
+        old = found[place]
+        if not why:
+            cfb = np.linalg.inv(pair.pose @ hand_eye)
+            pts = corners_base @ cfb[:3, :3].T + cfb[:3, 3]
+            rvec = cv2.Rodrigues(cfb[:3, :3])[0]
+            expected = cv2.projectPoints(corners_base.reshape(-1, 1, 3), rvec,
+                                         cfb[:3, 3].copy(), k, d)[0].reshape(-1, 2)
+            expected[pts[:, 2] <= 0] = np.nan
+            try:
+                corners = find_corners(pair.board_image, board, expected=expected)
+            except (ValueError, cv2.error) as e:
+                found[place] = replace(old, reason=f"checkerboard: {e} (predicted with the "
+                                       "hand-eye the views agree on)")
+                continue
+            found[place] = accept(old.id, old.index, pair, corners, info)
+        else:
+            found[place] = replace(old, reason=f"{error}; {why}")
 
 
 def _point_quality(stripe: StripeResult, cp: Any) -> dict[str, np.ndarray]:
