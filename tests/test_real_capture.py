@@ -10,7 +10,12 @@ import math
 import cv2
 from hmlvs.calibration.joint import calibrate_joint
 from hmlvs.image.colour import colour_stripe, laser_feature
-from hmlvs.image.corners import detect_board, flip_board_numbering, prefer_detected
+from hmlvs.image.corners import (
+    detect_board,
+    flip_board_numbering,
+    prefer_detected,
+    sb_positions,
+)
 from hmlvs.image.session import laser_channel, stripe_from_pair
 from hmlvs.image.views import stripe_on_one_line
 from hmlvs.sim.features import synthetic_views, transform
@@ -82,7 +87,8 @@ def test_stripe_on_one_line_drops_stray_light():
 
 def test_renders_keep_the_refined_corners_and_flips_carry_the_detected_ones(rendered):
     s, frames = rendered
-    corners = [detect_board(off, s.board) for _, off in frames]
+    # the detector's own full-size positions, searched for as prefer_detected would
+    corners = [sb_positions(off, detect_board(off, s.board)) for _, off in frames]
     n = s.board.rows * s.board.cols
     for c, truth in zip(corners, s.corners):
         assert c.detected is not None and np.isfinite(c.detected).all()
@@ -94,7 +100,7 @@ def test_renders_keep_the_refined_corners_and_flips_carry_the_detected_ones(rend
         raw = np.linalg.norm(c.detected - truth, axis=1)
         assert np.sqrt(np.mean(ref ** 2)) < np.sqrt(np.mean(raw ** 2))
     # and the session's choice, by one camera's fit over the views, agrees
-    pick, refined, raw = prefer_detected(corners, s.sensor.image_size)
+    pick, refined, raw, _ = prefer_detected(corners, s.sensor.image_size)
     assert not pick and refined < raw
 
 

@@ -161,7 +161,7 @@ def _poses(corners: list, k: np.ndarray, dist: np.ndarray) -> list[np.ndarray]:
 def test_the_numbering_agrees_with_the_stereo_rig(left, right):
     """The two cameras are rigidly mounted, so right_from_left = camR_from_board @
     inv(camL_from_board) is the same in every pair when both images number the board
-    alike. The top-left rule (detect_board) numbers 11 of the 12 pairs alike; in pair 02 the
+    alike. The top-left rule (detect_board) numbers 10 or 11 of the 12 pairs alike; in pair 02 the
     board stands at about 90 degrees in the image (rows at -80 degrees in the left image,
     +85 in the right), where the rule picks opposite corners, as its documentation warns.
     The pipeline's own consistency rule (consistent_numbering, with the left camera's poses
@@ -175,7 +175,10 @@ def test_the_numbering_agrees_with_the_stereo_rig(left, right):
     cam_r = _poses([right[n] for n in PAIRS], kr, dr)
     flips = consistent_numbering([np.linalg.inv(m) for m in cam_l], cam_r,
                                  BoardSpec(6, 9, 1.0))
-    assert [n for n, f in zip(PAIRS, flips) if f] == ["02"], flips
+    # pair 07 may be flipped too: in right07 r0c0 and its twin lie 0.6 px apart in u + v
+    # (a board at 45 degrees), a tie the top-left rule breaks either way depending on the
+    # detector's sub-pixel positions (the halved search's refined ones pick the other)
+    assert sorted(set(n for n, f in zip(PAIRS, flips) if f) - {"07"}) == ["02"], flips
     assert None not in flips
     fixed = [flip_board_numbering(right[n]) if f else right[n] for n, f in zip(PAIRS, flips)]
     cam_r = _poses(fixed, kr, dr)

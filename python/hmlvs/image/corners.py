@@ -684,24 +684,83 @@ def _x_gap(gray: np.ndarray, px: np.ndarray, board_xy: np.ndarray, hmat: np.ndar
 def _whole_board(gray: np.ndarray, board: Any, fallback: bool) -> tuple[np.ndarray, bool]:
     """(rows, cols, 2) pixels of a fully visible board's corners in OpenCV's grid order:
     ``findChessboardCornersSB``, else (``fallback``) the classic ``findChessboardCorners``;
-    and whether ``findChessboardCornersSB`` found them. Raises :class:`BoardNotFoundError`."""
+    and whether they are ``findChessboardCornersSB``'s own full-resolution positions.
+    Raises :class:`BoardNotFoundError`.
+
+    The search runs first on the image halved (``INTER_AREA``) with ``CALIB_CB_ACCURACY``
+    (its search on an upsampled image): at a quarter of the pixels it costs about what the
+    plain search costs at full size (OpenCV's samples: 36-112 ms against 109-545 ms for the
+    full-size accurate search), and it finds boards the plain search misses or takes wrongly
+    (left01.jpg: the plain search finds no 9 x 6 board but a 9 x 7 one; left05.jpg: the
+    full-size accurate search finds none). Its corners are within a few pixels and are
+    refined at full size (:func:`_refine_and_extend`). The full-size accurate search runs only
+    where the halved one finds nothing."""
     import cv2
     size = (board.cols, board.rows)
-    # by keyword: the Python signature takes ``corners`` third
-    ok, found = cv2.findChessboardCornersSB(
-        gray, size, flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY)
+    accurate = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
+    n = board.rows * board.cols
+    h, w = gray.shape
+    win = None
+    if min(h, w) >= 2 * _MIN_HALF_SIDE:
+        half = cv2.resize(gray, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+        # by keyword: the Python signature takes ``corners`` third
+        ok, found = cv2.findChessboardCornersSB(half, size, flags=accurate)
+        if ok and found is not None and found.size == 2 * n:
+            # a halved pixel i covers full pixels 2i and 2i + 1: its centre is 2i + 0.5
+            px = found.reshape(-1, 2).astype(float) * 2.0 + 0.5
+            spacing = _spacing(px)
+            win = int(np.clip(round(0.2 * spacing), 2, 9))
+            m = win + 2
+            fits = (px[:, 0] >= m) & (px[:, 0] <= w - 1 - m) & (px[:, 1] >= m) & \
+                (px[:, 1] <= h - 1 - m)
+            ref = px.copy()
+            ref[fits] = _refine(gray, px[fits], win)
+            # the halved search is good to about a pixel of the halved image: a corner the
+            # full-size refinement moves farther than that fell off its junction
+            if (np.linalg.norm(ref - px, axis=1) < max(2.5, 0.15 * spacing)).all():
+                return ref.reshape(board.rows, board.cols, 2), False
+    ok, found = cv2.findChessboardCornersSB(gray, size, flags=accurate)
     tried = "findChessboardCornersSB"
     by_sb = bool(ok) and found is not None
     if not by_sb and fallback:
         ok, found = cv2.findChessboardCorners(
             gray, size, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
         tried += " and findChessboardCorners"
-    if not ok or found is None or found.size != 2 * board.rows * board.cols:
+    if not ok or found is None or found.size != 2 * n:
         raise BoardNotFoundError(
             f"no fully visible {board.rows} x {board.cols} checkerboard found in the image "
             f"({tried} found none); for a partly visible board pass the expected corner "
             "pixels to find_corners")
     return found.reshape(board.rows, board.cols, 2).astype(float), by_sb
+
+
+#: the halved image's shorter side must be at least this (px) for the halved search
+_MIN_HALF_SIDE = 200
+
+
+def sb_positions(image: np.ndarray, corners: Corners) -> Corners:
+    """``corners`` with ``detected`` set: ``findChessboardCornersSB``'s own positions from
+    its full-size accurate search (``CALIB_CB_EXHAUSTIVE | CALIB_CB_ACCURACY``), matched to
+    the numbered corners (each within a quarter of the corner spacing); ``corners``
+    unchanged when that search finds no whole board. Costly (4-5x the halved search): for
+    :func:`prefer_detected`, which asks only when the refined corners fit poorly."""
+    import cv2
+
+    board = corners.board
+    gray = _to_8bit(_as_gray(image, "the image", None))
+    ok, found = cv2.findChessboardCornersSB(
+        gray, (board.cols, board.rows),
+        flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY)
+    if not ok or found is None or len(corners) < 2:
+        return corners
+    det = found.reshape(-1, 2).astype(float)
+    spacing = _spacing(np.asarray(corners.pixels, float))
+    d = np.linalg.norm(det[:, None] - corners.pixels[None], axis=2)
+    near = np.argmin(d, axis=1)
+    close = d[np.arange(len(det)), near] < 0.25 * spacing
+    detected = np.full((board.rows * board.cols, 2), np.nan)
+    detected[corners.index[near[close]]] = det[close]
+    return replace(corners, detected=detected)
 
 
 def detect_board(image: np.ndarray, board: Any,
@@ -1224,20 +1283,44 @@ def _calibration_rms(views: list[Corners], image_size: tuple[int, int]) -> float
                                      None)[0])
 
 
-def prefer_detected(views: list[Corners], image_size: tuple[int, int]
-                    ) -> tuple[bool, float, float]:
+def prefer_detected(views: list[Corners], image_size: tuple[int, int],
+                    images: dict[int, Any] | None = None
+                    ) -> tuple[bool, float, float, list[Corners]]:
     """Whether a session's whole boards are better taken at ``findChessboardCornersSB``'s own
-    positions than refined (:func:`find_corners`): (prefer, refined RMS, detected RMS).
+    positions than refined (:func:`find_corners`): (prefer, refined RMS, detected RMS, the
+    views with the detector's positions where they were searched for).
 
     The refinement (``cornerSubPix``, then the saddle point) is the more accurate on sharp
     images (renders: 0.01 against 0.1 px per axis; OpenCV's real samples: calibration RMS
     0.17 against 0.18 px), but on a soft, chroma-blocked camera image it can be pulled off
     the junction (the Blaser 1280 x 960 session: 1.7 px against 0.32 px). The choice is the
     session's: the positions with which one camera fits all the views better (OpenCV's
-    calibration RMS over the views that have both, at least 3), never one view's."""
+    calibration RMS over the views that have both, at least 3), never one view's.
+
+    Views without ``detected`` positions get them from ``images`` (``images[k]``: the image
+    of ``views[k]``, :func:`sb_positions`), but only when the refined corners fit worse than
+    :data:`SB_FLOOR_PX`: the detector's own positions fit no session better than that (renders
+    about 0.1 px, OpenCV's samples 0.18, the Blaser sessions 0.28 and 0.32), so below it the
+    costly search cannot pay."""
+    views = list(views)
+    usable = [k for k, c in enumerate(views) if len(c) >= 6]
+    if len(usable) < 3:
+        return False, float("nan"), float("nan"), views
+    if images is not None and any(views[k].detected is None for k in usable):
+        refined = _calibration_rms([views[k] for k in usable], image_size)
+        if refined <= SB_FLOOR_PX:
+            return False, refined, float("nan"), views
+        for k in usable:
+            if views[k].detected is None and images.get(k) is not None:
+                views[k] = sb_positions(images[k], views[k])
     both = [c for c in views if c.detected is not None and len(c) >= 6]
     if len(both) < 3:
-        return False, float("nan"), float("nan")
+        return False, float("nan"), float("nan"), views
     refined = _calibration_rms(both, image_size)
     raw = _calibration_rms([c.as_detected() for c in both], image_size)
-    return bool(raw < refined), refined, raw
+    return bool(raw < refined), refined, raw, views
+
+
+#: calibration RMS (px) below which findChessboardCornersSB's own positions cannot improve
+#: on the refined corners (see prefer_detected)
+SB_FLOOR_PX = 0.15

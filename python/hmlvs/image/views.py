@@ -114,6 +114,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     stripe_options["blur_var"] = _blur_var(stripe_options.get("blur_var"))
     edges: dict[str, tuple[Any, np.ndarray]] = {}
     whole: dict[str, Any] = {}  # the whole boards' Corners, by view id
+    board_images: dict[str, np.ndarray] = {}  # and their images
     for index, rec in enumerate(records):
         pid = _record_id(rec, index)
         on_name, off_name = _record_names(rec)
@@ -144,6 +145,8 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
             reports.append(ImageReport(pid, index, on_name, off_name, False, str(e)))
             continue
         whole[pid] = corners
+        if corners.rule.startswith("top-left"):
+            board_images[pid] = pair.board_image  # for prefer_detected, if it asks
         views.append(ViewData(pid, np.asarray(corners.pixels, float),
                               np.asarray(corners.index, int), pair.stripe.pixels, pair.pose))
         reports.append(ImageReport(pid, index, pair.on_name, pair.off_name, True, "",
@@ -156,8 +159,13 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         views = [replace(v, laser_pixels=fixed.get(v.id, v.laser_pixels)) for v in views]
         partial = [(slot, replace(p, stripe=fixed.get(p.id, p.stripe)), pair)
                    for slot, p, pair in partial]
-    if size is not None and prefer_detected(list(whole.values()), size)[0]:
-        raw = {k: c.as_detected() for k, c in whole.items()}
+    ids = list(whole)
+    prefer, _, _, with_detected = prefer_detected(
+        [whole[k] for k in ids], size, {n: board_images.get(k) for n, k in enumerate(ids)}
+    ) if size is not None else (False, 0.0, 0.0, [])
+    board_images.clear()
+    if prefer:
+        raw = {k: c.as_detected() for k, c in zip(ids, with_detected)}
         views = [replace(v, corner_pixels=np.asarray(raw[v.id].pixels, float),
                          corner_index=np.asarray(raw[v.id].index, int)) if v.id in raw else v
                  for v in views]
