@@ -273,3 +273,19 @@ def cv2_imread(path) -> np.ndarray:
     img = cv2.imread(str(path))
     assert img is not None, path
     return img
+
+
+def test_views_do_not_depend_on_the_number_of_threads(sessions):
+    """views_from_images reads the views on several threads; every corner, stripe pixel and
+    report is the same with one (OpenCV's random samples are seeded per image)."""
+    _s, r, views, reports = sessions[SEEDS[0]]
+    one, _, _, _, reports1 = views_from_images(r.manifest, threads=1)
+    three, _, _, _, reports3 = views_from_images(r.manifest, threads=3)
+    assert [v.id for v in one] == [v.id for v in three] == [v.id for v in views]
+    for a, b in zip(one, three):
+        np.testing.assert_array_equal(a.corner_pixels, b.corner_pixels)
+        np.testing.assert_array_equal(a.corner_index, b.corner_index)
+        np.testing.assert_array_equal(a.laser_pixels, b.laser_pixels)
+    assert reports1 == reports3
+    with pytest.raises(ValueError, match="threads must be a positive integer, got 0"):
+        views_from_images(r.manifest, threads=0)

@@ -395,6 +395,7 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
         if expected.shape != (n_board, 2):
             raise ValueError(f"expected must hold the ({n_board}, 2) predicted pixels of the "
                              f"board's corners, got shape {expected.shape}")
+        cv2.setRNGSeed(0)  # its random samples: the result depends on the image alone
         ok, found, _ = cv2.findChessboardCornersSBWithMeta(gray, (3, 3),
                                                            flags | cv2.CALIB_CB_LARGER)
         if not ok or found is None or len(found) < 4:
@@ -703,7 +704,9 @@ def _whole_board(gray: np.ndarray, board: Any, fallback: bool) -> tuple[np.ndarr
     win = None
     if min(h, w) >= 2 * _MIN_HALF_SIDE:
         half = cv2.resize(gray, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
-        # by keyword: the Python signature takes ``corners`` third
+        # by keyword: the Python signature takes ``corners`` third; OpenCV's RNG (its random
+        # samples; per thread) seeded, so that the result depends on the image alone
+        cv2.setRNGSeed(0)
         ok, found = cv2.findChessboardCornersSB(half, size, flags=accurate)
         if ok and found is not None and found.size == 2 * n:
             # a halved pixel i covers full pixels 2i and 2i + 1: its centre is 2i + 0.5
@@ -719,6 +722,7 @@ def _whole_board(gray: np.ndarray, board: Any, fallback: bool) -> tuple[np.ndarr
             # full-size refinement moves farther than that fell off its junction
             if (np.linalg.norm(ref - px, axis=1) < max(2.5, 0.15 * spacing)).all():
                 return ref.reshape(board.rows, board.cols, 2), False
+    cv2.setRNGSeed(0)
     ok, found = cv2.findChessboardCornersSB(gray, size, flags=accurate)
     tried = "findChessboardCornersSB"
     by_sb = bool(ok) and found is not None
@@ -748,6 +752,7 @@ def sb_positions(image: np.ndarray, corners: Corners) -> Corners:
 
     board = corners.board
     gray = _to_8bit(_as_gray(image, "the image", None))
+    cv2.setRNGSeed(0)
     ok, found = cv2.findChessboardCornersSB(
         gray, (board.cols, board.rows),
         flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY)

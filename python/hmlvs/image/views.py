@@ -68,7 +68,8 @@ def board_of(doc: dict[str, Any], board: Any, source: Any) -> tuple[BoardSpec, n
 
 def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
                       joint_unit: str | None = None, channel: int | None = None,
-                      normalize: bool = True, min_stripe: int = 20, **stripe_options: Any
+                      normalize: bool = True, min_stripe: int = 20,
+                      threads: int | None = None, **stripe_options: Any
                       ) -> tuple[list[ViewData], BoardSpec, tuple[int, int], np.ndarray | None,
                                  list[ImageReport]]:
     """An image session (a manifest, see docs/file-formats.md) -> joint-calibration views.
@@ -83,8 +84,10 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     without a stripe, without the board or with fewer than 6 numbered corners is reported
     and skipped; the rest of the session goes through. Unless ``blur_var`` is given, the
     stripes' correction at the board's albedo steps uses the camera blur fitted to the
-    session (:func:`hmlvs.image.session.session_blur_var`).
+    session (:func:`hmlvs.image.session.session_blur_var`). The views are read on
+    ``threads`` threads (default: one per core); the result does not depend on the number.
     """
+    from concurrent.futures import ThreadPoolExecutor
     from dataclasses import replace
 
     import cv2
@@ -115,38 +118,62 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     edges: dict[str, tuple[Any, np.ndarray]] = {}
     whole: dict[str, Any] = {}  # the whole boards' Corners, by view id
     board_images: dict[str, np.ndarray] = {}  # and their images
-    for index, rec in enumerate(records):
+    def read(item: tuple[int, Any]) -> tuple[Any, ...]:
+        """One view's pair and board (or why not): (pid, names, pair, corners or the
+        PartialView of a board not wholly seen, edge shifts, reject reason)."""
+        index, rec = item
         pid = _record_id(rec, index)
-        on_name, off_name = _record_names(rec)
+        names = _record_names(rec)
         try:
-            pair = _read_pair(rec, index, folder, unit, robot, size, channel, normalize,
+            pair = _read_pair(rec, index, folder, unit, robot, None, channel, normalize,
                               stripe_options, min_stripe)
-            size = pair.size
-            if fit_blur:
-                edges[pid] = (pair.stripe, _edge_shift(pair, normalize, stripe_options))
+            edge = _edge_shift(pair, normalize, stripe_options) if fit_blur else None
             try:
-                corners = detect_corners(pair.board_image, detector_board)
+                found: Any = detect_corners(pair.board_image, detector_board)
             except BoardNotFoundError as e:
                 if board_spec.unambiguous:
                     raise _Reject(str(e)) from None
                 # a partly visible board: numbered below from a first calibration
-                partial.append((len(reports), partial_view(pid, pair, detector_board, e),
-                                pair))
-                reports.append(None)  # type: ignore[arg-type]
-                continue
+                found = partial_view(pid, pair, detector_board, e)
             except ValueError as e:
                 raise _Reject(str(e)) from None
             except cv2.error as e:
                 raise _opencv_failure(e, "board", hint="") from None
-            if len(corners) < MIN_CORNERS:
-                raise _Reject(f"only {len(corners)} board corners found and numbered; a view "
+            if not isinstance(found, PartialView) and len(found) < MIN_CORNERS:
+                raise _Reject(f"only {len(found)} board corners found and numbered; a view "
                               f"needs at least {MIN_CORNERS}")
         except _Reject as e:
-            reports.append(ImageReport(pid, index, on_name, off_name, False, str(e)))
+            return pid, index, names, None, None, None, None, str(e)
+        image = None
+        if not isinstance(found, PartialView):
+            # a whole board's image only for prefer_detected; the rest is no longer needed
+            image = pair.board_image if found.rule.startswith("top-left") else None
+            pair = replace(pair, on=None, off=None, board=None)
+        return pid, index, names, pair, found, edge, image, ""
+
+    # The views one per core (each view's work depends on its own images alone, OpenCV's
+    # random samples included: the same result whatever the number of threads); then in
+    # the session's order.
+    with ThreadPoolExecutor(max_workers=_threads(threads, len(records))) as pool:
+        done = list(pool.map(read, enumerate(records)))
+    for pid, index, (on_name, off_name), pair, found, edge, image, why in done:
+        if not why and size is not None and pair.size != size:
+            why = (f"the images are {pair.size[0]} x {pair.size[1]} pixels but the "
+                   f"session's are {size[0]} x {size[1]}")
+        if why:
+            reports.append(ImageReport(pid, index, on_name, off_name, False, why))
             continue
+        size = pair.size
+        if fit_blur:
+            edges[pid] = (pair.stripe, edge)
+        if isinstance(found, PartialView):
+            partial.append((len(reports), found, pair))
+            reports.append(None)  # type: ignore[arg-type]
+            continue
+        corners = found
         whole[pid] = corners
-        if corners.rule.startswith("top-left"):
-            board_images[pid] = pair.board_image  # for prefer_detected, if it asks
+        if image is not None:
+            board_images[pid] = image  # for prefer_detected, if it asks
         views.append(ViewData(pid, np.asarray(corners.pixels, float),
                               np.asarray(corners.index, int), pair.stripe.pixels, pair.pose))
         reports.append(ImageReport(pid, index, pair.on_name, pair.off_name, True, "",
@@ -187,6 +214,20 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         raise ValueError("no image pair could be read: " +
                          "; ".join(f"{r.id}: {r.reason}" for r in reports))
     return views, board_spec, size, board_pose, reports
+
+
+def _threads(threads: int | None, jobs: int) -> int:
+    """Worker threads for ``jobs`` views: ``threads``, by default one per usable core."""
+    import os
+
+    if threads is None:
+        try:
+            threads = len(os.sched_getaffinity(0))
+        except AttributeError:  # not on Linux
+            threads = os.cpu_count() or 1
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise ValueError(f"threads must be a positive integer, got {threads!r}")
+    return max(1, min(threads, jobs))
 
 
 def _off_line_counts(counts: dict[str, int], n: int) -> dict[str, int]:
