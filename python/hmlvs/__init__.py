@@ -54,6 +54,7 @@ _PUBLIC = {
     "image.points": ("CalibrationPoints", "calibration_points"),
     "image.session": ("ImageReport", "dataset_from_images"),
     "measurement.measure": ("PointCloud", "measure", "MeasureResult"),
+    "measurement.measurer": ("Measurer", "Profile", "PointStatus"),
     "sim": ("simulate",),
     "paper.study": ("study",),
 }

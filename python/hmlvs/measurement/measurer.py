@@ -1,0 +1,158 @@
+"""Live measurement: one camera frame and the robot pose it was taken at -> the stripe's 3D
+points, frame after frame, from one or several threads.
+
+``Measurer(calibration).points(frame, base_from_hand)`` extracts the stripe as the session
+pipeline does (:func:`hmlvs.image.session.stripe_from_pair`: a laser-on frame alone, or with
+its laser-off frame) and maps every found centre through the calibration to the camera and the
+robot base. Nothing is shared between calls but the calibration, which is read only: one
+``Measurer`` serves several threads, and the heavy parts (OpenCV, the C++ kernels) release the
+GIL.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import enum
+import os
+from typing import Any
+
+import numpy as np
+
+from .._arrays import as_matrix
+from ..data.calibration_file import Calibration
+from ..image.stripe import StripeStatus
+from .measure import _require_hand_eye, sensor_model
+
+
+class PointStatus(enum.IntEnum):
+    """Per scan line of a frame: what :meth:`Measurer.points` made of it."""
+
+    MEASURED = 0    #: a stripe centre, mapped to a 3D point
+    NO_STRIPE = 1   #: no usable stripe centre on this scan line (see ``stripe_status``)
+    NO_POINT = 2    #: a centre whose ray misses the laser plane (or meets it behind the camera)
+
+
+@dataclass(frozen=True)
+class Profile:
+    """One frame's measurement, one entry per scan line (image column for a roughly
+    horizontal stripe).
+
+    Attributes
+    ----------
+    pixels : (n, 2) the stripe centre (u, v) of each scan line, NaN where none
+    points : (n, 3) the point in the robot base frame (mm), NaN unless MEASURED
+    camera_points : (n, 3) the same point in the camera frame (mm)
+    status : (n,) :class:`PointStatus` codes
+    stripe_status : (n,) the stripe extractor's :class:`hmlvs.image.StripeStatus` codes
+    """
+
+    pixels: np.ndarray
+    points: np.ndarray
+    camera_points: np.ndarray
+    status: np.ndarray
+    stripe_status: np.ndarray
+
+    @property
+    def measured(self) -> np.ndarray:
+        """(n,) bool: scan lines that gave a point."""
+        return self.status == PointStatus.MEASURED
+
+    def __len__(self) -> int:
+        return int(self.status.shape[0])
+
+
+class Measurer:
+    """A calibrated sensor, ready to measure frames (see the module's documentation).
+
+    Parameters
+    ----------
+    calibration : a :class:`hmlvs.Calibration` (either model) or the path of a calibration
+        file; a bench session's calibration (no hand-eye transform) is refused
+    stripe_options : options of :func:`hmlvs.image.session.stripe_from_pair`; without
+        ``blur_var`` the camera blur the calibration's session fitted is used
+    """
+
+    def __init__(self, calibration: Any, **stripe_options: Any) -> None:
+        if isinstance(calibration, (str, os.PathLike)):
+            calibration = Calibration.load(calibration)
+        _require_hand_eye(calibration)
+        self._model = sensor_model(calibration)
+        size = getattr(self._model, "image_size", None)
+        if size is None:
+            size = getattr(calibration, "image_size", None)
+        self.image_size: tuple[int, int] | None = (
+            None if size is None else (int(size[0]), int(size[1])))
+        options = dict(stripe_options)
+        if options.get("blur_var") is None and getattr(calibration, "blur_var", None):
+            options["blur_var"] = calibration.blur_var
+        from ..image.session import stripe_from_pair
+
+        # a typo in the options is the caller's error, found now rather than at frame one
+        try:
+            stripe_from_pair(np.zeros((16, 16), np.uint8), np.zeros((16, 16), np.uint8),
+                             **_checked_only(options))
+        except TypeError as e:  # an unknown keyword
+            raise ValueError(f"stripe options {sorted(options)}: {e}") from None
+        self._options = options
+
+    def points(self, frame: np.ndarray, base_from_hand: Any,
+               off: np.ndarray | None = None) -> Profile:
+        """The stripe of ``frame`` (laser on; ``off``: the laser-off frame at the same pose,
+        if taken) measured at the robot pose ``base_from_hand`` (4 x 4, mm)."""
+        from ..image.session import stripe_from_pair
+
+        frame = _image(frame, "the frame")
+        if self.image_size is not None and (frame.shape[1], frame.shape[0]) != self.image_size:
+            raise ValueError(f"the frame is {frame.shape[1]} x {frame.shape[0]} pixels but the "
+                             f"calibration's images are {self.image_size[0]} x "
+                             f"{self.image_size[1]}")
+        if off is not None and _image(off, "the laser-off frame").shape != frame.shape:
+            raise ValueError("the laser-on and laser-off frames differ in size")
+        pose = as_matrix(base_from_hand, 4, "base_from_hand")
+        if pose.shape != (4, 4) or not np.isfinite(pose).all():
+            raise ValueError(f"base_from_hand must be a finite 4 x 4 transform, got shape "
+                             f"{pose.shape}")
+        try:
+            stripe = stripe_from_pair(frame, off, **self._options)
+        except ValueError as e:
+            if "leaves no pixel" not in str(e):
+                raise
+            stripe = None  # nothing above the automatic threshold: no stripe in this frame
+        n = frame.shape[1]
+        pixels = np.full((n, 2), np.nan)
+        points = np.full((n, 3), np.nan)
+        camera = np.full((n, 3), np.nan)
+        status = np.full(n, PointStatus.NO_STRIPE, np.uint8)
+        stripe_status = np.full(n, StripeStatus.NONE, np.uint8)
+        if stripe is None:
+            return Profile(pixels, points, camera, status, stripe_status)
+        if stripe.direction != "columns":
+            raise ValueError("Measurer measures a roughly horizontal stripe (scan lines are "
+                             "image columns)")
+        cols = np.asarray(stripe.position, int)
+        stripe_status[cols] = stripe.status
+        found = cols[stripe.found]
+        px = stripe.pixels
+        if len(px):
+            cam, ok = self._model.points_in_camera(px, on_invalid="mask")
+            base, _ = self._model.points_in_base(px, np.repeat(pose[None], len(px), axis=0),
+                                                 on_invalid="mask")
+            pixels[found] = px
+            camera[found[ok]] = cam[ok]
+            points[found[ok]] = base[ok]
+            status[found] = np.where(ok, PointStatus.MEASURED, PointStatus.NO_POINT)
+        return Profile(pixels, points, camera, status, stripe_status)
+
+
+def _checked_only(options: dict[str, Any]) -> dict[str, Any]:
+    """The options as stripe_from_pair checks them on a blank pair (no automatic threshold
+    to trip over: a fixed one)."""
+    out = dict(options)
+    out.setdefault("threshold", 1.0)
+    return out
+
+
+def _image(image: Any, what: str) -> np.ndarray:
+    if not isinstance(image, np.ndarray) or image.ndim not in (2, 3) or image.size == 0:
+        raise ValueError(f"{what} must be an image (a 2D or colour numpy array)")
+    return image
