@@ -379,7 +379,9 @@ def test_the_stripe_on_the_sheet_around_the_board_is_used():
     bfh = views[2].base_from_hand @ transform([0.05, -0.04, 0.02], [3.0, -4.0, 2.0])
     dark = ViewData("dark", np.zeros((0, 2)), np.zeros(0, int),
                     _laser_line_pixels(t, board, bfh) + rng.normal(0, 0.1, (300, 2)), bfh)
-    r = calibrate_joint(wide + [dark], board, (1024, 768))
+    r = calibrate_joint(wide[:3] + [dark] + wide[3:], board, (1024, 768))
+    # the per-view accounts keep the session's order, the laser-only view in its place
+    assert list(r.per_view) == [v.id for v in wide[:3]] + ["dark"] + [v.id for v in wide[3:]]
     assert all(r.per_view[v.id]["laser_pixels"] > 280 for v in wide)
     assert r.per_view["dark"]["laser_pixels"] > 280 and r.per_view["dark"]["corners"] == 0
     plain = calibrate_joint(views, board, (1024, 768), stripe_margin=0.5)

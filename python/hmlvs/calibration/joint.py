@@ -354,6 +354,7 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
     board = BoardSpec.of(board)
     terms = _check_distortion(distortion)
     uncertain = _robot_poses_uncertain(robot_poses)
+    session_order = [v.id for v in views]  # per_view keeps it (laser-only views go last below)
     laser_only = [v for v in views if len(v.corner_index) == 0]
     views = [v for v in views if len(v.corner_index) > 0]
     if len(views) < 3:
@@ -538,7 +539,7 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         sensor=sensor, std=std, names=list(names), covariance=cov,
         corner_rms_px=_rms(c_all) * math.sqrt(2), laser_rms_mm=_rms(l_all),
         corner_sigma_px=float(opts.corner_sigma), laser_sigma_mm=float(opts.laser_sigma),
-        per_view=per_view,
+        per_view={k: per_view[k] for k in session_order if k in per_view},
         dropped={"corners": int(sum((~k).sum() for k in keep_c)),
                  "laser_pixels": int(sum((~k).sum() for k in keep_l))},
         mode="chain" if chain else "camera", rank=rank, num_unknowns=len(names), condition=cond,
