@@ -43,7 +43,8 @@ def _figures(result: Any) -> dict[str, str]:
     figs["quiver"] = _png(fig)
 
     fig, ax = plt.subplots(figsize=(7, 3.4))
-    ids = list(res)
+    # views with corners only: a laser-only view has no reprojection error
+    ids = [i for i in res if result.per_view[i]["corners"]]
     c_rms = [result.per_view[i]["corner_rms_px"] for i in ids]
     ax.bar(np.arange(len(ids)), c_rms)
     ax.set_xticks(np.arange(len(ids)), ids, rotation=90, fontsize=7)
