@@ -1,15 +1,15 @@
-"""An independent renderer of laser on/off sessions, written from MODEL.md and
+"""An independent renderer of laser on/off sessions, written from docs/model.md and
 docs/file-formats.md alone (it shares no code with ``hmlvs.sim``), to measure the image
 pipeline on images the project did not make.
 
 The scene: the paper's Table 2 sensor (640 x 480 px, 7.4 um pixels, f = 8 mm, H = 140 mm,
-theta = 25 deg) with the division-model radial distortion k = 4.8e-4 / mm^2 (MODEL.md step 2)
+theta = 25 deg) with the division-model radial distortion k = 4.8e-4 / mm^2 (docs/model.md step 2)
 on a hand moved by random poses (yaw, tilt, camera 230-400 mm above the board) over the
 paper's checkerboard (6 x 8 inner corners, 30 mm squares, on the plane z = 0 of the base).
 
 Image formation, per pixel: the area of the pixel is integrated (``ss`` x ``ss`` samples,
 each of which takes the print averaged over its share of the pixel, so the sum is exact at
-the print's edges); every sample's ray (MODEL.md steps 1-2, inverted to a ray) meets the
+the print's edges); every sample's ray (docs/model.md steps 1-2, inverted to a ray) meets the
 board plane, whose printed albedo (dark 0.07, light 0.85, a white margin and a grey table
 around it) is lit by vignetted ambient light. The laser sheet has a Gaussian thickness
 profile (1-sigma 0.45 mm across the plane) and falls off as 1 / range; its return is the
@@ -31,7 +31,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-#: the rendered sensor: Table 2 nominal values with k = 4.8e-4 / mm^2 (MODEL.md units)
+#: the rendered sensor: Table 2 nominal values with k = 4.8e-4 / mm^2 (docs/model.md units)
 TRUE = {"f": 8.0, "Su": 0.0074, "Sv": 0.0074, "Cu": 320.0, "Cv": 240.0, "k": 4.8e-4,
         "H": 140.0, "theta": 5 * np.pi / 36, "omega": 0.0, "phi": 0.0, "varphi": 0.0,
         "tx": 60.0, "ty": 0.0, "tz": -45.0}
@@ -63,7 +63,7 @@ def _axis_angle(axis: np.ndarray, a: float) -> np.ndarray:
 
 
 def hand_from_camera(p: dict) -> np.ndarray:
-    """MODEL.md step 4: R_C = Rz(omega) Ry(phi) Rz(varphi), t = (tx, ty, tz)."""
+    """docs/model.md step 4: R_C = Rz(omega) Ry(phi) Rz(varphi), t = (tx, ty, tz)."""
     t = np.eye(4)
     t[:3, :3] = _rz(p["omega"]) @ _ry(p["phi"]) @ _rz(p["varphi"])
     t[:3, 3] = [p["tx"], p["ty"], p["tz"]]
@@ -71,7 +71,7 @@ def hand_from_camera(p: dict) -> np.ndarray:
 
 
 def camera_rays(p: dict, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(..., 3) camera-frame ray directions (Xu, Yu, f) of pixels (u, v): MODEL.md 1-2."""
+    """(..., 3) camera-frame ray directions (Xu, Yu, f) of pixels (u, v): docs/model.md 1-2."""
     xd, yd = p["Su"] * (u - p["Cu"]), p["Sv"] * (v - p["Cv"])
     s = 1.0 + p["k"] * (xd * xd + yd * yd)
     return np.stack([xd / s, yd / s, np.full(np.shape(xd), p["f"])], axis=-1)

@@ -1,6 +1,6 @@
-"""An independent NumPy implementation of the model of MODEL.md, used as a parity oracle.
+"""An independent NumPy implementation of the model of docs/model.md, used as a parity oracle.
 
-Written from MODEL.md alone, vectorised, without calling hmlvs.
+Written from docs/model.md alone, vectorised, without calling hmlvs.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Sensor design analysis (hmlvs.design) against hand-computed values.
 
 The paper's design: f = 8 mm, 7.4 um pixels, 640 x 480 px, H = 100 mm, theta = 25 deg,
-principal point at the image centre (319.5, 239.5), k = 0. By hand (MODEL.md, step 3):
+principal point at the image centre (319.5, 239.5), k = 0. By hand (docs/model.md, step 3):
 
     f tan(theta) = 8 * 0.4663077 = 3.730461 mm
     row 0:   Yd = -239.5 * 0.0074 = -1.7723 mm, D = Yd + f tan(theta) = 1.958161 mm,

@@ -1,4 +1,4 @@
-"""Identifiability: the Jacobian SVD finds and names MODEL.md's degeneracies (issue 4)."""
+"""Identifiability: the Jacobian SVD finds and names docs/model.md's degeneracies (issue 4)."""
 
 import math
 import warnings
@@ -141,7 +141,7 @@ def test_rotation_jacobian_matches_autodiff_euler_jacobian():
 
 
 def test_with_distortion_the_exact_directions_become_weak():
-    # MODEL.md: with k != 0 the camera shift (and the tilt) are only weakly determined.
+    # docs/model.md: with k != 0 the camera shift (and the tilt) are only weakly determined.
     truth = hmlvs.Parameters.nominal().replace(k=0.002, omega=0.1, phi=0.12, varphi=-0.07)
     ds = hmlvs.simulate(truth, seed=3).fit
     rep = hmlvs.identifiability(ds, truth, fixed=("Su",))

@@ -26,7 +26,7 @@ def test_pso_lm_with_pixel_noise_matches_lm_started_at_truth(seed):
     r = hmlvs.calibrate(sim, seed=seed)
     oracle = hmlvs.calibrate(sim, method="lm", initial=sim.truth)
     assert r.test_rms <= 1.05 * oracle.test_rms, (r.test_rms, oracle.test_rms)
-    # As good a minimum of F, up to 0.5 %: along the near-flat valleys of MODEL.md, LM stops on
+    # As good a minimum of F, up to 0.5 %: along the near-flat valleys of docs/model.md, LM stops on
     # its function tolerance at slightly different points (seed 5 differs by 0.09 %).
     assert r.cost <= 1.005 * oracle.cost
 

@@ -1,6 +1,6 @@
 """The image pipeline on images it did not render (issue 14, first "Done when" bullet).
 
-``independent_render.py`` renders the paper's Table 2 sensor from MODEL.md alone (no code of
+``independent_render.py`` renders the paper's Table 2 sensor from docs/model.md alone (no code of
 ``hmlvs.sim``): k = 4.8e-4, laser reflectance lower on dark squares and not proportional to
 the ambient albedo (dark 0.25 / light 0.9 for the laser, 0.07 / 0.85 under ambient light),
 area-integrated pixels, 0.5 px blur, 10 % laser speckle, 1 grey level of noise, random yaw

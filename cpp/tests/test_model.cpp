@@ -40,8 +40,8 @@ RowMatX16 PoseRows(const Eigen::Matrix4d& t) {
   return p;
 }
 
-// MODEL.md steps 1-5 written out independently of the library: the two-division form of
-// Eq. 1-3 as MODEL.md states it and R_C from Eigen's angle-axis product.
+// docs/model.md steps 1-5 written out independently of the library: the two-division form of
+// Eq. 1-3 as docs/model.md states it and R_C from Eigen's angle-axis product.
 Eigen::Vector3d IndependentBasePoint(const Vector14d& q, double u, double v,
                                      const Eigen::Matrix4d& base_from_hand,
                                      Eigen::Vector3d* camera_point) {
@@ -69,7 +69,7 @@ Eigen::Matrix4d QuarterTurnPose() {
 }
 
 TEST(Model, HandComputedPixelWithTable2Nominal) {
-  // Pixel (400, 300) with the Table 2 nominal parameters. By hand (MODEL.md):
+  // Pixel (400, 300) with the Table 2 nominal parameters. By hand (docs/model.md):
   //   Xd = 0.0074 * 80 = 0.592 mm, Yd = 0.0074 * 60 = 0.444 mm, k = 0: Xu = Xd, Yu = Yd
   //   Yu + f tan(25 deg) = 0.444 + 8 * 0.466307658155 = 4.17446126524 mm
   //   rho = 140 / 4.17446126524 = 33.5372617894
@@ -105,8 +105,8 @@ TEST(Model, HandComputedPixelWithTable2Nominal) {
 }
 
 TEST(Model, HandComputedPixelWithDistortionAndRotation) {
-  // The same pixel with k = 0.01 /mm^2 (division model, MODEL.md step 2): r2 = 0.592^2 + 0.444^2
-  // = 0.5476, 1 + k r2 = 1.005476, and (mpmath) cP = [19.7573749015, 14.8180311761,
+  // The same pixel with k = 0.01 /mm^2 (division model, docs/model.md step 2): r2 = 0.592^2 +
+  // 0.444^2 = 0.5476, 1 + k r2 = 1.005476, and (mpmath) cP = [19.7573749015, 14.8180311761,
   // 268.453598466].
   Vector14d q = Nominal();
   q[kK] = 0.01;
@@ -141,7 +141,7 @@ TEST(Model, BasePointsRoundTripThroughPixels) {
     const PixelsResult back = PixelsFromBasePoints(q, s.points, s.poses, /*plane_tolerance=*/1e-6);
     ASSERT_EQ(back.num_invalid, 0);
     EXPECT_LT((back.pixels - s.pixels).cwiseAbs().maxCoeff(), 1e-9);
-    // The points lie on the laser plane (MODEL.md step 3): distance at the rounding level.
+    // The points lie on the laser plane (docs/model.md step 3): distance at the rounding level.
     EXPECT_LT(LaserPlaneDistance(q, s.points, s.poses).cwiseAbs().maxCoeff(), 1e-9);
   }
 }
@@ -195,7 +195,7 @@ TEST(Model, BatchFunctionsAgreeWithSinglePointFunctions) {
     EXPECT_NEAR(errors[i], norm, tol);
     sum_sq += norm * norm;
   }
-  // Objective and fitness: F = 1/2 sum ||E||^2 (MODEL.md), relative 1e-12.
+  // Objective and fitness: F = 1/2 sum ||E||^2 (docs/model.md), relative 1e-12.
   const double objective = Objective(q, s.pixels, s.poses, refs);
   EXPECT_GT(objective, 1.0);
   EXPECT_NEAR(objective, 0.5 * sum_sq, 1e-12 * objective);
@@ -219,7 +219,8 @@ TEST(Model, FitnessKernelAgreesWithObjectiveOnALargeDataSet) {
 
 TEST(Model, PixelWhoseRayMissesTheLaserPlane) {
   // theta = 0.01: f tan(theta) = 0.0800027 mm. Row 10 has Yd = 0.0074 (10 - 240) = -1.702 mm,
-  // so Yu + f tan(theta) = -1.6219973 mm <= 0: no measurement (MODEL.md step 3). Row 300 is fine.
+  // so Yu + f tan(theta) = -1.6219973 mm <= 0: no measurement (docs/model.md step 3). Row 300 is
+  // fine.
   Vector14d q = Nominal();
   q[kTheta] = 0.01;
   const RowMatX2 pixels = (RowMatX2(2, 2) << 320.0, 300.0, 320.0, 10.0).finished();

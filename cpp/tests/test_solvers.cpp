@@ -126,7 +126,7 @@ Vector14d PerturbedTruth(const Vector14d& truth, unsigned seed) {
   for (int j = 0; j < kNumParams; ++j) {
     q[j] = std::abs(truth[j]) > 1.0 ? truth[j] * (1.0 + u(rng)) : truth[j] + u(rng);
   }
-  q[kSu] = truth[kSu];  // the scale gauge (MODEL.md): Su from the datasheet, held fixed
+  q[kSu] = truth[kSu];  // the scale gauge (docs/model.md): Su from the datasheet, held fixed
   return q;
 }
 
@@ -157,10 +157,10 @@ TEST(Solvers, LmFromPerturbedTruthReachesZeroCost) {
     EXPECT_EQ(r.final_cost, data.Evaluate(r.params.data()));
     // Noise-free data: the modern mode (smooth 3m residuals, autodiff) converges to rounding:
     // F = 6e-25 mm^2 measured, bound 1e-12 mm^2. The paper mode's ||E|| residual is not
-    // differentiable at 0 and its forward differences stall earlier (MODEL.md): F = 1.9e-4 mm^2
-    // measured (RMS 3e-3 mm), bound 1e-2 mm^2, still 1e6 below the start.
+    // differentiable at 0 and its forward differences stall earlier (docs/model.md): F = 1.9e-4
+    // mm^2 measured (RMS 3e-3 mm), bound 1e-2 mm^2, still 1e6 below the start.
     EXPECT_LT(r.final_cost, modern ? 1e-12 : 1e-2);
-    // Parameters are not all identifiable (MODEL.md), so compare what the data determines:
+    // Parameters are not all identifiable (docs/model.md), so compare what the data determines:
     // base points of held-out pixels and poses. Measured RMS: 1e-13 mm (modern), 2.7e-3 mm
     // (paper); bounds 1e-6 and 3e-2 mm.
     EXPECT_LT(HeldOutRms(r.params, held_out), modern ? 1e-6 : 3e-2);

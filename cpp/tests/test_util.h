@@ -11,7 +11,7 @@ namespace hmlvs::test {
 
 constexpr double kPi = 3.14159265358979323846;
 
-/// Table 2 nominal parameters (MODEL.md).
+/// Table 2 nominal parameters (docs/model.md).
 inline Vector14d Nominal() {
   Vector14d q;
   q << 8.0, 0.0074, 0.0074, 320.0, 240.0, 0.0, 140.0, 5.0 * kPi / 36.0, 0.0, 0.0, 0.0, 60.0, 0.0,
@@ -38,7 +38,7 @@ inline void Table2Bounds(Vector14d* lower, Vector14d* upper) {
 }
 
 /// Stripe pixels, base_from_hand poses with generic rotations, and the exact base-frame points
-/// that parameters q give (MODEL.md simulation protocol, noise-free).
+/// that parameters q give (docs/model.md simulation protocol, noise-free).
 struct Scene {
   RowMatX2 pixels;
   RowMatX16 poses;

@@ -109,7 +109,7 @@ GLOSSARY_URL = "docs/glossary.md"
 
 # What the command line holds fixed unless told otherwise: the scale gauge (Su) and the
 # three parameters the laser data cannot separate from the camera's position and tilt
-# (Sv, Cu, Cv; MODEL.md, "What the data can and cannot determine"). Give them from the
+# (Sv, Cu, Cv; docs/model.md, "What the data can and cannot determine"). Give them from the
 # camera's datasheet or a prior camera calibration.
 DEFAULT_FIXED = ("Su", "Sv", "Cu", "Cv")
 _FIXED_WHY = {
@@ -439,7 +439,7 @@ def demo(
 
     The true sensor is the paper's nominal one (Table 2) with the camera mounted slightly
     rotated (omega 1, phi 2, varphi -1 deg). Su, Sv, Cu and Cv are held at their
-    datasheet values, as MODEL.md says the laser data need; the other ten are estimated.
+    datasheet values, as docs/model.md says the laser data need; the other ten are estimated.
 
     Example: hmlvs demo --seed 1 --poses 60
     """
@@ -702,7 +702,7 @@ def calibrate(
     robot poses alone.
 
     Su, Sv, Cu and Cv are held at their initial (datasheet) values by default: laser points
-    alone cannot determine them (MODEL.md; docs/glossary.md, "scale gauge", "flat direction").
+    alone cannot determine them (docs/model.md; docs/glossary.md, "scale gauge", "flat direction").
 
     Example: hmlvs calibrate session.npz --holdout 0.3 --out calibration.yaml --report report.html
     """

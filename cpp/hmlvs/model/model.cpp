@@ -37,7 +37,7 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // A pixel whose ray misses the laser plane; `plane` is PixelToCamera's test value D s.
 [[noreturn]] void ThrowMissedPlane(const Vector14d& q, Eigen::Index i, double u, double v,
                                    double plane) {
-  // Yu + f tan(theta) = D / s = (D s) / s^2, the number MODEL.md step 3 names.
+  // Yu + f tan(theta) = D / s = (D s) / s^2, the number docs/model.md step 3 names.
   double xd, yd;
   const double s = DistortedSensorPoint(q.data(), u, v, &xd, &yd);
   std::ostringstream msg;

@@ -1,4 +1,4 @@
-// The hand-mounted laser-vision sensor model (see MODEL.md of the project's specification).
+// The hand-mounted laser-vision sensor model (see docs/model.md).
 //
 // Units: mm, rad, pixels. Parameter order is the paper's (Eq. 10):
 //   q = [f, Su, Sv, Cu, Cv, k, H, theta, omega, phi, varphi, tx, ty, tz]
@@ -71,16 +71,16 @@ Eigen::Matrix<T, 3, 3> RotationZYZ(const T& omega, const T& phi, const T& varphi
 }
 
 // ---------------------------------------------------------------------------------------------
-// The one formulation of MODEL.md steps 1-5. Every evaluation of the model (the batch functions
-// below, the residual functors of cost.h, the LM functors and the fitness kernel of solvers/)
-// goes through these functions.
+// The one formulation of docs/model.md steps 1-5. Every evaluation of the model (the batch
+// functions below, the residual functors of cost.h, the LM functors and the fitness kernel of
+// solvers/) goes through these functions.
 //
 // Each returns the laser-plane test `D s` (see PixelToCamera): the pixel has a measurement iff it
 // is > 0. The outputs are always written; when the test fails they are meaningless (inf, NaN or
 // a point behind the camera), so that the hot loops stay branch-free and vectorise.
 
-/// MODEL.md steps 1-2: the distorted sensor-plane point Xd = Su (u - Cu), Yd = Sv (v - Cv) (mm)
-/// of pixel (u = column, v = row), and the radial factor s = 1 + k (Xd^2 + Yd^2) that is
+/// docs/model.md steps 1-2: the distorted sensor-plane point Xd = Su (u - Cu), Yd = Sv (v - Cv)
+/// (mm) of pixel (u = column, v = row), and the radial factor s = 1 + k (Xd^2 + Yd^2) that is
 /// returned. The undistorted point of the division model (paper Eq. 1) is (Xu, Yu) = (Xd, Yd) / s.
 template <typename T>
 T DistortedSensorPoint(const T* q, const T& u, const T& v, T* xd, T* yd) {
@@ -89,7 +89,7 @@ T DistortedSensorPoint(const T* q, const T& u, const T& v, T* xd, T* yd) {
   return T(1.0) + q[kK] * (*xd * *xd + *yd * *yd);
 }
 
-/// MODEL.md steps 1-3: stripe pixel (u, v) to a point in the camera frame (paper Eq. 1-3),
+/// docs/model.md steps 1-3: stripe pixel (u, v) to a point in the camera frame (paper Eq. 1-3),
 ///   cP = rho [Xu, Yu, f],  rho = H / (Yu + f tan(theta)).
 /// It is computed with a single division: with D = Yd + f tan(theta) s, Yu + f tan(theta) = D / s
 /// and cP = (H / D) [Xd, Yd, f s].
@@ -108,8 +108,8 @@ T PixelToCamera(const T* q, const T& tan_theta, const T& u, const T& v, T* camer
   return d * s;
 }
 
-/// MODEL.md step 4 and the hand part of step 5 (paper Eq. 5-6): a camera-frame point in the hand
-/// frame, R_C cP + t, with R_C from RotationZYZ and t = (q[kTx], q[kTy], q[kTz]), written out
+/// docs/model.md step 4 and the hand part of step 5 (paper Eq. 5-6): a camera-frame point in the
+/// hand frame, R_C cP + t, with R_C from RotationZYZ and t = (q[kTx], q[kTy], q[kTz]), written out
 /// term by term and summed left to right.
 template <typename T>
 Eigen::Matrix<T, 3, 1> CameraToHand(const T* q, const Eigen::Matrix<T, 3, 3>& hand_from_camera_rot,
@@ -131,7 +131,7 @@ Eigen::Matrix<T, 3, 1> CameraToHand(const T* q, const Eigen::Quaternion<T>& hand
 }
 
 /// Stripe pixel seen at hand pose (R_N, P_N) to a point in the robot base frame (paper Eq. 9,
-/// MODEL.md step 5): bP = R_N (R_C cP + t) + P_N. Returns the laser-plane test D s.
+/// docs/model.md step 5): bP = R_N (R_C cP + t) + P_N. Returns the laser-plane test D s.
 template <typename T>
 T PixelToBase(const T* q, const Eigen::Matrix<T, 3, 3>& hand_from_camera_rot, const T& tan_theta,
               double u, double v, const Eigen::Matrix3d& base_from_hand_rot,
@@ -215,7 +215,7 @@ void ValidateParams(const Vector14d& q);
 /// orthonormal (tolerance 1e-6) or whose last row is not [0 0 0 1].
 void ValidatePoses(PosesRef base_from_hand);
 
-/// Stripe pixels -> camera-frame points (mm), MODEL.md steps 1-3. Pixels whose ray misses the
+/// Stripe pixels -> camera-frame points (mm), docs/model.md steps 1-3. Pixels whose ray misses the
 /// laser plane are marked invalid; with `throw_on_invalid` the first one raises
 /// std::invalid_argument.
 /// Pixels whose ray meets the plane at an angle whose sine is below `min_ray_sine` (e.g.

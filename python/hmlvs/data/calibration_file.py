@@ -5,7 +5,7 @@ Format ``hmlvs-calibration`` version 1, as YAML (``.yaml``/``.yml``) or JSON (``
     format: hmlvs-calibration
     version: 1
     units: {length: mm, angle: rad, pixel: px, k: 1/mm^2}
-    parameters: {f: 8.0, Su: 0.0074, ...}     # all 14, paper order (MODEL.md)
+    parameters: {f: 8.0, Su: 0.0074, ...}     # all 14, paper order (docs/model.md)
     std: {f: 0.002, Su: null, ...}           # standard deviations; null when fixed/unknown
     fixed: [Su]
     fit_rms_mm: 0.09

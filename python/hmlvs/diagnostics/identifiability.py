@@ -1,6 +1,6 @@
 """What calibration data can and cannot determine: Jacobian SVD with named flat directions.
 
-MODEL.md ("What the data can and cannot determine") lists exact degeneracies of the 14
+docs/model.md ("What the data can and cannot determine") lists exact degeneracies of the 14
 parameters for laser points. :func:`identifiability` finds them numerically from the residual
 Jacobian (automatic differentiation in C++) and names them:
 
@@ -233,7 +233,7 @@ class IdentifiabilityReport:
     euler_singular_values, euler_rank : the same in the paper's parameters (ZYZ Euler
         angles); lower than ``rank`` by one at the gimbal lock
     directions : the null and weak directions, named (see :class:`Direction`)
-    known : each known degeneracy of MODEL.md with its status here, including those
+    known : each known degeneracy of docs/model.md with its status here, including those
         removed by fixing a parameter or determined by the data
     suggested_fixed : parameters to hold fixed as well (the ones a datasheet or a prior
         camera calibration gives first) so that the data determine every other one; empty
@@ -471,7 +471,7 @@ def _analyse(dataset: Dataset, q: np.ndarray, fixed: Iterable[str] | str,
 
 
 # ------------------------------------------------------------------------------------------
-# Known directions (MODEL.md), in the data coordinates' own units (14 values)
+# Known directions (docs/model.md), in the data coordinates' own units (14 values)
 
 
 def scale_gauge_tangent(params: Any) -> np.ndarray:
@@ -560,7 +560,7 @@ def _make_direction(kind: str, name: str, x: np.ndarray, a: np.ndarray, smax: fl
 
 
 def _known_directions(an: _Analysis) -> list[Direction]:
-    """MODEL.md's degeneracies, each with its status at this point and these fixed ones."""
+    """docs/model.md's degeneracies, each with its status at this point and these fixed ones."""
     a = an.scaled
     smax = float(an.sv[0])
     flat = an.flat_basis()

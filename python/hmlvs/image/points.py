@@ -91,7 +91,7 @@ def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None
         fits every corner within ``GLOBAL_RESIDUAL`` px, by that one (for points in squares
         with at least one found corner), then to the base frame; the reference
         points are points of the board plane where the stripe is, many per image. Radial
-        distortion is taken out first: the division model of MODEL.md about the image
+        distortion is taken out first: the division model of docs/model.md about the image
         centre, its coefficient fitted so that all corners obey one homography, or
         ``distortion``.
     distortion : homography mode: the division model (centre, k in 1/px^2) to take out
@@ -260,7 +260,7 @@ def _undistort(px: np.ndarray, centre: np.ndarray, k: float) -> np.ndarray:
 
 
 def fit_division_distortion(views: Sequence[Corners]) -> Distortion:
-    """The division model (MODEL.md step 2, in pixels: k_px = k Su^2) about the image
+    """The division model (docs/model.md step 2, in pixels: k_px = k Su^2) about the image
     centre, (centre, k_px), that makes the numbered corners of each view fit that view's own
     homography best. One lens serves every view of a session: fitted to all of them, the
     coefficient holds for views with too few corners to fit it alone. Views with fewer than

@@ -1,4 +1,4 @@
-"""The sensor model of MODEL.md, evaluated in C++ (``hmlvs._core``).
+"""The sensor model of docs/model.md, evaluated in C++ (``hmlvs._core``).
 
 Every function takes parameters as :class:`~hmlvs.Parameters` or a 14-vector, stripe pixels
 as (m, 2) arrays of (u = column, v = row), and base_from_hand poses as (m, 4, 4) arrays.

@@ -209,7 +209,7 @@ class Bounds:
         """The box of the paper's Eq. 22, q0 (1 + (rand - 0.5) s), for the spread ``s``.
 
         Parameters whose centre is exactly 0 (omega, phi, varphi, ty and k at the nominal
-        values) would get an empty box; as MODEL.md suggests they get the Table 2 bounds
+        values) would get an empty box; as docs/model.md suggests they get the Table 2 bounds
         scaled by ``s`` instead, e.g. k in [0, 0.1 s] and omega in [-pi/16 s, pi/16 s].
         """
         q0 = center.to_array() if isinstance(center, Parameters) else np.asarray(center, float)

@@ -1,7 +1,7 @@
 """Sensor design analysis (paper section 2, Figs. 3-6): measurement range, resolution, and
 the 3D error caused by a wrong baseline H or projection angle theta.
 
-Everything is computed in the camera frame by the model of MODEL.md (``hmlvs._core``
+Everything is computed in the camera frame by the model of docs/model.md (``hmlvs._core``
 through :func:`hmlvs.points_in_camera`), at every pixel of the image; this module only
 measures the resulting point maps. Units: mm, rad, pixels (angles in degrees only in text).
 
@@ -20,7 +20,7 @@ Definitions (the paper does not give them; these are ours):
   the far end), the stripe length on the nearest, the mid-depth and the farthest usable
   rows, and ``x_growth`` = far length - near length, i.e. how much the stripe lengthens
   over the depth range. Only ``x_growth`` is near the paper's 155.0 mm (155.55 mm; see the
-  README for the rest of the difference).
+  docs/paper.md, "Sensor design analysis", for the rest of the difference).
 - *Resolution* (the paper: "the displacement in the 3D real space per one pixel"): at pixel
   (u, v), ``res_u = |P(u + 1/2, v) - P(u - 1/2, v)|`` and
   ``res_v = |P(u, v + 1/2) - P(u, v - 1/2)|`` in mm/px, the 3D displacement over a one-pixel
@@ -156,7 +156,7 @@ class Sensor:
             raise ValueError(f"image_size must be (width, height) in px, got {image_size!r}")
         w, h = size
         if principal_point is None:
-            # the image centre in the pixel-centres-at-integers convention of MODEL.md; a
+            # the image centre in the pixel-centres-at-integers convention of docs/model.md; a
             # non-integer size gives a nonsense centre, but Sensor() rejects it below
             cu = (w - 1) / 2 if isinstance(w, (int, np.integer)) else 0.0
             cv = (h - 1) / 2 if isinstance(h, (int, np.integer)) else 0.0

@@ -48,7 +48,7 @@ LABELS: dict[str, str] = {
 SUCCESS_THRESHOLD = 0.01
 """Held-out RMS (mm) below which a run counts as a success. On noise-free data the true
 parameters give 0 and modern LM reaches ~1e-13 mm; 0.01 mm is 13x finer than the sensor's
-best resolution (0.134 mm/px, README "Sensor design analysis") and 35x below the paper's
+best resolution (0.134 mm/px, docs/paper.md "Sensor design analysis") and 35x below the paper's
 experimental accuracy (0.355 mm), so a run below it is as good as exact for any use, and a run
 above it has not found the minimum."""
 
@@ -612,7 +612,7 @@ def _valley_lines(r: StudyResult) -> list[str]:
     lines = ["", f"## Same RMS, different parameters: modern LM at s = {s:g}", "",
              f"The {int(ok.sum())} successful modern-LM runs at s = {s:g} all fit to a held-out "
              f"RMS of at most {_fmt(float(lm.test_rms[ok].max()))} mm, yet their parameters "
-             "differ: the data fix only some combinations of the 14 (MODEL.md, \"What the "
+             "differ: the data fix only some combinations of the 14 (docs/model.md, \"What the "
              "data can and cannot determine\").", "",
              "| parameter | smallest | largest | true |", "|---|---:|---:|---:|"]
     for name, unit in VALLEY_PARAMS:
@@ -710,7 +710,7 @@ def _markdown(r: StudyResult) -> str:
         "paper's ingredients and MINPACK's tolerances, not MINPACK itself "
         "(`docs/study/minpack_check.py` runs MINPACK on the same starts).",
         "- All 14 parameters are free for every method, as in the paper. The exact scale gauge "
-        "(f, Su, Sv, k) of MODEL.md makes the parameter vector non-unique, but not the RMS: "
+        "(f, Su, Sv, k) of docs/model.md makes the parameter vector non-unique, but not the RMS: "
         "modern LM's damping handles the null directions.",
         f"- Success: held-out RMS < {thr} mm (13x below the sensor's best resolution, "
         "0.134 mm/px, and 35x below the paper's experimental 0.355 mm).",

@@ -1,6 +1,6 @@
 """Rendered laser-on / laser-off images of a checkerboard session, with known truth.
 
-Every pixel is ray-traced through the sensor model of MODEL.md: the pixel's (distorted)
+Every pixel is ray-traced through the sensor model of docs/model.md: the pixel's (distorted)
 position gives an undistorted camera ray (:func:`hmlvs.models.paper.rays_in_camera`), the ray
 meets
 the board plane (the board lies on a table in that plane), the point's albedo comes from the

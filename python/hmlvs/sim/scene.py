@@ -4,7 +4,7 @@ A :class:`Scene` is a list of primitives in the robot base frame (mm): the table
 (:class:`Table`, optionally textured), axis-aligned boxes (:class:`Box`) and cylinders with
 the axis along x, y or z, solid or hollow, with circular holes through the wall
 (:class:`Cylinder`, :class:`Hole`). :func:`render_scene` ray-traces it through the sensor
-model of MODEL.md exactly as :mod:`hmlvs.sim.render` does for the checkerboard: every
+model of docs/model.md exactly as :mod:`hmlvs.sim.render` does for the checkerboard: every
 supersample's (distorted) pixel gives an undistorted camera ray
 (:func:`hmlvs.models.paper.rays_in_camera`), the camera pose is ``base_from_hand @
 hand_from_camera``, the nearest surface along the ray gives the point, its normal and albedo.
