@@ -741,16 +741,20 @@ def calibrate(
     with _guard(as_json), _collect_warnings() as caught:
         fixed_names, why = _resolve_fixed(fixed, free)
         arm = _load_robot(robot)
-        guess = bounds_obj = None
+        guess = bounds_obj = board_pose = None
+        widened: list[str] = []
         if initial is not None:
-            from .data.guess import read_initial
+            from .data.guess import initial_board_pose, read_initial
 
             guess = read_initial(initial)
+            board_pose = initial_board_pose(initial)
         if _is_manifest(data):
             from .image.session import dataset_from_images
 
-            # the corners are numbered with the given initial guess, else the nominal values
-            ds, image_reports = dataset_from_images(data, mode=mode, robot=arm, params=guess)
+            # the corners are numbered with the given initial guess, else the nominal values;
+            # a board the manifest does not place sits where an opencv initial guess put it
+            ds, image_reports = dataset_from_images(data, mode=mode, robot=arm, params=guess,
+                                                    base_from_board=board_pose)
             if not (as_json or quiet):
                 for r in image_reports:
                     typer.echo(str(r))
@@ -766,6 +770,10 @@ def calibrate(
             from .models.params import Parameters
 
             bounds_obj = read_bounds(bounds, guess or Parameters.nominal())
+        elif guess is not None:
+            from .data.guess import bounds_with
+
+            bounds_obj, widened = bounds_with(guess)
         result = run_calibration(ds, method=method, test=test_ds, fixed=fixed_names, runs=runs,
                                  initial=guess, bounds=bounds_obj,
                                  iterations=iterations, loss=loss, loss_scale=loss_scale,
@@ -791,12 +799,14 @@ def calibrate(
                     "determined": det, "not_determined": undet,
                     "rotation_vector_rad": _rotation_vector(result.params),
                     "termination": result.termination, "seconds": result.seconds,
-                    "warnings": warns,
+                    "warnings": warns, "notes": widened,
                     "images": [{"id": r.id, "ok": r.ok, "reason": r.reason,
                                 "points": r.points, "rejected": dict(r.rejected)}
                                for r in image_reports]})
         return
     typer.echo(_without_warning_lines(summary))
+    for note in widened:
+        typer.echo(f"note: {note}")
     typer.echo(_rotation_text(result.params))
     typer.echo("held fixed: " + ("; ".join(why) if why else "nothing (--fixed none)"))
     typer.echo("determined by the data: " + (", ".join(det) or "none")

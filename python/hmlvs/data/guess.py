@@ -61,6 +61,46 @@ def read_initial(path: str | os.PathLike, su: float | None = None) -> Parameters
         raise ValueError(f"{path}: {e}") from None
 
 
+def initial_board_pose(path: str | os.PathLike) -> Any:
+    """The board's pose in the base (4 x 4) that an opencv calibration used as the initial
+    guess estimated, or None (a paper calibration or a parameter mapping holds none): the
+    paper model needs the board placed, and a session whose manifest does not place it is
+    placed there."""
+    import numpy as np
+
+    d = _read_mapping(path, "initial guess")
+    if d.get("format") != "hmlvs-calibration":
+        return None
+    from .calibration_file import Calibration
+
+    cal = Calibration.from_dict(d, source=str(path))
+    pose = None if cal.sensor is None else cal.sensor.base_from_board
+    return None if pose is None else np.asarray(pose, float)
+
+
+def bounds_with(guess: Parameters, bounds: Bounds | None = None) -> tuple[Bounds, list[str]]:
+    """``bounds`` (default Table 2) widened, where the initial guess lies outside them, to hold
+    it with a margin of a tenth of the range: the Table 2 ranges are the paper's camera's (its
+    k >= 0 excludes an ordinary barrel lens, whose division-model k is negative), while a guess
+    from one's own calibration is the better knowledge. Returns the bounds and one note per
+    widened parameter."""
+    b = Bounds.table2() if bounds is None else bounds
+    lo, hi = b.lower.copy(), b.upper.copy()
+    q = guess.to_array()
+    notes = []
+    for i, name in enumerate(NAMES):
+        margin = 0.1 * (hi[i] - lo[i])
+        if q[i] < lo[i]:
+            lo[i] = q[i] - margin
+        elif q[i] > hi[i]:
+            hi[i] = q[i] + margin
+        else:
+            continue
+        notes.append(f"the search range of {name} widened to [{lo[i]:.6g}, {hi[i]:.6g}] to "
+                     f"hold the initial guess {q[i]:.6g}")
+    return Bounds(lo, hi), notes
+
+
 def read_bounds(path: str | os.PathLike, initial: Parameters) -> Bounds:
     """The search bounds in a file (module doc), +- ranges taken around ``initial``."""
     d = _read_mapping(path, "bounds file")

@@ -123,6 +123,7 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                         params: Any = None, mode: Mode = "corners", normalize: bool = True,
                         channel: int | None = None, tolerance: float = 0.5, step: int = 8,
                         min_stripe: int = 20, joint_unit: str | None = None,
+                        base_from_board: np.ndarray | None = None,
                         **stripe_options: Any) -> tuple[Any, list[ImageReport]]:
     """Laser on/off image pairs + joint readings -> a calibration :class:`~hmlvs.Dataset`.
 
@@ -150,6 +151,8 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     tolerance, step : passed to :func:`calibration_points`
     min_stripe : fewest scan lines with a stripe for a usable pair
     joint_unit : "rad" or "deg" for records (a manifest says its unit)
+    base_from_board : where the manifest's board lies in the base (4 x 4), when the manifest
+        does not say (e.g. estimated by an opencv calibration of the same session)
     stripe_options : options of :func:`stripe_from_pair`. Without ``blur_var`` the camera's
         blur variance for the correction at the squares' edges is fitted to the session
         (:func:`session_blur_var`); ``meta["blur_var"]`` records the value used.
@@ -181,6 +184,9 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
             from ..data.manifest import checkerboard_of
 
             board = checkerboard_of(doc["board"], source)
+            if base_from_board is not None and isinstance(doc["board"], dict) and \
+                    "origin" not in doc["board"]:
+                board = _placed(board, base_from_board)
         robot = _manifest_robot(doc, robot, source)
         if isinstance(doc.get("image_size"), list) and len(doc["image_size"]) == 2:
             size = (int(doc["image_size"][0]), int(doc["image_size"][1]))
@@ -353,6 +359,19 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                            "centre_px": [float(x) for x in distortion[0]],
                            "k_per_px2": float(distortion[1])}})})
     return ds, reports
+
+
+def _placed(board: Any, base_from_board: np.ndarray) -> Any:
+    """``board`` (rows, cols, square) placed at the pose ``base_from_board``."""
+    from ..geometry.board import Checkerboard
+
+    r = np.asarray(base_from_board, float)[:3, :3]
+    u, _, vt = np.linalg.svd(r)  # the nearest rotation: unit, orthogonal directions
+    r = u @ vt
+    return Checkerboard(rows=board.rows, cols=board.cols, square=board.square,
+                        origin=tuple(float(x) for x in np.asarray(base_from_board)[:3, 3]),
+                        row_direction=tuple(float(x) for x in r[:, 0]),
+                        col_direction=tuple(float(x) for x in r[:, 1]))
 
 
 def _number_by_agreement(found: list[Any], unnumbered: list[tuple[int, Any, dict, str]],
