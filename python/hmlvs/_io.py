@@ -6,28 +6,83 @@ from __future__ import annotations
 from contextlib import contextmanager
 import os
 from pathlib import Path
+import re
 import tempfile
 from typing import IO, Iterator
 
-_TMP_PREFIX = ".hmlvs-"
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised by the command line's handler (:func:`on_sigterm`) where Python next
+    runs: a KeyboardInterrupt, so every clean-up path of Ctrl-C (temporary files and folders
+    removed, a half-written output set undone) runs for it too; the command line then exits
+    143 (128 + SIGTERM)."""
+
+
+def on_sigterm(signum: int, frame: object) -> None:
+    raise Terminated("terminated")
+
+
+# Every temporary name is ".hmlvs-tmp-<pid>-<random>.tmp": the marker and the writing
+# process's id make a name no user file has; only such names whose process is gone (and that
+# are older than an hour) are ever removed, so a user's file is never touched.
+_TMP_PREFIX = ".hmlvs-tmp-"
 _STALE_SECONDS = 3600.0
+_TMP_NAME = re.compile(r"\.hmlvs-tmp-(\d+)-[A-Za-z0-9_]{6,}\.tmp")
 
 
-def _remove_stale(folder: Path) -> None:
-    """Remove our temporary files that a killed write left behind (older than an hour: no
-    write of ours takes that long)."""
+def _tmp_prefix() -> str:
+    return f"{_TMP_PREFIX}{os.getpid()}-"
+
+
+def _pid_running(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists but is another user's (EPERM), or cannot tell: keep
+        return True
+    return True
+
+
+def _stale_temporaries(folder: Path) -> Iterator[Path]:
+    """Our temporary files and folders in ``folder`` that a killed write left behind: a name
+    of ours, its process no longer running, older than an hour."""
     import time
 
     now = time.time()
     try:
-        for p in folder.glob(f"{_TMP_PREFIX}*.tmp"):
-            try:
-                if now - p.stat().st_mtime > _STALE_SECONDS:
-                    p.unlink()
-            except OSError:
-                pass
+        names = os.listdir(folder)
     except OSError:
-        pass
+        return
+    for name in names:
+        m = _TMP_NAME.fullmatch(name)
+        if m is None or _pid_running(int(m.group(1))):
+            continue
+        p = folder / name
+        try:
+            if not p.is_symlink() and now - p.stat().st_mtime > _STALE_SECONDS:
+                yield p
+        except OSError:
+            pass
+
+
+def _remove_stale(folder: Path) -> None:
+    """Remove our temporary files that a killed write left behind (:func:`_stale_temporaries`);
+    nothing else."""
+    for p in _stale_temporaries(folder):
+        try:
+            if p.is_file():
+                p.unlink()
+        except OSError:
+            pass
+
+
+def _target(path: Path) -> Path:
+    """Where a write to ``path`` lands: through a symbolic link (also a chain, or one to a
+    file that does not exist yet) to its target, so the link stays a link."""
+    return Path(os.path.realpath(path)) if path.is_symlink() else path
 
 
 @contextmanager
@@ -39,7 +94,7 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", encoding: str | None 
     """
     import errno
 
-    path = Path(path)
+    path = _target(Path(path))  # a symbolic link is written through, not replaced
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except (FileExistsError, NotADirectoryError):
@@ -48,11 +103,18 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", encoding: str | None 
         raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
     _remove_stale(path.parent)
     # A short temporary name (not derived from the target's), so that any legal target name
-    # works; the prefix marks it as ours for _remove_stale.
-    fd, tmp = tempfile.mkstemp(prefix=_TMP_PREFIX, suffix=".tmp", dir=path.parent)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual permissions
+    # works; marker and pid make it ours (_stale_temporaries).
+    fd, tmp = tempfile.mkstemp(prefix=_tmp_prefix(), suffix=".tmp", dir=path.parent)
+    try:
+        keep = os.stat(path).st_mode & 0o7777  # an existing output keeps its permissions
+    except OSError:
+        umask = os.umask(0)
+        os.umask(umask)
+        keep = 0o666 & ~umask  # mkstemp makes 0600; a new file gets the usual permissions
+    try:
+        os.chmod(tmp, keep)
+    except OSError:
+        pass
     try:
         with os.fdopen(fd, mode, encoding=None if "b" in mode else encoding) as fh:
             yield fh
@@ -73,6 +135,28 @@ def existing_file(path: str | os.PathLike, what: str) -> Path:
     if not path.is_file():
         raise ValueError(f"{path}: no such {what}")
     return path
+
+
+def read_image(path: str | os.PathLike) -> object:
+    """An image file (any format OpenCV reads, depth and channels unchanged) as an array, or
+    None when the file is not an image. The file is opened by Python and decoded from its
+    bytes, so any name works, also one that is not UTF-8 (``cv2.imread`` crashes on such a
+    name); a name no file system can hold (a lone surrogate) is a ValueError naming it."""
+    import cv2
+    import numpy as np
+
+    try:
+        os.fsencode(path)
+    except UnicodeError:
+        raise ValueError(f"{os.fspath(path)!r}: the image file's name holds a character no "
+                         "file name can (an unpaired surrogate); rename it") from None
+    data = np.fromfile(path, dtype=np.uint8)
+    if data.size == 0:
+        return None
+    try:
+        return cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    except cv2.error:
+        return None
 
 
 def plain(obj: object) -> object:
@@ -150,7 +234,7 @@ def atomic_folder(path: str | os.PathLike, last: tuple[str, ...] = ("manifest.js
     except (FileExistsError, NotADirectoryError):
         raise NotADirectoryError(errno.ENOTDIR, "Not a directory", str(path.parent)) from None
     _remove_stale_folders(path.parent)
-    tmp = Path(tempfile.mkdtemp(prefix=_TMP_PREFIX, suffix=".tmp", dir=path.parent))
+    tmp = Path(tempfile.mkdtemp(prefix=_tmp_prefix(), suffix=".tmp", dir=path.parent))
     try:
         yield tmp
         if not path.exists():
@@ -165,17 +249,9 @@ def atomic_folder(path: str | os.PathLike, last: tuple[str, ...] = ("manifest.js
 
 
 def _remove_stale_folders(folder: Path) -> None:
-    """Temporary folders of killed multi-file writes (older than an hour)."""
+    """Our temporary folders of killed multi-file writes (:func:`_stale_temporaries`)."""
     import shutil
-    import time
 
-    now = time.time()
-    try:
-        for p in folder.glob(f"{_TMP_PREFIX}*.tmp"):
-            try:
-                if p.is_dir() and now - p.stat().st_mtime > _STALE_SECONDS:
-                    shutil.rmtree(p, ignore_errors=True)
-            except OSError:
-                pass
-    except OSError:
-        pass
+    for p in _stale_temporaries(folder):
+        if p.is_dir():
+            shutil.rmtree(p, ignore_errors=True)

@@ -8,7 +8,7 @@ from typing import Any, Iterator, Optional
 
 import typer
 
-from ._io import atomic_write, json_text
+from ._io import Terminated, atomic_write, json_text, on_sigterm
 
 app = typer.Typer(
     name="hmlvs",
@@ -65,11 +65,20 @@ def _fail(lines: list[str], code: int, as_json: bool) -> None:
 _PASS_THROUGH = (typer.Exit, typer.Abort, typer.BadParameter, SystemExit)
 
 
+def _interrupted(e: BaseException, what: str = "") -> "typer.Exit":
+    """Ctrl-C (exit 130) or SIGTERM (exit 143, :class:`hmlvs._io.Terminated`), said on stderr;
+    the exit to raise."""
+    terminated = isinstance(e, Terminated)
+    typer.echo(("terminated" if terminated else "interrupted") + what, err=True)
+    return typer.Exit(143 if terminated else 130)
+
+
 @contextmanager
 def _guard(as_json: bool = False) -> Iterator[None]:
     """The command line's error policy. Exit 2: bad input or an environment fault (a path,
     a permission, disk space), one line naming the file, entry or option. Exit 1: an internal
-    error, a short message (the traceback with --debug). Exit 130: Ctrl-C."""
+    error, a short message (the traceback with --debug). Exit 130: Ctrl-C; exit 143: SIGTERM
+    (every clean-up path of Ctrl-C runs for it too)."""
     try:
         yield
     except _PASS_THROUGH:
@@ -78,9 +87,8 @@ def _guard(as_json: bool = False) -> Iterator[None]:
         _fail(_error_lines(str(e)), 2, as_json)
     except OSError as e:
         _fail([_fault(e)], 2, as_json)
-    except KeyboardInterrupt:
-        typer.echo("interrupted", err=True)
-        raise typer.Exit(130) from None
+    except KeyboardInterrupt as e:
+        raise _interrupted(e) from None
     except Exception as e:
         if _DEBUG:
             raise
@@ -321,6 +329,13 @@ def simulate(
     from .sim.render import RenderOptions
 
     with _guard(as_json), _collect_warnings() as caught:
+        # every refusal before anything is written
+        if out.suffix not in (".npz", ".json"):  # as Dataset.save, before any image is made
+            raise ValueError(f"{out}: data sets are saved as .npz or .json, not "
+                             f"{out.suffix or 'a file without a suffix'}")
+        if images is not None and images.is_dir() and any(images.iterdir()):
+            raise ValueError(f"--images {images}: the folder exists and is not empty; its "
+                             "manifest and images would be replaced: give a new or empty folder")
         s = sim.session(_truth(mounting), num_poses=poses, pixel_noise=pixel_noise,
                         point_noise=point_noise, seed=seed)
         manifest = None
@@ -864,6 +879,8 @@ def design(
     except ValueError as e:
         typer.echo(f"error: {' '.join(str(e).split())}", err=True)
         raise typer.Exit(2) from None
+    except KeyboardInterrupt as e:
+        raise _interrupted(e) from None
     if as_json:
         summary = report.to_dict()
         summary["errors"] = [e.to_dict() for e in errors]
@@ -1098,9 +1115,8 @@ def study(
     except ValueError as e:
         typer.echo(f"error: {' '.join(str(e).split())}", err=True)
         raise typer.Exit(2) from None
-    except KeyboardInterrupt:
-        typer.echo("interrupted: no results written", err=True)
-        raise typer.Exit(130) from None
+    except KeyboardInterrupt as e:
+        raise _interrupted(e, ": no results written") from None
     if as_json:
         _echo_json(result.to_dict())
     else:
@@ -1200,18 +1216,28 @@ def _command():
 
 def main(argv: Optional[list[str]] = None) -> None:
     """Run the command line; errors outside a command's own guard follow the same policy."""
+    import signal
     import sys
 
+    # SIGTERM as Ctrl-C: temporaries removed, outputs left as they were, exit 143
+    try:
+        previous = signal.signal(signal.SIGTERM, on_sigterm)
+    except ValueError:  # not the main thread (an embedding application): left as it is
+        previous = None
     try:
         _command().main(args=argv, prog_name="hmlvs")
     except SystemExit:
         raise
-    except KeyboardInterrupt:  # outside a command's guard, e.g. while parsing the options
-        print("interrupted", file=sys.stderr)
-        sys.exit(130)
+    except KeyboardInterrupt as e:  # outside a command's guard, e.g. while parsing the options
+        terminated = isinstance(e, Terminated)
+        print("terminated" if terminated else "interrupted", file=sys.stderr)
+        sys.exit(143 if terminated else 130)
     except Exception as e:  # reached only outside _guard, e.g. while printing results
         try:
             with _guard():
                 raise e
         except typer.Exit as exit_:
             sys.exit(exit_.exit_code)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
