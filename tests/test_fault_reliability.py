@@ -208,37 +208,74 @@ def _sigterm_cases(d: Path, ds: Path, cal: Path, sess: Path) -> dict[str, list[s
         "export": ["export", str(cal), "--format", "opencv", "--out", "old.yaml"],
         "report": ["report", str(cal), str(ds), "--out", "old.html"],
         "demo": ["demo", "--poses", "16", "--out", "pictures", "-q"],
-        "design": ["design", "--out", "pictures"],
     }
 
 
-@pytest.mark.parametrize("command", ["simulate", "calibrate", "measure", "inspect", "export",
-                                     "report", "demo", "design"])
-def test_sigterm_while_writing_cleans_up_and_exits_143(files, tmp_path, command):
-    d, ds, cal, sess = files
+def _work(tmp_path: Path) -> Path:
+    """A folder of existing outputs a command is about to replace."""
     work = tmp_path / "work"
     work.mkdir()
     for name in ("old.yaml", "old.ply", "old.html"):
         (work / name).write_text("the user's file\n")
     (work / "pictures").mkdir()
     (work / "pictures" / "keep.png").write_bytes(b"the user's picture")
-    (tmp_path / "ready").mkdir()
-    before, inputs = _tree(work), {**_tree(d)}
-    code, err = _terminate_while_writing(_sigterm_cases(d, ds, cal, sess)[command], work,
-                                         tmp_path / "ready")
+    return work
+
+
+@pytest.mark.parametrize("command", ["simulate", "calibrate", "measure", "inspect", "export",
+                                     "report", "demo"])
+def test_sigterm_while_writing_cleans_up_and_exits_143(files, tmp_path, monkeypatch, capsys,
+                                                       command):
+    # in this process (the command line's handler is installed by main and removed after):
+    # SIGTERM is sent from inside the first fsync, while the temporaries exist
+    d, ds, cal, sess = files
+    work = _work(tmp_path)
+    before, inputs = _tree(work), _tree(d)
+    real, seen = os.fsync, []
+
+    def terminate(fd):
+        seen.append(_temporaries(work))
+        if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, signal.SIG_IGN, None):
+            raise AssertionError("no SIGTERM handler: the signal would kill the test run")
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(30)  # the handler raises here
+        real(fd)
+
+    monkeypatch.chdir(work)
+    monkeypatch.setattr(os, "fsync", terminate)
+    code, _, err = _run(_sigterm_cases(d, ds, cal, sess)[command], capsys)
+    monkeypatch.setattr(os, "fsync", real)
+    assert seen and seen[0], "the signal came while a temporary existed"
     assert code == 143, err
     assert err.strip().splitlines()[-1] == "terminated"
     assert _temporaries(tmp_path) == []
     assert _tree(work) == before  # nothing new, nothing changed
     assert _tree(d) == inputs
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # main put it back
+
+
+def test_sigterm_to_the_hmlvs_program_while_writing(files, tmp_path):
+    # the installed entry point (hmlvs.__main__.run) in its own process
+    d, ds, cal, sess = files
+    work = _work(tmp_path)
+    (tmp_path / "ready").mkdir()
+    before = _tree(work)
+    code, err = _terminate_while_writing(_sigterm_cases(d, ds, cal, sess)["simulate"], work,
+                                         tmp_path / "ready")
+    assert code == 143, err
+    assert err.strip().splitlines()[-1] == "terminated"
+    assert _temporaries(tmp_path) == []
+    assert _tree(work) == before
 
 
 @pytest.mark.parametrize("argv", [
     ["study", "--runs-lm", "100000", "--s", "0.1", "--out", "out", "--no-progress"],
     ["scenario", "gauge-block", "--out", "out", "--json"],
-], ids=["study", "scenario"])
+    ["design", "--out", "out"],
+], ids=["study", "scenario", "design"])
 def test_sigterm_while_computing_exits_143_without_output(tmp_path, argv):
-    # long solves: the signal reaches Python through the solver's progress calls
+    # long solves (the signal reaches Python through the solver's progress calls) and the
+    # design's plots
     script = textwrap.dedent("""
         import os, signal, sys, threading
         from hmlvs.__main__ import run
@@ -246,11 +283,14 @@ def test_sigterm_while_computing_exits_143_without_output(tmp_path, argv):
         sys.argv = ["hmlvs", *sys.argv[1:]]
         run()
     """)
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "keep.md").write_text("the user's notes\n")
+    before = _tree(tmp_path)
     r = subprocess.run([sys.executable, "-c", script, *argv], capture_output=True, text=True,
                        cwd=tmp_path, timeout=120)
     assert r.returncode == 143, r.stderr
-    assert "terminated" in r.stderr
-    assert list(tmp_path.iterdir()) == []
+    assert r.stderr.strip().splitlines()[-1].startswith("terminated")
+    assert _tree(tmp_path) == before
 
 
 # -- 4. simulate --images into an existing session -------------------------------------------
@@ -282,3 +322,91 @@ def test_simulate_into_an_empty_folder_is_fine(tmp_path, capsys):
                          str(tmp_path / "empty"), "-q"], capsys)
     assert code in (0, None), err
     assert (tmp_path / "empty" / "manifest.json").is_file()
+
+
+# -- 5. names and sizes ----------------------------------------------------------------------
+def _copy_session(sess: Path, to: Path, change=None) -> Path:
+    """A copy of the rendered session at ``to`` (a str or bytes path), its manifest changed by
+    ``change(doc)``."""
+    import shutil
+
+    shutil.copytree(os.fsencode(sess), os.fsencode(to))
+    to = Path(os.fsdecode(to))
+    if change is not None:
+        doc = json.loads((to / "manifest.json").read_text())
+        change(doc)
+        (to / "manifest.json").write_text(json.dumps(doc))
+    return to
+
+
+def _hmlvs(*argv: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    # in a process of its own: a crash (SIGSEGV) must show as such, not take the suite down
+    return subprocess.run([sys.executable, "-m", "hmlvs", *argv], capture_output=True,
+                          text=True, cwd=cwd, timeout=300, errors="surrogateescape")
+
+
+def test_a_session_folder_whose_name_is_not_utf8_is_read(files, tmp_path, capsys):
+    _, _, _, sess = files
+    weird = _copy_session(sess, os.fsencode(tmp_path) + b"/sess-\xff\xfe")
+    code, _, err = _run(["inspect", str(weird), "--out", str(tmp_path / "pics")], capsys)
+    assert code in (0, None), err
+    assert sorted(p.name for p in (tmp_path / "pics").iterdir()) == \
+        ["v000.png", "v001.png", "v002.png"]
+
+
+def test_image_names_with_surrogates_are_read_or_refused_by_name(files, tmp_path,
+                                                                  capsys):
+    _, _, _, sess = files
+
+    def rename(doc):
+        doc["poses"][0]["on"] = "v000_on-\udcff.png"  # the byte 0xff in a non-UTF-8 name
+        doc["poses"][1]["on"] = "v001_on-\ud800.png"  # no file system holds this name
+
+    copy = _copy_session(sess, tmp_path / "sess", rename)
+    os.rename(copy / "v000_on.png", os.fsencode(copy) + b"/v000_on-\xff.png")
+    code, out, err = _run(["inspect", str(copy), "--out", str(tmp_path / "pics")], capsys)
+    assert code in (0, None), err
+    lines = out.splitlines()
+    assert lines[0].startswith("v000: ") and "v000.png" in lines[0]  # read by its bytes
+    assert lines[1].startswith("v001: rejected (") and "unpaired surrogate" in lines[1]
+    assert "v001_on-" in lines[1]
+
+
+def test_deep_nesting_is_a_sentence_not_a_recursion_error(files, tmp_path, capsys):
+    _, _, cal, _ = files
+    from hmlvs.data.manifest import read_manifest
+
+    deep = tmp_path / "manifest.json"
+    deep.write_text('{"format": "hmlvs-images", "version": 1, "poses": '
+                    + "[" * 100_000 + "]" * 100_000 + "}")
+    with pytest.raises(ValueError, match=r"manifest.json: malformed manifest: its lists and "
+                                         r"mappings nest more than 32 levels deep"):
+        read_manifest(deep)
+    deep_cal = tmp_path / "cal.yaml"
+    deep_cal.write_text(cal.read_text() + "extra: " + "[" * 3000 + "]" * 3000 + "\n")
+    code, _, err = _run(["export", str(deep_cal), "--format", "json"], capsys)
+    assert code == 2
+    assert err.strip() == (f"error: {deep_cal}: malformed calibration file: its lists and "
+                           "mappings nest more than 32 levels deep")
+    shallow = tmp_path / "shallow.json"  # 32 levels are fine for the reader
+    shallow.write_text("[" * 32 + "]" * 32)
+    assert _io.read_document(shallow, "x") == json.loads("[" * 32 + "]" * 32)
+
+
+def test_a_huge_board_is_a_sentence_not_a_memory_error(files, tmp_path, capsys):
+    _, _, _, sess = files
+    copy = _copy_session(sess, tmp_path / "sess",
+                         lambda doc: doc["board"].update(rows=1_000_000))
+    before = _tree(copy)
+    code, _, err = _run(["calibrate", str(copy), "--out", str(tmp_path / "c.yaml"), "-q"],
+                        capsys)
+    assert code == 2
+    assert err.startswith(f"error: {copy}: board: ")
+    assert "at most 1000 inner corners per side, got 1000000 x 9" in err
+    assert _tree(copy) == before and not (tmp_path / "c.yaml").exists()
+    from hmlvs.geometry.board import BoardSpec, Checkerboard
+
+    for make in (lambda: Checkerboard(rows=6, cols=1001), lambda: BoardSpec(1001, 6, 20.0)):
+        with pytest.raises(ValueError, match="at most 1000 inner corners per side"):
+            make()
+    Checkerboard(rows=1000, cols=1000)  # the bound itself is allowed

@@ -9,6 +9,12 @@ import sys
 def run() -> None:
     from ._io import Terminated, on_sigterm
 
+    # a file name that is not UTF-8 is printed as the bytes it is, not an encoding error
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.reconfigure(errors="surrogateescape")  # type: ignore[union-attr]
+        except (AttributeError, ValueError):
+            pass
     try:
         signal.signal(signal.SIGTERM, on_sigterm)
     except ValueError:  # not the main thread: leave the default

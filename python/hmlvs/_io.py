@@ -183,6 +183,47 @@ def json_text(obj: object, indent: int | None = 2) -> str:
     return json.dumps(plain(obj), indent=indent, allow_nan=False, default=str)
 
 
+#: how deeply a YAML or JSON file's lists and mappings may nest (every file of ours needs 4)
+MAX_DEPTH = 32
+
+
+def parse_text(text: str, as_json: bool, source: object, what: str) -> object:
+    """JSON or YAML text as Python objects, nested at most :data:`MAX_DEPTH` deep: a deeper
+    document (which Python's parsers and every reader after them would recurse into until
+    RecursionError) is a ValueError naming ``source``. Syntax errors are the parser's."""
+    import json
+
+    import yaml
+
+    try:
+        doc = json.loads(text) if as_json else yaml.safe_load(text)
+    except RecursionError:
+        doc = None
+        deep = True
+    else:
+        deep = _too_deep(doc)
+    if deep:
+        raise ValueError(f"{source}: malformed {what}: its lists and mappings nest more than "
+                         f"{MAX_DEPTH} levels deep") from None
+    return doc
+
+
+def _too_deep(doc: object) -> bool:
+    stack = [(doc, 1)]
+    seen: set[int] = set()
+    while stack:
+        obj, depth = stack.pop()
+        if isinstance(obj, (dict, list)):
+            if depth > MAX_DEPTH:
+                return True
+            if id(obj) in seen:  # a YAML alias: the same object again
+                continue
+            seen.add(id(obj))
+            stack.extend((v, depth + 1) for v in (obj.values() if isinstance(obj, dict)
+                                                  else obj))
+    return False
+
+
 def read_document(path: str | os.PathLike, what: str) -> object:
     """The YAML (or, for .json, JSON) document in an existing file; ValueError naming the file
     and ``what`` when it is missing or malformed."""
@@ -193,7 +234,7 @@ def read_document(path: str | os.PathLike, what: str) -> object:
     path = existing_file(path, what)
     try:
         text = path.read_text(encoding="utf-8")
-        return json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+        return parse_text(text, path.suffix.lower() == ".json", path, what)
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, yaml.YAMLError) as e:
         raise ValueError(f"{path}: malformed {what} ({type(e).__name__}: {e})") from None
 
@@ -226,7 +267,7 @@ def atomic_folder(path: str | os.PathLike, last: tuple[str, ...] = ("manifest.js
     import errno
     import shutil
 
-    path = Path(path)
+    path = _target(Path(path))  # a symbolic link to a folder is written through
     if path.exists() and not path.is_dir():
         raise NotADirectoryError(errno.ENOTDIR, "Not a directory", str(path))
     try:

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .._io import atomic_folder, atomic_write
+from .._io import atomic_folder, atomic_write, parse_text
 from .dataset import check_format
 from .poses import PoseFormat, pose_from_entry, read_poses
 
@@ -124,7 +124,7 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
                          "hmlvs.simulate.render_session, or its manifest.json)")
     try:
         text = path.read_text(encoding="utf-8")
-        doc = yaml.safe_load(text) if path.suffix in (".yaml", ".yml") else json.loads(text)
+        doc = parse_text(text, path.suffix.lower() not in (".yaml", ".yml"), path, "manifest")
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, yaml.YAMLError) as e:
         raise ValueError(f"{path}: unreadable manifest ({type(e).__name__}: {e})") from None
     from .schema import validate

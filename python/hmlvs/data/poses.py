@@ -23,7 +23,7 @@ from typing import Any, Literal, Sequence
 import numpy as np
 import yaml
 
-from .._io import atomic_write, existing_file
+from .._io import atomic_write, existing_file, parse_text
 
 Rotation = Literal["matrix", "quaternion", "rotation_vector"]
 ROTATIONS: tuple[str, ...] = ("matrix", "quaternion", "rotation_vector")
@@ -419,7 +419,7 @@ def _read_csv(path: Path, rotation: str | None, fmt: PoseFormat
 def _read_yaml(path: Path, rotation: str | None, fmt: PoseFormat, explicit: dict[str, Any]
                ) -> tuple[list[str] | None, np.ndarray, str]:
     try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+        doc = parse_text(path.read_text(encoding="utf-8-sig"), False, path, "pose file")
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
         raise ValueError(f"{path}: unreadable pose file ({type(e).__name__}: {e})") from None
     from .schema import validate

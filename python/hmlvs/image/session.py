@@ -94,9 +94,10 @@ def _opencv_failure(err: Exception, stage: str, hint: str = _BOARD_POSE_HINT) ->
 
 
 def _load(item: Any, folder: Any, what: str) -> tuple[np.ndarray, str]:
+    import os
     from pathlib import Path
 
-    import cv2
+    from .._io import read_image
     if isinstance(item, np.ndarray):
         return item, "<array>"
     if not isinstance(item, (str, Path)):
@@ -105,9 +106,18 @@ def _load(item: Any, folder: Any, what: str) -> tuple[np.ndarray, str]:
     path = Path(item)
     if folder is not None and not path.is_absolute():
         path = Path(folder) / path
-    if not path.is_file():
-        raise _Reject(f"the {what} image file {path} does not exist")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    try:
+        os.fsencode(path)  # before is_file, which says False for a name no file can have
+        if not path.is_file():
+            raise _Reject(f"the {what} image file {path} does not exist")
+        img = read_image(path)  # by bytes: cv2.imread crashes on a name that is not UTF-8
+    except UnicodeError:
+        raise _Reject(f"the {what} image file {str(path)!r}: its name holds a character no "
+                      "file name can (an unpaired surrogate); rename it") from None
+    except ValueError as e:
+        raise _Reject(str(e)) from None
+    except OSError as e:
+        raise _Reject(f"the {what} image file {path} cannot be read ({e.strerror})") from None
     if img is None:
         raise _Reject(f"the {what} image file {path.name} cannot be read as an image")
     return img, path.name
