@@ -19,6 +19,7 @@ import hmlvs
 from hmlvs import _io
 from hmlvs.cli import main
 from hmlvs.sim.general import general_session, render_general_session
+import numpy as np
 import pytest
 
 
@@ -410,3 +411,135 @@ def test_a_huge_board_is_a_sentence_not_a_memory_error(files, tmp_path, capsys):
         with pytest.raises(ValueError, match="at most 1000 inner corners per side"):
             make()
     Checkerboard(rows=1000, cols=1000)  # the bound itself is allowed
+
+
+# -- 6. schemas ------------------------------------------------------------------------------
+def _opencv_doc(**sensor_changes) -> dict:
+    from hmlvs.data.calibration_file import Calibration
+    from hmlvs.models.opencv import OpenCvSensor
+
+    sensor = OpenCvSensor(camera_matrix=[[1000, 0, 320], [0, 1000, 240], [0, 0, 1]],
+                          dist_coeffs=[0, 0, 0, 0, 0], image_size=(640, 480),
+                          laser_plane=[0, 0.5, 0.866, -200], hand_from_camera=np.eye(4))
+    doc = Calibration(sensor=sensor, model="opencv").to_dict()
+    doc["sensor"].update(sensor_changes)
+    return doc
+
+
+@pytest.mark.parametrize("size", [[True, True], ["640", "480"], [640.9, 480.5], [640],
+                                  [0, 480], [-640, 480], None])
+def test_a_calibrations_image_size_is_two_positive_whole_numbers(size):
+    from hmlvs.data.calibration_file import Calibration
+
+    with pytest.raises(ValueError, match=r"^cal.yaml: sensor: image_size must be two positive "
+                                         r"whole numbers of pixels \(width, height\), got "):
+        Calibration.from_dict(_opencv_doc(image_size=size), source="cal.yaml")
+
+
+def test_a_whole_float_image_size_is_still_fine():
+    from hmlvs.data.calibration_file import Calibration
+
+    cal = Calibration.from_dict(_opencv_doc(image_size=[640.0, 480]), source="cal.yaml")
+    assert cal.sensor.image_size == (640, 480)
+    assert all(type(v) is int for v in cal.sensor.image_size)
+
+
+def test_a_laser_plane_through_the_camera_is_refused():
+    from hmlvs.data.calibration_file import Calibration
+
+    with pytest.raises(ValueError, match=r"^cal.yaml: sensor: laser_plane .* has d = 0"):
+        Calibration.from_dict(_opencv_doc(laser_plane=[0, 0.5, 0.866, 0]), source="cal.yaml")
+    with pytest.raises(ValueError, match="non-zero normal"):
+        Calibration.from_dict(_opencv_doc(laser_plane=[0, 0, 0, -200]), source="cal.yaml")
+
+
+@pytest.mark.parametrize("name", ["Su", "Sv", "f"])
+def test_zero_intrinsics_are_refused_at_load(files, tmp_path, capsys, name):
+    import yaml
+
+    _, _, cal, _ = files
+    doc = yaml.safe_load(cal.read_text())
+    doc["parameters"][name] = 0
+    bad = tmp_path / "zero.yaml"
+    bad.write_text(yaml.safe_dump(doc))
+    code, out, err = _run(["export", str(bad), "--format", "opencv"], capsys)
+    assert code == 2 and out == ""
+    assert err.strip() == (f"error: {bad}: parameters: {name} is 0; the focal length f and the "
+                           "pixel pitches Su, Sv scale every pixel to mm and must not be 0")
+
+
+@pytest.mark.parametrize("key", ["base_from_link0", "flange_from_hand"])
+@pytest.mark.parametrize("matrix", [
+    np.diag([2.0, 2.0, 2.0, 1.0]),                                       # a scale
+    np.diag([1.0, 1.0, -1.0, 1.0]),                                      # a mirror
+    np.array([[1, 0.1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]]),  # a shear
+    np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 1, 1.0]]),    # a last row
+], ids=["scale", "mirror", "shear", "last-row"])
+def test_a_robots_base_and_tool_transforms_must_be_rigid(key, matrix):
+    from hmlvs.data.robot_file import robot_from_dict
+
+    d = hmlvs.Robot.scorbot_er7().to_dict()
+    d[key] = matrix.tolist()
+    with pytest.raises(ValueError, match=rf"^arm.yaml: malformed robot description \({key} is "
+                                         r"not a rigid transform .* to within 1e-05\)$"):
+        robot_from_dict(d, "arm.yaml")
+    d[key] = (np.eye(4) + 1e-7).tolist()  # six decimals written by hand: fine
+    d[key][3] = [0, 0, 0, 1]
+    robot_from_dict(d, "arm.yaml")
+
+
+def test_manifest_poses_in_metres_are_refused_like_a_pose_files(files, tmp_path):
+    from hmlvs.data.manifest import read_manifest
+
+    _, _, _, sess = files
+
+    def metres(doc):
+        for e in doc["poses"]:
+            pose = np.array(e["pose"])
+            pose[:3, 3] *= 1e-3
+            e["pose"] = pose.tolist()
+
+    copy = _copy_session(sess, tmp_path / "sess", metres)
+    with pytest.raises(ValueError, match=r"manifest.json: the hand positions are 0\.\d+ mm from "
+                                         r"the robot base \(median\): they look like metres; "
+                                         r"name it as the manifest's pose_format: \{unit: m\}$"):
+        read_manifest(copy)
+    doc = json.loads((copy / "manifest.json").read_text())
+    doc["pose_format"] = {"unit": "m"}
+    (copy / "manifest.json").write_text(json.dumps(doc))
+    entries, _, _ = read_manifest(copy)
+    assert np.linalg.norm(entries[0]["pose"][:3, 3]) > 100  # read as metres, given in mm
+
+
+def test_a_stripe_list_of_one_column_is_refused(tmp_path):
+    from hmlvs.data.manifest import read_stripe_list
+
+    one = tmp_path / "s.csv"
+    one.write_text("320\n300\n")
+    with pytest.raises(ValueError, match=r"s.csv must hold rows of u, v\[, intensity\]; its "
+                                         r"rows have 1 column$"):
+        read_stripe_list(one)
+    one.write_text("320,300\n")  # one pixel is still one pixel
+    assert read_stripe_list(one)[0].tolist() == [[320.0, 300.0]]
+
+
+def test_images_of_another_size_than_the_calibrations_are_refused(files, tmp_path, capsys):
+    from hmlvs.data.calibration_file import Calibration
+
+    _, _, _, sess = files
+    cal = tmp_path / "cal640.yaml"
+    Calibration.from_dict(_opencv_doc(), source="x").save(cal)
+    code, _, err = _run(["measure", str(cal), str(sess), "--out", str(tmp_path / "c.ply")],
+                        capsys)
+    assert code == 2 and not (tmp_path / "c.ply").exists()
+    assert err.strip() == (f"error: {sess}: the manifest's image_size is 1024 x 768 pixels but "
+                           f"the calibration {cal} is for 640 x 480 pixel images: measure with "
+                           "a calibration of this camera at this resolution")
+    copy = _copy_session(sess, tmp_path / "sess", lambda doc: doc.pop("image_size"))
+    code, _, err = _run(["measure", str(cal), str(copy), "--out", str(tmp_path / "c.ply")],
+                        capsys)
+    assert code == 2 and not (tmp_path / "c.ply").exists()
+    assert err.strip() == (f"error: {copy}: entry v000: the images v000_on.png and "
+                           f"v000_off.png are 1024 x 768 pixels but the calibration {cal} is "
+                           "for 640 x 480 pixel images: measure with a calibration of this "
+                           "camera at this resolution")

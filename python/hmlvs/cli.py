@@ -969,7 +969,8 @@ def measure(
         refuse_overwrite([calibration, *_inputs_of(source), robot], [("--out", out)])
         cal = Calibration.load(calibration)
         if _is_manifest(source):
-            result = measure_images(cal, source, robot=_load_robot(robot))
+            result = measure_images(cal, source, robot=_load_robot(robot),
+                                    image_size_of=f"the calibration {calibration}")
             cloud, info = result.cloud, {**result.summary(), "blur_var_px2": cal.blur_var}
         else:
             ds = Dataset.load(source)

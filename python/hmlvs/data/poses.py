@@ -478,17 +478,19 @@ _NO_UNIT = ("{path}: the length unit of the positions is not named: pass unit='m
             "(pose_format: {{unit: m}} in a manifest)")
 
 
-def _check_plausible(path: Path, poses: np.ndarray, unit: str) -> None:
+def _check_plausible(path: Any, poses: np.ndarray, unit: str, how: str = "name unit {u!r}"
+                     ) -> None:
     """A hand a few mm from the base in every pose was given in metres, and one kilometres
-    away in millimetres: refuse both rather than calibrate with a wrong unit."""
-    reach = np.linalg.norm(poses[:, :3, 3], axis=1)
+    away in millimetres: refuse both rather than calibrate with a wrong unit. ``how`` says how
+    to name the unit ({u}: the unit to name)."""
+    reach = np.linalg.norm(np.asarray(poses, float).reshape(-1, 4, 4)[:, :3, 3], axis=1)
     med = float(np.median(reach)) if reach.size else 0.0
     if unit == "mm" and 0.0 < med < 5.0:
         raise ValueError(f"{path}: the hand positions are {med:.3g} mm from the robot base "
-                         "(median): they look like metres; name unit 'm'")
+                         f"(median): they look like metres; {how.format(u='m')}")
     if unit == "m" and med > 50_000.0:
         raise ValueError(f"{path}: the hand positions are {med / 1000:.3g} m from the robot "
-                         "base (median): they look like millimetres; name unit 'mm'")
+                         f"base (median): they look like millimetres; {how.format(u='mm')}")
 
 
 def read_poses(path: str | os.PathLike, *, rotation: str | None = None,
