@@ -543,3 +543,82 @@ def test_images_of_another_size_than_the_calibrations_are_refused(files, tmp_pat
                            f"v000_off.png are 1024 x 768 pixels but the calibration {cal} is "
                            "for 640 x 480 pixel images: measure with a calibration of this "
                            "camera at this resolution")
+
+
+# -- 7. messages -----------------------------------------------------------------------------
+def test_a_pose_file_with_a_byte_order_mark_and_named_columns(tmp_path):
+    from hmlvs.data.poses import read_poses
+
+    rows = [("v000", 0.1, -0.2, 0.3, 500.0, 20.0, 300.0),
+            ("v001", 0.0, 0.1, -0.1, 480.0, -10.0, 320.0)]
+    plain = tmp_path / "plain.csv"
+    plain.write_text("id,x,y,z,rx,ry,rz\n" + "".join(
+        f"{i},{x},{y},{z},{a},{b},{c}\n" for i, a, b, c, x, y, z in rows))
+    named = tmp_path / "named.csv"  # the same poses, rotation first, with Excel's BOM
+    named.write_bytes(("id,rx,ry,rz,x,y,z\n" + "".join(
+        f"{i},{a},{b},{c},{x},{y},{z}\n" for i, a, b, c, x, y, z in rows)).encode("utf-8-sig"))
+    ids, want = read_poses(plain, unit="mm")
+    ids2, got = read_poses(named, unit="mm")
+    assert ids == ids2 == ["v000", "v001"]
+    np.testing.assert_allclose(got, want, atol=1e-12)
+    assert np.allclose(got[0][:3, 3], [500.0, 20.0, 300.0])
+
+
+def test_read_poses_of_none_is_a_value_error():
+    from hmlvs.data.poses import read_poses
+
+    with pytest.raises(ValueError, match=r"^no pose file given: expected a file name, got "
+                                         r"None$"):
+        read_poses(None, unit="mm")
+
+
+def test_an_empty_poses_list_is_one_sentence(files, tmp_path, capsys):
+    _, _, _, sess = files
+    copy = _copy_session(sess, tmp_path / "sess", lambda doc: doc.update(poses=[]))
+    code, _, err = _run(["calibrate", str(copy), "--out", str(tmp_path / "c.yaml")], capsys)
+    assert code == 2
+    assert err.strip() == (f"error: {copy}: the session lists no image pairs (its poses list "
+                           "is empty)")
+    assert not err.strip().endswith(":")
+
+
+def test_an_uppercase_yaml_manifest_is_read_as_yaml(files, tmp_path):
+    from hmlvs.data.manifest import read_manifest
+    import yaml
+
+    _, _, _, sess = files
+    copy = _copy_session(sess, tmp_path / "sess")
+    doc = json.loads((copy / "manifest.json").read_text())
+    (copy / "manifest.json").unlink()
+    (copy / "MANIFEST.YAML").write_text(yaml.safe_dump(doc))
+    entries, _, _ = read_manifest(copy / "MANIFEST.YAML")
+    assert [e["id"] for e in entries] == ["v000", "v001", "v002"]
+
+
+# -- 8. inspect: one picture per view ----------------------------------------------------------
+def test_ids_that_make_one_file_name_get_one_picture_each(files, tmp_path, capsys):
+    _, _, _, sess = files
+
+    def ids(doc):
+        for e, pid in zip(doc["poses"], ["a/b", "a_b", "A_B"]):
+            e["id"] = pid
+
+    copy = _copy_session(sess, tmp_path / "sess", ids)
+    code, out, err = _run(["inspect", str(copy), "--out", str(tmp_path / "pics"), "--json"],
+                          capsys)
+    assert code in (0, None), err
+    images = [Path(v["image"]).name for v in json.loads(out)]
+    assert images == ["a_b.png", "a_b-2.png", "A_B-3.png"]
+    assert sorted(p.name for p in (tmp_path / "pics").iterdir()) == sorted(images)
+
+
+def test_export_says_its_warning_without_a_source_line(files, tmp_path):
+    _, _, cal, _ = files
+    bent = tmp_path / "k.yaml"
+    bent.write_text(cal.read_text().replace(" k: 0.0,", " k: 0.05,"))
+    assert bent.read_text() != cal.read_text()
+    r = _hmlvs("export", str(bent), "--format", "opencv", "--out", str(tmp_path / "o.yaml"))
+    assert r.returncode == 0, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("warning UserWarning: the division model")
+    assert ".py:" not in r.stderr and "warnings.warn" not in r.stderr

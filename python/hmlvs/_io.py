@@ -131,8 +131,14 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", encoding: str | None 
 
 def existing_file(path: str | os.PathLike, what: str) -> Path:
     """``path`` as a Path; ValueError "<path>: no such <what>" unless it is a file."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise ValueError(f"no {what} given: expected a file name, got {path!r}")
     path = Path(path)
-    if not path.is_file():
+    try:
+        is_file = path.is_file()
+    except ValueError:  # a name no file system holds (a NUL, an unpaired surrogate)
+        is_file = False
+    if not is_file:
         raise ValueError(f"{path}: no such {what}")
     return path
 

@@ -499,14 +499,16 @@ def _outputs(*targets: Path) -> Iterator[list]:
     """Several output files as one: the block appends each file it writes; if it fails, the
     files it wrote that did not exist before are removed (a calibration is not left without
     the report asked for, nor a report without its calibration)."""
+    import os
+
     existed = {Path(t) for t in targets if Path(t).exists()}
     made: list = []
     try:
         yield made
     except BaseException:
         for p in made:
-            if Path(p) not in existed:
-                Path(p).unlink(missing_ok=True)
+            if Path(p) not in existed:  # through a link: the file written, not the link
+                Path(os.path.realpath(p)).unlink(missing_ok=True)
         raise
 
 
@@ -915,7 +917,7 @@ def report(
     from .data.dataset import Dataset
     from .report.html import write_report
 
-    with _guard(as_json):
+    with _guard(as_json), _collect_warnings() as caught:
         cal = Calibration.load(calibration)
         image_reports = None
         if _is_manifest(data):
@@ -932,6 +934,8 @@ def report(
                           fixed=cal.fixed)
         path = write_report(result, ds, out, test=test_ds, std=cal.std,
                             image_reports=image_reports)
+    if not as_json:
+        _show_warnings(_gather(caught))
     if as_json:
         _echo_json({"report": str(path), "fit_rms_mm": result.fit_rms,
                     "test_rms_mm": result.test_rms})
@@ -963,7 +967,7 @@ def measure(
     from .measurement.measure import measure as measure_points
     from .measurement.measure import measure_images
 
-    with _guard(as_json):
+    with _guard(as_json), _collect_warnings() as caught:
         from .guard import refuse_overwrite
 
         refuse_overwrite([calibration, *_inputs_of(source), robot], [("--out", out)])
@@ -982,11 +986,13 @@ def measure(
                              f"plane of {calibration}: nothing to write (is this calibration "
                              "of the sensor that took these data?)")
         path = cloud.save(out)
+    warns = _gather(caught)
     summary = {"cloud": str(path), "points": cloud.num_valid,
                "invalid": len(cloud) - cloud.num_valid, **info}
     if as_json:
-        _echo_json(summary)
+        _echo_json({**summary, "warnings": warns} if warns else summary)
         return
+    _show_warnings(warns)
     typer.echo(f"{cloud.num_valid} points measured ({len(cloud) - cloud.num_valid} stripe "
                "pixels without a measurement: their rays miss the laser plane, meet it at a "
                "grazing angle or lie outside the image)")
@@ -1020,11 +1026,13 @@ def inspect_images(
     """
     from .report.inspect import inspect_session
 
-    with _guard(as_json):
+    with _guard(as_json), _collect_warnings() as caught:
         from .guard import refuse_overwrite
 
         refuse_overwrite([*_inputs_of(data), robot], [], [("--out", out)])
         views = inspect_session(data, out, robot=_load_robot(robot))
+    if not as_json:
+        _show_warnings(_gather(caught))
     if as_json:
         _echo_json([{"id": v.id, "used": v.used, "reason": v.reason, "corners": v.corners,
                      "stripe": v.stripe, "image": None if v.image is None else str(v.image)}
@@ -1058,7 +1066,7 @@ def export_calibration(
     """
     from .data.export import export, export_text
 
-    with _guard():
+    with _guard(), _collect_warnings() as caught:
         from .guard import refuse_overwrite
 
         refuse_overwrite([calibration], [("--out", out)])
@@ -1068,6 +1076,7 @@ def export_calibration(
         else:
             path = export(calibration, fmt, out, image_size=image_size,
                           camera_name=camera_name)
+    _show_warnings(_gather(caught))  # on stderr: stdout may be the export itself
     if out is None:
         typer.echo(text, nl=False)
     else:

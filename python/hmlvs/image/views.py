@@ -176,7 +176,11 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     reports = [replace(r, blur_var=var, stripe=_off_line_counts(r.stripe, off_line.get(r.id, 0)))
                if r.ok else r for r in reports]
     if size is None:
-        raise ValueError("no image pair could be read: " +
+        where = "" if isinstance(source, (list, tuple)) else f"{source}: "
+        if not reports:
+            raise ValueError(f"{where}the session lists no image pairs (its poses list is "
+                             "empty)")
+        raise ValueError(f"{where}no image pair could be read: " +
                          "; ".join(f"{r.id}: {r.reason}" for r in reports))
     return views, board_spec, size, board_pose, reports
 
