@@ -545,6 +545,17 @@ def test_images_of_another_size_than_the_calibrations_are_refused(files, tmp_pat
                            "camera at this resolution")
 
 
+def test_the_manifests_image_size_holds_on_the_opencv_path(files, tmp_path, capsys):
+    _, _, _, sess = files
+    copy = _copy_session(sess, tmp_path / "sess", lambda doc: doc.update(image_size=[640, 480]))
+    code, _, err = _run(["calibrate", str(copy), "--model", "opencv", "--out",
+                         str(tmp_path / "c.yaml"), "-q"], capsys)
+    assert code == 2 and not (tmp_path / "c.yaml").exists()
+    assert err.strip() == f"error: {copy}: no image pair could be read: " + "; ".join(
+        f"v00{i}: the images are 1024 x 768 pixels but the session's are 640 x 480"
+        for i in range(3))
+
+
 # -- 7. messages -----------------------------------------------------------------------------
 def test_a_pose_file_with_a_byte_order_mark_and_named_columns(tmp_path):
     from hmlvs.data.poses import read_poses

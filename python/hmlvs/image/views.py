@@ -109,6 +109,9 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     reports: list[ImageReport] = []
     partial: list[tuple[int, PartialView, Any]] = []
     size = None
+    given = doc.get("image_size")  # the manifest's: every pair must have it
+    given = (int(given[0]), int(given[1])) if isinstance(given, list) and len(given) == 2 \
+        else None
     stripe_options = dict(stripe_options)
     fit_blur = stripe_options.get("blur_var") is None
     stripe_options["blur_var"] = _blur_var(stripe_options.get("blur_var"))
@@ -118,8 +121,8 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         pid = _record_id(rec, index)
         on_name, off_name = _record_names(rec)
         try:
-            pair = _read_pair(rec, index, folder, unit, robot, size, channel, normalize,
-                              stripe_options, min_stripe)
+            pair = _read_pair(rec, index, folder, unit, robot, size or given, channel,
+                              normalize, stripe_options, min_stripe)
             size = pair.size
             if fit_blur:
                 edges[pid] = (pair.stripe, _edge_shift(pair, normalize, stripe_options))
