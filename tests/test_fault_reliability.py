@@ -280,7 +280,7 @@ def test_sigterm_while_computing_exits_143_without_output(tmp_path, argv):
     script = textwrap.dedent("""
         import os, signal, sys, threading
         from hmlvs.__main__ import run
-        threading.Timer(2.0, lambda: os.kill(os.getpid(), signal.SIGTERM)).start()
+        threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGTERM)).start()
         sys.argv = ["hmlvs", *sys.argv[1:]]
         run()
     """)
