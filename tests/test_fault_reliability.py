@@ -467,7 +467,7 @@ def test_zero_intrinsics_are_refused_at_load(files, tmp_path, capsys, name):
 
 @pytest.mark.parametrize("key", ["base_from_link0", "flange_from_hand"])
 @pytest.mark.parametrize("matrix", [
-    np.diag([2.0, 2.0, 2.0, 1.0]),                                       # a scale
+    np.diag([1.01, 1.01, 1.01, 1.0]),                                    # a scale
     np.diag([1.0, 1.0, -1.0, 1.0]),                                      # a mirror
     np.array([[1, 0.1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]]),  # a shear
     np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 1, 1.0]]),    # a last row
@@ -478,10 +478,10 @@ def test_a_robots_base_and_tool_transforms_must_be_rigid(key, matrix):
     d = hmlvs.Robot.scorbot_er7().to_dict()
     d[key] = matrix.tolist()
     with pytest.raises(ValueError, match=rf"^arm.yaml: malformed robot description \({key} is "
-                                         r"not a rigid transform .* to within 1e-05\)$"):
+                                         r"not a rigid transform .* to within 0\.001\)$"):
         robot_from_dict(d, "arm.yaml")
-    d[key] = (np.eye(4) + 1e-7).tolist()  # six decimals written by hand: fine
-    d[key][3] = [0, 0, 0, 1]
+    # a rotation of 45 deg about z written by hand with four decimals: fine
+    d[key] = [[0.7071, -0.7071, 0, 10], [0.7071, 0.7071, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
     robot_from_dict(d, "arm.yaml")
 
 

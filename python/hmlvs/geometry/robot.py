@@ -33,9 +33,9 @@ class DHLink:
 
 
 #: how far a base or tool transform's rotation may be from orthonormal (|R R^T - I|, entry by
-#: entry) and its last row from [0 0 0 1]: six decimals written by hand pass, a scale or a
-#: shear does not
-RIGID_TOL = 1e-5
+#: entry) and its last row from [0 0 0 1]: a rotation written by hand with three or four
+#: decimals passes (cos 45 deg as 0.7071: 2e-5), a scale, a mirror or a shear does not
+RIGID_TOL = 1e-3
 
 
 def _as_transform(t: Any, name: str) -> np.ndarray:
