@@ -269,26 +269,29 @@ def test_sigterm_to_the_hmlvs_program_while_writing(files, tmp_path):
     assert _tree(work) == before
 
 
-@pytest.mark.parametrize("argv", [
-    ["study", "--runs-lm", "100000", "--s", "0.1", "--out", "out", "--no-progress"],
-    ["scenario", "gauge-block", "--out", "out", "--json"],
-    ["design", "--out", "out"],
-], ids=["study", "scenario", "design"])
-def test_sigterm_while_computing_exits_143_without_output(tmp_path, argv):
-    # long solves (the signal reaches Python through the solver's progress calls) and the
-    # design's plots
+@pytest.mark.parametrize("delay, argv", [
+    (1.0, ["study", "--runs-lm", "100000", "--s", "0.1", "--out", "out", "--no-progress"]),
+    (1.0, ["scenario", "gauge-block", "--out", "out", "--json"]),
+    (1.0, ["design", "--out", "out"]),
+    (0.2, ["scenario", "gauge-block", "--out", "out", "--json"]),
+], ids=["study", "scenario", "design", "while-loading"])
+def test_sigterm_while_computing_exits_143_without_output(tmp_path, delay, argv):
+    # long solves (the signal reaches Python through the solver's progress calls), the
+    # design's plots, and a command still loading (typer ends a KeyboardInterrupt there with
+    # a silent exit 130)
     script = textwrap.dedent("""
         import os, signal, sys, threading
         from hmlvs.__main__ import run
-        threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGTERM)).start()
+        delay = float(sys.argv.pop(1))
+        threading.Timer(delay, lambda: os.kill(os.getpid(), signal.SIGTERM)).start()
         sys.argv = ["hmlvs", *sys.argv[1:]]
         run()
     """)
     (tmp_path / "out").mkdir()
     (tmp_path / "out" / "keep.md").write_text("the user's notes\n")
     before = _tree(tmp_path)
-    r = subprocess.run([sys.executable, "-c", script, *argv], capture_output=True, text=True,
-                       cwd=tmp_path, timeout=120)
+    r = subprocess.run([sys.executable, "-c", script, str(delay), *argv], capture_output=True,
+                       text=True, cwd=tmp_path, timeout=120)
     assert r.returncode == 143, r.stderr
     assert r.stderr.strip().splitlines()[-1].startswith("terminated")
     assert _tree(tmp_path) == before

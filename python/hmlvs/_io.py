@@ -18,7 +18,13 @@ class Terminated(KeyboardInterrupt):
     143 (128 + SIGTERM)."""
 
 
+#: set by :func:`on_sigterm`: a Terminated that something turned into a plain exit (typer
+#: ends a KeyboardInterrupt outside a command's body with exit 130, silently) is still told
+SIGTERM_RECEIVED = [False]
+
+
 def on_sigterm(signum: int, frame: object) -> None:
+    SIGTERM_RECEIVED[0] = True
     raise Terminated("terminated")
 
 

@@ -1234,9 +1234,16 @@ def main(argv: Optional[list[str]] = None) -> None:
         previous = signal.signal(signal.SIGTERM, on_sigterm)
     except ValueError:  # not the main thread (an embedding application): left as it is
         previous = None
+    from . import _io
+
+    _io.SIGTERM_RECEIVED[0] = False
     try:
         _command().main(args=argv, prog_name="hmlvs")
-    except SystemExit:
+    except SystemExit as e:
+        # SIGTERM while a command loads (before its guard): typer exits 130 without a word
+        if e.code == 130 and _io.SIGTERM_RECEIVED[0]:
+            print("terminated", file=sys.stderr)
+            sys.exit(143)
         raise
     except KeyboardInterrupt as e:  # outside a command's guard, e.g. while parsing the options
         terminated = isinstance(e, Terminated)
