@@ -110,14 +110,22 @@ def test_a_long_legal_file_name_works(tmp_path):
 
 
 def test_stale_temporary_files_of_killed_writes_are_cleaned(tmp_path):
-    stale = tmp_path / ".hmlvs-abc123.tmp"
+    import subprocess
+    import sys
+
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()  # a process that has ended: its temporaries are stale
+    stale = tmp_path / f".hmlvs-tmp-{gone.pid}-abc12345.tmp"
     stale.write_text("half")
     os.utime(stale, (1, 1))  # as if left by a write killed long ago
-    fresh = tmp_path / ".hmlvs-def456.tmp"
-    fresh.write_text("in progress")  # another write under way: kept
+    fresh = tmp_path / f".hmlvs-tmp-{gone.pid}-def45678.tmp"
+    fresh.write_text("in progress")  # too recent: kept
+    users = tmp_path / ".hmlvs-abc123.tmp"  # not a name of ours: a user's file, kept
+    users.write_text("mine")
+    os.utime(users, (1, 1))
     with _io.atomic_write(tmp_path / "out.txt") as fh:
         fh.write("ok")
-    assert not stale.exists() and fresh.exists()
+    assert not stale.exists() and fresh.exists() and users.read_text() == "mine"
 
 
 def test_internal_error_exits_1_with_one_line_and_debug_shows_it(data, tmp_path, capsys,

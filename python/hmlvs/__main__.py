@@ -1,15 +1,30 @@
 """The command line (`hmlvs` and `python -m hmlvs`). Ctrl-C while the command line is still
-loading ends as it does during a command: "interrupted" and exit code 130, no traceback."""
+loading ends as it does during a command: "interrupted" and exit code 130, no traceback;
+SIGTERM likewise, "terminated" and exit code 143."""
 
+import signal
 import sys
 
 
 def run() -> None:
+    from ._io import Terminated, on_sigterm
+
+    # a file name that is not UTF-8 is printed as the bytes it is, not an encoding error
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.reconfigure(errors="surrogateescape")  # type: ignore[union-attr]
+        except (AttributeError, ValueError):
+            pass
+    try:
+        signal.signal(signal.SIGTERM, on_sigterm)
+    except ValueError:  # not the main thread: leave the default
+        pass
     try:
         from .cli import main
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        sys.exit(130)
+    except KeyboardInterrupt as e:
+        terminated = isinstance(e, Terminated)
+        print("terminated" if terminated else "interrupted", file=sys.stderr)
+        sys.exit(143 if terminated else 130)
     main()
 
 

@@ -6,28 +6,89 @@ from __future__ import annotations
 from contextlib import contextmanager
 import os
 from pathlib import Path
+import re
 import tempfile
 from typing import IO, Iterator
 
-_TMP_PREFIX = ".hmlvs-"
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised by the command line's handler (:func:`on_sigterm`) where Python next
+    runs: a KeyboardInterrupt, so every clean-up path of Ctrl-C (temporary files and folders
+    removed, a half-written output set undone) runs for it too; the command line then exits
+    143 (128 + SIGTERM)."""
+
+
+#: set by :func:`on_sigterm`: a Terminated that something turned into a plain exit (typer
+#: ends a KeyboardInterrupt outside a command's body with exit 130, silently) is still told
+SIGTERM_RECEIVED = [False]
+
+
+def on_sigterm(signum: int, frame: object) -> None:
+    SIGTERM_RECEIVED[0] = True
+    raise Terminated("terminated")
+
+
+# Every temporary name is ".hmlvs-tmp-<pid>-<random>.tmp": the marker and the writing
+# process's id make a name no user file has; only such names whose process is gone (and that
+# are older than an hour) are ever removed, so a user's file is never touched.
+_TMP_PREFIX = ".hmlvs-tmp-"
 _STALE_SECONDS = 3600.0
+_TMP_NAME = re.compile(r"\.hmlvs-tmp-(\d+)-[A-Za-z0-9_]{6,}\.tmp")
 
 
-def _remove_stale(folder: Path) -> None:
-    """Remove our temporary files that a killed write left behind (older than an hour: no
-    write of ours takes that long)."""
+def _tmp_prefix() -> str:
+    return f"{_TMP_PREFIX}{os.getpid()}-"
+
+
+def _pid_running(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists but is another user's (EPERM), or cannot tell: keep
+        return True
+    return True
+
+
+def _stale_temporaries(folder: Path) -> Iterator[Path]:
+    """Our temporary files and folders in ``folder`` that a killed write left behind: a name
+    of ours, its process no longer running, older than an hour."""
     import time
 
     now = time.time()
     try:
-        for p in folder.glob(f"{_TMP_PREFIX}*.tmp"):
-            try:
-                if now - p.stat().st_mtime > _STALE_SECONDS:
-                    p.unlink()
-            except OSError:
-                pass
+        names = os.listdir(folder)
     except OSError:
-        pass
+        return
+    for name in names:
+        m = _TMP_NAME.fullmatch(name)
+        if m is None or _pid_running(int(m.group(1))):
+            continue
+        p = folder / name
+        try:
+            if not p.is_symlink() and now - p.stat().st_mtime > _STALE_SECONDS:
+                yield p
+        except OSError:
+            pass
+
+
+def _remove_stale(folder: Path) -> None:
+    """Remove our temporary files that a killed write left behind (:func:`_stale_temporaries`);
+    nothing else."""
+    for p in _stale_temporaries(folder):
+        try:
+            if p.is_file():
+                p.unlink()
+        except OSError:
+            pass
+
+
+def _target(path: Path) -> Path:
+    """Where a write to ``path`` lands: through a symbolic link (also a chain, or one to a
+    file that does not exist yet) to its target, so the link stays a link."""
+    return Path(os.path.realpath(path)) if path.is_symlink() else path
 
 
 @contextmanager
@@ -39,7 +100,7 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", encoding: str | None 
     """
     import errno
 
-    path = Path(path)
+    path = _target(Path(path))  # a symbolic link is written through, not replaced
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except (FileExistsError, NotADirectoryError):
@@ -48,11 +109,18 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", encoding: str | None 
         raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
     _remove_stale(path.parent)
     # A short temporary name (not derived from the target's), so that any legal target name
-    # works; the prefix marks it as ours for _remove_stale.
-    fd, tmp = tempfile.mkstemp(prefix=_TMP_PREFIX, suffix=".tmp", dir=path.parent)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the usual permissions
+    # works; marker and pid make it ours (_stale_temporaries).
+    fd, tmp = tempfile.mkstemp(prefix=_tmp_prefix(), suffix=".tmp", dir=path.parent)
+    try:
+        keep = os.stat(path).st_mode & 0o7777  # an existing output keeps its permissions
+    except OSError:
+        umask = os.umask(0)
+        os.umask(umask)
+        keep = 0o666 & ~umask  # mkstemp makes 0600; a new file gets the usual permissions
+    try:
+        os.chmod(tmp, keep)
+    except OSError:
+        pass
     try:
         with os.fdopen(fd, mode, encoding=None if "b" in mode else encoding) as fh:
             yield fh
@@ -69,10 +137,38 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", encoding: str | None 
 
 def existing_file(path: str | os.PathLike, what: str) -> Path:
     """``path`` as a Path; ValueError "<path>: no such <what>" unless it is a file."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise ValueError(f"no {what} given: expected a file name, got {path!r}")
     path = Path(path)
-    if not path.is_file():
+    try:
+        is_file = path.is_file()
+    except ValueError:  # a name no file system holds (a NUL, an unpaired surrogate)
+        is_file = False
+    if not is_file:
         raise ValueError(f"{path}: no such {what}")
     return path
+
+
+def read_image(path: str | os.PathLike) -> object:
+    """An image file (any format OpenCV reads, depth and channels unchanged) as an array, or
+    None when the file is not an image. The file is opened by Python and decoded from its
+    bytes, so any name works, also one that is not UTF-8 (``cv2.imread`` crashes on such a
+    name); a name no file system can hold (a lone surrogate) is a ValueError naming it."""
+    import cv2
+    import numpy as np
+
+    try:
+        os.fsencode(path)
+    except UnicodeError:
+        raise ValueError(f"{os.fspath(path)!r}: the image file's name holds a character no "
+                         "file name can (an unpaired surrogate); rename it") from None
+    data = np.fromfile(path, dtype=np.uint8)
+    if data.size == 0:
+        return None
+    try:
+        return cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    except cv2.error:
+        return None
 
 
 def plain(obj: object) -> object:
@@ -99,6 +195,47 @@ def json_text(obj: object, indent: int | None = 2) -> str:
     return json.dumps(plain(obj), indent=indent, allow_nan=False, default=str)
 
 
+#: how deeply a YAML or JSON file's lists and mappings may nest (every file of ours needs 4)
+MAX_DEPTH = 32
+
+
+def parse_text(text: str, as_json: bool, source: object, what: str) -> object:
+    """JSON or YAML text as Python objects, nested at most :data:`MAX_DEPTH` deep: a deeper
+    document (which Python's parsers and every reader after them would recurse into until
+    RecursionError) is a ValueError naming ``source``. Syntax errors are the parser's."""
+    import json
+
+    import yaml
+
+    try:
+        doc = json.loads(text) if as_json else yaml.safe_load(text)
+    except RecursionError:
+        doc = None
+        deep = True
+    else:
+        deep = _too_deep(doc)
+    if deep:
+        raise ValueError(f"{source}: malformed {what}: its lists and mappings nest more than "
+                         f"{MAX_DEPTH} levels deep") from None
+    return doc
+
+
+def _too_deep(doc: object) -> bool:
+    stack = [(doc, 1)]
+    seen: set[int] = set()
+    while stack:
+        obj, depth = stack.pop()
+        if isinstance(obj, (dict, list)):
+            if depth > MAX_DEPTH:
+                return True
+            if id(obj) in seen:  # a YAML alias: the same object again
+                continue
+            seen.add(id(obj))
+            stack.extend((v, depth + 1) for v in (obj.values() if isinstance(obj, dict)
+                                                  else obj))
+    return False
+
+
 def read_document(path: str | os.PathLike, what: str) -> object:
     """The YAML (or, for .json, JSON) document in an existing file; ValueError naming the file
     and ``what`` when it is missing or malformed."""
@@ -109,7 +246,7 @@ def read_document(path: str | os.PathLike, what: str) -> object:
     path = existing_file(path, what)
     try:
         text = path.read_text(encoding="utf-8")
-        return json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+        return parse_text(text, path.suffix.lower() == ".json", path, what)
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, yaml.YAMLError) as e:
         raise ValueError(f"{path}: malformed {what} ({type(e).__name__}: {e})") from None
 
@@ -142,7 +279,7 @@ def atomic_folder(path: str | os.PathLike, last: tuple[str, ...] = ("manifest.js
     import errno
     import shutil
 
-    path = Path(path)
+    path = _target(Path(path))  # a symbolic link to a folder is written through
     if path.exists() and not path.is_dir():
         raise NotADirectoryError(errno.ENOTDIR, "Not a directory", str(path))
     try:
@@ -150,7 +287,7 @@ def atomic_folder(path: str | os.PathLike, last: tuple[str, ...] = ("manifest.js
     except (FileExistsError, NotADirectoryError):
         raise NotADirectoryError(errno.ENOTDIR, "Not a directory", str(path.parent)) from None
     _remove_stale_folders(path.parent)
-    tmp = Path(tempfile.mkdtemp(prefix=_TMP_PREFIX, suffix=".tmp", dir=path.parent))
+    tmp = Path(tempfile.mkdtemp(prefix=_tmp_prefix(), suffix=".tmp", dir=path.parent))
     try:
         yield tmp
         if not path.exists():
@@ -165,17 +302,9 @@ def atomic_folder(path: str | os.PathLike, last: tuple[str, ...] = ("manifest.js
 
 
 def _remove_stale_folders(folder: Path) -> None:
-    """Temporary folders of killed multi-file writes (older than an hour)."""
+    """Our temporary folders of killed multi-file writes (:func:`_stale_temporaries`)."""
     import shutil
-    import time
 
-    now = time.time()
-    try:
-        for p in folder.glob(f"{_TMP_PREFIX}*.tmp"):
-            try:
-                if p.is_dir() and now - p.stat().st_mtime > _STALE_SECONDS:
-                    shutil.rmtree(p, ignore_errors=True)
-            except OSError:
-                pass
-    except OSError:
-        pass
+    for p in _stale_temporaries(folder):
+        if p.is_dir():
+            shutil.rmtree(p, ignore_errors=True)

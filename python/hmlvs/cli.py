@@ -8,7 +8,7 @@ from typing import Any, Iterator, Optional
 
 import typer
 
-from ._io import atomic_write, json_text
+from ._io import Terminated, atomic_write, json_text, on_sigterm
 
 app = typer.Typer(
     name="hmlvs",
@@ -65,11 +65,20 @@ def _fail(lines: list[str], code: int, as_json: bool) -> None:
 _PASS_THROUGH = (typer.Exit, typer.Abort, typer.BadParameter, SystemExit)
 
 
+def _interrupted(e: BaseException, what: str = "") -> "typer.Exit":
+    """Ctrl-C (exit 130) or SIGTERM (exit 143, :class:`hmlvs._io.Terminated`), said on stderr;
+    the exit to raise."""
+    terminated = isinstance(e, Terminated)
+    typer.echo(("terminated" if terminated else "interrupted") + what, err=True)
+    return typer.Exit(143 if terminated else 130)
+
+
 @contextmanager
 def _guard(as_json: bool = False) -> Iterator[None]:
     """The command line's error policy. Exit 2: bad input or an environment fault (a path,
     a permission, disk space), one line naming the file, entry or option. Exit 1: an internal
-    error, a short message (the traceback with --debug). Exit 130: Ctrl-C."""
+    error, a short message (the traceback with --debug). Exit 130: Ctrl-C; exit 143: SIGTERM
+    (every clean-up path of Ctrl-C runs for it too)."""
     try:
         yield
     except _PASS_THROUGH:
@@ -78,9 +87,8 @@ def _guard(as_json: bool = False) -> Iterator[None]:
         _fail(_error_lines(str(e)), 2, as_json)
     except OSError as e:
         _fail([_fault(e)], 2, as_json)
-    except KeyboardInterrupt:
-        typer.echo("interrupted", err=True)
-        raise typer.Exit(130) from None
+    except KeyboardInterrupt as e:
+        raise _interrupted(e) from None
     except Exception as e:
         if _DEBUG:
             raise
@@ -321,6 +329,13 @@ def simulate(
     from .sim.render import RenderOptions
 
     with _guard(as_json), _collect_warnings() as caught:
+        # every refusal before anything is written
+        if out.suffix not in (".npz", ".json"):  # as Dataset.save, before any image is made
+            raise ValueError(f"{out}: data sets are saved as .npz or .json, not "
+                             f"{out.suffix or 'a file without a suffix'}")
+        if images is not None and images.is_dir() and any(images.iterdir()):
+            raise ValueError(f"--images {images}: the folder exists and is not empty; its "
+                             "manifest and images would be replaced: give a new or empty folder")
         s = sim.session(_truth(mounting), num_poses=poses, pixel_noise=pixel_noise,
                         point_noise=point_noise, seed=seed)
         manifest = None
@@ -484,14 +499,16 @@ def _outputs(*targets: Path) -> Iterator[list]:
     """Several output files as one: the block appends each file it writes; if it fails, the
     files it wrote that did not exist before are removed (a calibration is not left without
     the report asked for, nor a report without its calibration)."""
+    import os
+
     existed = {Path(t) for t in targets if Path(t).exists()}
     made: list = []
     try:
         yield made
     except BaseException:
         for p in made:
-            if Path(p) not in existed:
-                Path(p).unlink(missing_ok=True)
+            if Path(p) not in existed:  # through a link: the file written, not the link
+                Path(os.path.realpath(p)).unlink(missing_ok=True)
         raise
 
 
@@ -874,6 +891,8 @@ def design(
     except ValueError as e:
         typer.echo(f"error: {' '.join(str(e).split())}", err=True)
         raise typer.Exit(2) from None
+    except KeyboardInterrupt as e:
+        raise _interrupted(e) from None
     if as_json:
         summary = report.to_dict()
         summary["errors"] = [e.to_dict() for e in errors]
@@ -908,7 +927,7 @@ def report(
     from .data.dataset import Dataset
     from .report.html import write_report
 
-    with _guard(as_json):
+    with _guard(as_json), _collect_warnings() as caught:
         cal = Calibration.load(calibration)
         image_reports = None
         if _is_manifest(data):
@@ -925,6 +944,8 @@ def report(
                           fixed=cal.fixed)
         path = write_report(result, ds, out, test=test_ds, std=cal.std,
                             image_reports=image_reports)
+    if not as_json:
+        _show_warnings(_gather(caught))
     if as_json:
         _echo_json({"report": str(path), "fit_rms_mm": result.fit_rms,
                     "test_rms_mm": result.test_rms})
@@ -956,13 +977,14 @@ def measure(
     from .measurement.measure import measure as measure_points
     from .measurement.measure import measure_images
 
-    with _guard(as_json):
+    with _guard(as_json), _collect_warnings() as caught:
         from .guard import refuse_overwrite
 
         refuse_overwrite([calibration, *_inputs_of(source), robot], [("--out", out)])
         cal = Calibration.load(calibration)
         if _is_manifest(source):
-            result = measure_images(cal, source, robot=_load_robot(robot))
+            result = measure_images(cal, source, robot=_load_robot(robot),
+                                    image_size_of=f"the calibration {calibration}")
             cloud, info = result.cloud, {**result.summary(), "blur_var_px2": cal.blur_var}
         else:
             ds = Dataset.load(source)
@@ -974,11 +996,13 @@ def measure(
                              f"plane of {calibration}: nothing to write (is this calibration "
                              "of the sensor that took these data?)")
         path = cloud.save(out)
+    warns = _gather(caught)
     summary = {"cloud": str(path), "points": cloud.num_valid,
                "invalid": len(cloud) - cloud.num_valid, **info}
     if as_json:
-        _echo_json(summary)
+        _echo_json({**summary, "warnings": warns} if warns else summary)
         return
+    _show_warnings(warns)
     typer.echo(f"{cloud.num_valid} points measured ({len(cloud) - cloud.num_valid} stripe "
                "pixels without a measurement: their rays miss the laser plane, meet it at a "
                "grazing angle or lie outside the image)")
@@ -1012,11 +1036,13 @@ def inspect_images(
     """
     from .report.inspect import inspect_session
 
-    with _guard(as_json):
+    with _guard(as_json), _collect_warnings() as caught:
         from .guard import refuse_overwrite
 
         refuse_overwrite([*_inputs_of(data), robot], [], [("--out", out)])
         views = inspect_session(data, out, robot=_load_robot(robot))
+    if not as_json:
+        _show_warnings(_gather(caught))
     if as_json:
         _echo_json([{"id": v.id, "used": v.used, "reason": v.reason, "corners": v.corners,
                      "stripe": v.stripe, "image": None if v.image is None else str(v.image)}
@@ -1050,7 +1076,7 @@ def export_calibration(
     """
     from .data.export import export, export_text
 
-    with _guard():
+    with _guard(), _collect_warnings() as caught:
         from .guard import refuse_overwrite
 
         refuse_overwrite([calibration], [("--out", out)])
@@ -1060,6 +1086,7 @@ def export_calibration(
         else:
             path = export(calibration, fmt, out, image_size=image_size,
                           camera_name=camera_name)
+    _show_warnings(_gather(caught))  # on stderr: stdout may be the export itself
     if out is None:
         typer.echo(text, nl=False)
     else:
@@ -1108,9 +1135,8 @@ def study(
     except ValueError as e:
         typer.echo(f"error: {' '.join(str(e).split())}", err=True)
         raise typer.Exit(2) from None
-    except KeyboardInterrupt:
-        typer.echo("interrupted: no results written", err=True)
-        raise typer.Exit(130) from None
+    except KeyboardInterrupt as e:
+        raise _interrupted(e, ": no results written") from None
     if as_json:
         _echo_json(result.to_dict())
     else:
@@ -1210,18 +1236,35 @@ def _command():
 
 def main(argv: Optional[list[str]] = None) -> None:
     """Run the command line; errors outside a command's own guard follow the same policy."""
+    import signal
     import sys
 
+    # SIGTERM as Ctrl-C: temporaries removed, outputs left as they were, exit 143
+    try:
+        previous = signal.signal(signal.SIGTERM, on_sigterm)
+    except ValueError:  # not the main thread (an embedding application): left as it is
+        previous = None
+    from . import _io
+
+    _io.SIGTERM_RECEIVED[0] = False
     try:
         _command().main(args=argv, prog_name="hmlvs")
-    except SystemExit:
+    except SystemExit as e:
+        # SIGTERM while a command loads (before its guard): typer exits 130 without a word
+        if e.code == 130 and _io.SIGTERM_RECEIVED[0]:
+            print("terminated", file=sys.stderr)
+            sys.exit(143)
         raise
-    except KeyboardInterrupt:  # outside a command's guard, e.g. while parsing the options
-        print("interrupted", file=sys.stderr)
-        sys.exit(130)
+    except KeyboardInterrupt as e:  # outside a command's guard, e.g. while parsing the options
+        terminated = isinstance(e, Terminated)
+        print("terminated" if terminated else "interrupted", file=sys.stderr)
+        sys.exit(143 if terminated else 130)
     except Exception as e:  # reached only outside _guard, e.g. while printing results
         try:
             with _guard():
                 raise e
         except typer.Exit as exit_:
             sys.exit(exit_.exit_code)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)

@@ -15,7 +15,10 @@ from typing import Iterable
 
 
 def _resolved(p: str | os.PathLike) -> Path:
-    return Path(os.path.realpath(os.fspath(p)))
+    try:
+        return Path(os.path.realpath(os.fspath(p)))
+    except ValueError:  # a name no file system holds (an unpaired surrogate): no file's
+        return Path(os.path.abspath(os.fspath(p)))
 
 
 def session_files(source: str | os.PathLike) -> list[Path]:

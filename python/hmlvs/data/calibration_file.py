@@ -225,6 +225,12 @@ class Calibration:
                 params = Parameters.from_dict(p)
             except ValueError as e:
                 raise ValueError(f"{source}: {e}") from None
+            zero = [n for n in ("f", "Su", "Sv") if getattr(params, n) == 0]
+            if zero:
+                raise ValueError(f"{source}: parameters: {', '.join(zero)} "
+                                 f"{'is' if len(zero) == 1 else 'are'} 0; the focal length "
+                                 "f and the pixel pitches Su, Sv scale every pixel to mm and "
+                                 "must not be 0")
         sensor = None
         if model == "opencv" or d.get("sensor") is not None:
             if d.get("sensor") is None:

@@ -12,7 +12,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .._arrays import as_matrix, same_rows
-from .._io import atomic_write, existing_file
+from .._io import atomic_write, existing_file, parse_text
 from ..models.paper import validate_poses
 
 FORMAT = "hmlvs-dataset"
@@ -272,8 +272,7 @@ class Dataset:
                            quality={k: arrays[f"quality_{k}"] for k in QUALITY_FIELDS
                                     if f"quality_{k}" in arrays} or None)
             if path.suffix == ".json":
-                with open(path, encoding="utf-8") as fh:
-                    d = json.load(fh)
+                d = parse_text(path.read_text(encoding="utf-8"), True, path, "data set file")
                 return cls.from_json_dict(d, source=str(path))
         except (KeyError, OSError, json.JSONDecodeError) as e:  # JSONDecodeError first: a
             # subclass of ValueError

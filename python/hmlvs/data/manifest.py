@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .._io import atomic_folder, atomic_write
+from .._io import atomic_folder, atomic_write, parse_text
 from .dataset import check_format
 from .poses import PoseFormat, pose_from_entry, read_poses
 
@@ -124,7 +124,7 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
                          "hmlvs.simulate.render_session, or its manifest.json)")
     try:
         text = path.read_text(encoding="utf-8")
-        doc = yaml.safe_load(text) if path.suffix in (".yaml", ".yml") else json.loads(text)
+        doc = parse_text(text, path.suffix.lower() not in (".yaml", ".yml"), path, "manifest")
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, yaml.YAMLError) as e:
         raise ValueError(f"{path}: unreadable manifest ({type(e).__name__}: {e})") from None
     from .schema import validate
@@ -186,6 +186,13 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
         out.append(e)
     if file_poses is not None:
         _pair_poses(out, file_poses, doc["pose_file"], path)
+    else:  # the entries' own poses: the pose files' units check
+        given = [e["pose"] for e in out if "pose" in e]
+        if given:
+            from .poses import _check_plausible
+
+            _check_plausible(path, np.array(given), fmt.unit,
+                             "name it as the manifest's pose_format: {{unit: {u}}}")
     return out, doc, path.parent
 
 
@@ -236,13 +243,22 @@ def read_stripe_list(path: Path) -> tuple[np.ndarray, np.ndarray]:
     Returns (pixels (n, 2), intensity (n,)); raises ValueError naming the file.
     """
     try:
-        arr = np.genfromtxt(path, delimiter=",", dtype=float)
+        # ndmin=2: a file of one column stays one column (n x 1), not one row of n pixels
+        import warnings
+
+        with warnings.catch_warnings():  # an empty file: said below, in a sentence
+            warnings.simplefilter("ignore")
+            arr = np.genfromtxt(path, delimiter=",", dtype=float, ndmin=2,
+                                encoding="utf-8-sig")
     except (OSError, ValueError) as e:
         raise ValueError(f"the stripe list {path} cannot be read ({e})") from None
-    arr = np.atleast_2d(arr)
-    arr = arr[~np.all(np.isnan(arr), axis=1)]  # a header line reads as NaN
+    arr = arr[~np.all(np.isnan(arr), axis=1)] if arr.size else arr  # a header reads as NaN
     if arr.ndim != 2 or arr.shape[1] not in (2, 3) or arr.shape[0] == 0:
-        raise ValueError(f"the stripe list {path} must hold rows of u, v[, intensity]")
+        raise ValueError(f"the stripe list {path} must hold rows of u, v[, intensity]"
+                         + (f"; its rows have {arr.shape[1]} column"
+                            f"{'' if arr.shape[1] == 1 else 's'}"
+                            if arr.ndim == 2 and arr.shape[0] and arr.shape[1] not in (2, 3)
+                            else ""))
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"the stripe list {path} has a non-numeric or missing value")
     inten = arr[:, 2] if arr.shape[1] == 3 else np.zeros(arr.shape[0])

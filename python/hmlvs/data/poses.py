@@ -23,7 +23,7 @@ from typing import Any, Literal, Sequence
 import numpy as np
 import yaml
 
-from .._io import atomic_write, existing_file
+from .._io import atomic_write, existing_file, parse_text
 
 Rotation = Literal["matrix", "quaternion", "rotation_vector"]
 ROTATIONS: tuple[str, ...] = ("matrix", "quaternion", "rotation_vector")
@@ -349,6 +349,25 @@ def _form_of(ncols: int, rotation: str | None, where: str) -> str:
                      "major), 7 (x, y, z and a quaternion) or 6 (x, y, z, rx, ry, rz)")
 
 
+def _column_names(form: str, fmt: PoseFormat) -> list[str]:
+    """The header names of a form's columns, in the order :func:`pose_from_row` reads them."""
+    if form == "matrix":
+        return [f"m{r}{c}" for r in range(4) for c in range(4)]
+    if form == "rotation_vector":
+        return ["x", "y", "z", "rx", "ry", "rz"]
+    return ["x", "y", "z"] + [f"q{a}" for a in (fmt.quaternion_order or "xyzw")]
+
+
+def _columns_by_name(names: list[str], form: str, fmt: PoseFormat) -> list[int] | None:
+    """Where each of the form's columns is in a header of ``names`` (lower case, without the
+    id column), when the header names exactly the form's columns; None otherwise (then the
+    columns are read in their order)."""
+    want = _column_names(form, fmt)
+    if sorted(names) != sorted(want) or len(set(names)) != len(names):
+        return None
+    return [names.index(n) for n in want]
+
+
 def _is_number(text: str) -> bool:
     try:
         float(text)
@@ -360,7 +379,7 @@ def _is_number(text: str) -> bool:
 def _read_csv(path: Path, rotation: str | None, fmt: PoseFormat
               ) -> tuple[list[str] | None, np.ndarray]:
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark (Excel's) is no text
     except (OSError, UnicodeDecodeError) as e:
         raise ValueError(f"{path}: unreadable pose file ({type(e).__name__}: {e})") from None
     rows: list[tuple[int, list[str]]] = []
@@ -373,6 +392,7 @@ def _read_csv(path: Path, rotation: str | None, fmt: PoseFormat
         raise ValueError(f"{path}: the pose file holds no poses")
     id_col = None
     header_line = None
+    names: list[str] = []
     if not any(_is_number(f) for f in rows[0][1]):  # a header: names, no numbers
         header_line, header = rows.pop(0)
         names = [h.lower() for h in header]
@@ -390,6 +410,9 @@ def _read_csv(path: Path, rotation: str | None, fmt: PoseFormat
     width = len(rows[0][1])
     ncols = width - (id_col is not None)
     form = _form_of(ncols, rotation, str(path))
+    # a header of known names is read by name, in any column order
+    order = None if header_line is None else _columns_by_name(
+        [n for k, n in enumerate(names) if k != id_col], form, fmt)
     ids: list[str] = []
     poses = []
     for lineno, fields in rows:
@@ -406,6 +429,8 @@ def _read_csv(path: Path, rotation: str | None, fmt: PoseFormat
         if bad:
             raise ValueError(f"{where}: {bad[0]!r} is not a number")
         values = np.array([float(f) for f in fields])
+        if order is not None:
+            values = values[order]
         if not np.all(np.isfinite(values)):
             raise ValueError(f"{where} has a value that is not finite (NaN or inf): "
                              f"{', '.join(fields)}")
@@ -419,7 +444,7 @@ def _read_csv(path: Path, rotation: str | None, fmt: PoseFormat
 def _read_yaml(path: Path, rotation: str | None, fmt: PoseFormat, explicit: dict[str, Any]
                ) -> tuple[list[str] | None, np.ndarray, str]:
     try:
-        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+        doc = parse_text(path.read_text(encoding="utf-8-sig"), False, path, "pose file")
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
         raise ValueError(f"{path}: unreadable pose file ({type(e).__name__}: {e})") from None
     from .schema import validate
@@ -478,17 +503,19 @@ _NO_UNIT = ("{path}: the length unit of the positions is not named: pass unit='m
             "(pose_format: {{unit: m}} in a manifest)")
 
 
-def _check_plausible(path: Path, poses: np.ndarray, unit: str) -> None:
+def _check_plausible(path: Any, poses: np.ndarray, unit: str, how: str = "name unit {u!r}"
+                     ) -> None:
     """A hand a few mm from the base in every pose was given in metres, and one kilometres
-    away in millimetres: refuse both rather than calibrate with a wrong unit."""
-    reach = np.linalg.norm(poses[:, :3, 3], axis=1)
+    away in millimetres: refuse both rather than calibrate with a wrong unit. ``how`` says how
+    to name the unit ({u}: the unit to name)."""
+    reach = np.linalg.norm(np.asarray(poses, float).reshape(-1, 4, 4)[:, :3, 3], axis=1)
     med = float(np.median(reach)) if reach.size else 0.0
     if unit == "mm" and 0.0 < med < 5.0:
         raise ValueError(f"{path}: the hand positions are {med:.3g} mm from the robot base "
-                         "(median): they look like metres; name unit 'm'")
+                         f"(median): they look like metres; {how.format(u='m')}")
     if unit == "m" and med > 50_000.0:
         raise ValueError(f"{path}: the hand positions are {med / 1000:.3g} m from the robot "
-                         "base (median): they look like millimetres; name unit 'mm'")
+                         f"base (median): they look like millimetres; {how.format(u='mm')}")
 
 
 def read_poses(path: str | os.PathLike, *, rotation: str | None = None,

@@ -26,6 +26,10 @@ def board_pose_from_corners(board_points: np.ndarray, pixels: np.ndarray,
     return pose
 
 
+#: inner corners per side a board may have (a bound, so that a typo such as rows: 1000000
+#: is a sentence rather than an allocation of terabytes)
+MAX_CORNERS = 1000
+
 @dataclass(frozen=True)
 class Checkerboard:
     """A checkerboard lying in the robot's workspace, described in the base frame (mm).
@@ -47,6 +51,9 @@ class Checkerboard:
         if self.rows < 2 or self.cols < 2:
             raise ValueError(f"a checkerboard needs at least 2 x 2 inner corners, got "
                              f"{self.rows} x {self.cols}")
+        if self.rows > MAX_CORNERS or self.cols > MAX_CORNERS:
+            raise ValueError(f"a checkerboard has at most {MAX_CORNERS} inner corners per "
+                             f"side, got {self.rows} x {self.cols}")
         if not self.square > 0:
             raise ValueError(f"square size must be > 0 mm, got {self.square}")
         r = np.asarray(self.row_direction, float)
@@ -103,6 +110,9 @@ class BoardSpec:
         if int(self.rows) < 2 or int(self.cols) < 2:
             raise ValueError(f"a board needs at least 2 x 2 inner corners, got {self.rows} x "
                              f"{self.cols}")
+        if int(self.rows) > MAX_CORNERS or int(self.cols) > MAX_CORNERS:
+            raise ValueError(f"a board has at most {MAX_CORNERS} inner corners per side, got "
+                             f"{self.rows} x {self.cols}")
         if not float(self.square) > 0:
             raise ValueError(f"the board's square size must be > 0 mm, got {self.square}")
 

@@ -32,11 +32,22 @@ class DHLink:
     theta: float = 0.0
 
 
+#: how far a base or tool transform's rotation may be from orthonormal (|R R^T - I|, entry by
+#: entry) and its last row from [0 0 0 1]: a rotation written by hand with three or four
+#: decimals passes (cos 45 deg as 0.7071: 2e-5), a scale, a mirror or a shear does not
+RIGID_TOL = 1e-3
+
+
 def _as_transform(t: Any, name: str) -> np.ndarray:
+    from .._arrays import check_transform
+
     arr = np.asarray(t, dtype=float)
     if arr.shape != (4, 4) or not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be a finite 4x4 transform, got shape {arr.shape}")
-    return arr
+    try:
+        return check_transform(arr, name, tol=RIGID_TOL)
+    except ValueError as e:
+        raise ValueError(f"{e} to within {RIGID_TOL:g}") from None
 
 
 @dataclass(frozen=True)

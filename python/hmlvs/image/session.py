@@ -94,9 +94,10 @@ def _opencv_failure(err: Exception, stage: str, hint: str = _BOARD_POSE_HINT) ->
 
 
 def _load(item: Any, folder: Any, what: str) -> tuple[np.ndarray, str]:
+    import os
     from pathlib import Path
 
-    import cv2
+    from .._io import read_image
     if isinstance(item, np.ndarray):
         return item, "<array>"
     if not isinstance(item, (str, Path)):
@@ -105,9 +106,18 @@ def _load(item: Any, folder: Any, what: str) -> tuple[np.ndarray, str]:
     path = Path(item)
     if folder is not None and not path.is_absolute():
         path = Path(folder) / path
-    if not path.is_file():
-        raise _Reject(f"the {what} image file {path} does not exist")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    try:
+        os.fsencode(path)  # before is_file, which says False for a name no file can have
+        if not path.is_file():
+            raise _Reject(f"the {what} image file {path} does not exist")
+        img = read_image(path)  # by bytes: cv2.imread crashes on a name that is not UTF-8
+    except UnicodeError:
+        raise _Reject(f"the {what} image file {str(path)!r}: its name holds a character no "
+                      "file name can (an unpaired surrogate); rename it") from None
+    except ValueError as e:
+        raise _Reject(str(e)) from None
+    except OSError as e:
+        raise _Reject(f"the {what} image file {path} cannot be read ({e.strerror})") from None
     if img is None:
         raise _Reject(f"the {what} image file {path.name} cannot be read as an image")
     return img, path.name
@@ -461,7 +471,8 @@ def _record_names(rec: Any) -> tuple[str, str]:
 
 def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | None = None,
                         channel: int | None = None, normalize: bool = True,
-                        min_stripe: int = 20, **stripe_options: Any
+                        min_stripe: int = 20, image_size: tuple[int, int] | None = None,
+                        image_size_of: str = "the calibration", **stripe_options: Any
                         ) -> tuple[list[str], list[Any], np.ndarray, list[ImageReport]]:
     """Laser on/off pairs + joint readings (a manifest or a list of records) -> stripes.
 
@@ -469,12 +480,15 @@ def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | Non
     each pair the same checks, difference image and stripe extraction. A pair that fails is
     reported and skipped. Entries may give a stripe list (``stripe``: CSV of u, v[, intensity])
     instead of an image pair, and a ``pose`` instead of joint readings. Returns (ids, stripes,
-    base_from_hand poses (n, 4, 4), reports).
+    base_from_hand poses (n, 4, 4), reports). With ``image_size`` (width, height: that of
+    ``image_size_of``, the calibration) images of another size are refused, a ValueError
+    naming both sizes: a calibration holds for one camera at one resolution.
     """
     from ..geometry.robot import Robot
 
     folder = None
     unit = joint_unit
+    manifest_size = None
     if isinstance(source, (list, tuple)):
         records = list(source)
         unit = "rad" if unit is None else unit
@@ -482,6 +496,13 @@ def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | Non
         records, doc, folder = _read_manifest(source)
         unit = doc.get("joint_unit", "rad") if unit is None else unit
         robot = _manifest_robot(doc, robot, source)
+        if isinstance(doc.get("image_size"), list) and len(doc["image_size"]) == 2:
+            manifest_size = (int(doc["image_size"][0]), int(doc["image_size"][1]))
+            if image_size is not None and tuple(image_size) != manifest_size:
+                raise ValueError(f"{source}: the manifest's image_size is {manifest_size[0]} x "
+                                 f"{manifest_size[1]} pixels but {image_size_of} is for "
+                                 f"{image_size[0]} x {image_size[1]} pixel images: measure "
+                                 "with a calibration of this camera at this resolution")
     if unit not in ("rad", "deg"):
         raise ValueError(f"joint_unit must be 'rad' or 'deg', got {unit!r}")
     if not records:
@@ -495,7 +516,7 @@ def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | Non
     from ..data.manifest import read_stripe_list
 
     ids, stripes, poses, reports = [], [], [], []
-    size = None
+    size = manifest_size
     for index, rec in enumerate(records):
         pid = _record_id(rec, index)
         on_name, off_name = _record_names(rec)
@@ -519,6 +540,13 @@ def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | Non
                 size, pose, item = pair.size, pair.pose, pair.stripe
                 on_name, off_name = pair.on_name, pair.off_name
                 found = int(pair.stripe.found.sum())
+                if image_size is not None and tuple(size) != tuple(image_size):
+                    where = pid if folder is None else f"{source}: entry {pid}"
+                    raise ValueError(f"{where}: the images {on_name} and {off_name} are "
+                                     f"{size[0]} x {size[1]} pixels but {image_size_of} is for "
+                                     f"{image_size[0]} x {image_size[1]} pixel images: "
+                                     "measure with a calibration of this camera at this "
+                                     "resolution")
         except _Reject as e:
             reports.append(ImageReport(pid, index, on_name, off_name, False, str(e), {}, 0, 0,
                                        {}))

@@ -112,12 +112,16 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     reports: list[ImageReport] = []
     partial: list[tuple[int, PartialView, Any]] = []
     size = None
+    given = doc.get("image_size")  # the manifest's: every pair must have it
+    given = (int(given[0]), int(given[1])) if isinstance(given, list) and len(given) == 2 \
+        else None
     stripe_options = dict(stripe_options)
     fit_blur = stripe_options.get("blur_var") is None
     stripe_options["blur_var"] = _blur_var(stripe_options.get("blur_var"))
     edges: dict[str, tuple[Any, np.ndarray]] = {}
     whole: dict[str, Any] = {}  # the whole boards' Corners, by view id
     board_images: dict[str, np.ndarray] = {}  # and their images
+
     def read(item: tuple[int, Any]) -> tuple[Any, ...]:
         """One view's pair and board (or why not): (pid, names, pair, corners or the
         PartialView of a board not wholly seen, edge shifts, reject reason)."""
@@ -125,7 +129,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         pid = _record_id(rec, index)
         names = _record_names(rec)
         try:
-            pair = _read_pair(rec, index, folder, unit, robot, None, channel, normalize,
+            pair = _read_pair(rec, index, folder, unit, robot, given, channel, normalize,
                               stripe_options, min_stripe)
             edge = _edge_shift(pair, normalize, stripe_options) if fit_blur else None
             try:
@@ -211,7 +215,11 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     reports = [replace(r, blur_var=var, stripe=_off_line_counts(r.stripe, off_line.get(r.id, 0)))
                if r.ok else r for r in reports]
     if size is None:
-        raise ValueError("no image pair could be read: " +
+        where = "" if isinstance(source, (list, tuple)) else f"{source}: "
+        if not reports:
+            raise ValueError(f"{where}the session lists no image pairs (its poses list is "
+                             "empty)")
+        raise ValueError(f"{where}no image pair could be read: " +
                          "; ".join(f"{r.id}: {r.reason}" for r in reports))
     return views, board_spec, size, board_pose, reports
 

@@ -297,10 +297,19 @@ def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
 
     if robot is None:
         robot = _calibration_robot(calibration, source)
+    cal_name = None
     if isinstance(calibration, (str, os.PathLike)):
+        cal_name = str(calibration)
         calibration = Calibration.load(calibration)
     if options.get("blur_var") is None and getattr(calibration, "blur_var", None) is not None:
         options["blur_var"] = calibration.blur_var
+    sensor = getattr(calibration, "sensor", None)
+    if sensor is None and hasattr(calibration, "image_size"):  # an OpenCvSensor itself
+        sensor = calibration
+    if sensor is not None and options.get("image_size") is None:
+        options["image_size"] = tuple(sensor.image_size)
+        options.setdefault("image_size_of", f"the calibration {cal_name}" if cal_name
+                           else "the calibration")
     ids, stripes, poses, reports = stripes_from_images(source, robot=robot, **options)
     rejected = tuple(RejectedPair(str(r.id), str(r.reason)) for r in reports if not r.ok)
     if not stripes:

@@ -36,6 +36,28 @@ def _array(x: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
     return a
 
 
+def _image_size(size: Any) -> tuple[int, int]:
+    """(width, height): two positive whole numbers (a whole float such as 640.0 is one; a
+    fraction, a text or a boolean is not)."""
+    def whole(v: Any) -> int | None:
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer,
+                                                                  np.floating)):
+            return None
+        if not np.isfinite(v) or v != int(v) or v <= 0:
+            return None
+        return int(v)
+
+    try:
+        pair = list(size)
+    except TypeError:
+        pair = []
+    dims = [whole(v) for v in pair] if len(pair) == 2 else [None]
+    if None in dims:
+        raise ValueError(f"image_size must be two positive whole numbers of pixels (width, "
+                         f"height), got {size!r}")
+    return dims[0], dims[1]
+
+
 @dataclass(frozen=True, eq=False)
 class OpenCvSensor:
     """A calibrated general sensor.
@@ -69,17 +91,15 @@ class OpenCvSensor:
                              f"{given.size}")
         dist[: given.size] = given
         dist = _array(dist, (5,), "dist_coeffs")
-        try:
-            w, h = (int(v) for v in self.image_size)
-        except (TypeError, ValueError):
-            raise ValueError(f"image_size must be (width, height), got {self.image_size!r}") \
-                from None
-        if w <= 0 or h <= 0:
-            raise ValueError(f"image_size must be positive, got {(w, h)}")
+        w, h = _image_size(self.image_size)
         plane = _array(self.laser_plane, (4,), "laser_plane")
         norm = float(np.linalg.norm(plane[:3]))
         if not norm > 0:
             raise ValueError("laser_plane needs a non-zero normal (a, b, c)")
+        if not abs(float(plane[3])) > 1e-9 * norm:
+            raise ValueError(f"laser_plane {plane.tolist()} has d = 0: a plane through the "
+                             "camera's centre, which every ray meets nowhere or everywhere; "
+                             "d is the plane's distance from the camera (mm), never 0")
         plane = plane / norm
         if plane[3] > 0:
             plane = -plane

@@ -113,10 +113,9 @@ def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = Non
     for a malformed manifest or one without a board (as :func:`views_from_images`).
     """
 
+    from .._io import atomic_folder
     from ..data.manifest import _write_png, read_manifest
-    from ..image.colour import board_gray
-    from ..image.session import stripe_from_pair
-    from ..image.views import detect_corners, views_from_images
+    from ..image.views import views_from_images
 
     used, spec, _, _, reports = views_from_images(source, robot=robot, board=board,
                                                   channel=channel, normalize=normalize,
@@ -131,46 +130,77 @@ def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = Non
     detector_board = spec if spec.unambiguous else Checkerboard(rows=spec.rows, cols=spec.cols,
                                                                 square=spec.square)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    result = []
-    for entry, rep in zip(entries, reports):
-        view = ViewInspection(rep.id, rep.ok, rep.reason, rep.corners, dict(rep.stripe))
-        result.append(view)
-        if "on" not in entry:
-            continue
-        on, off = (_read_image(entry.get(key), folder) for key in ("on", "off"))
-        if on is None or ("off" in entry and off is None):
-            continue
-        try:
-            stripe = stripe_from_pair(on, off, normalize=normalize, channel=channel,
-                                      **stripe_options)
-        except ValueError:
-            stripe = None
-        corners = numbered.get(rep.id) if rep.ok else None
-        if corners is None and not (rep.ok and rep.corners == 0):
-            try:
-                corners = detect_corners(board_gray(on if off is None else off),
-                                         detector_board)
-            except ValueError:
-                corners = None
-        if not rep.ok:  # the pipeline stopped early: report what the images show
-            view.corners = 0 if corners is None else len(corners)
-            view.stripe = {} if stripe is None else stripe.counts()
-        state = "used" if rep.ok else "rejected"
-        picture = draw_view(on, corners, stripe, f"{rep.id}: {state}, {view.corners} corners")
-        view.image = out / f"{_safe(rep.id)}.png"
-        _write_png(view.image, picture)
+    result: list[ViewInspection] = []
+    taken: set[str] = set()
+    # all pictures or none (an interrupted or failed run leaves the folder as it was)
+    with atomic_folder(out, last=()) as tmp:
+        for entry, rep in zip(entries, reports):
+            view = ViewInspection(rep.id, rep.ok, rep.reason, rep.corners, dict(rep.stripe))
+            result.append(view)
+            picture = _picture(entry, rep, view, folder, numbered, detector_board, normalize,
+                               channel, stripe_options)
+            if picture is None:
+                continue
+            name = _unique(_safe(rep.id), taken)
+            view.image = out / name
+            _write_png(tmp / name, picture)
     return result
+
+
+def _picture(entry: dict, rep: Any, view: ViewInspection, folder: Path, numbered: dict,
+             detector_board: Any, normalize: bool, channel: int | None,
+             stripe_options: dict) -> np.ndarray | None:
+    """One view's picture (None when its images cannot be read); fills in ``view`` the
+    corners and stripe of a view the pipeline rejected."""
+    from ..image.colour import board_gray
+    from ..image.session import stripe_from_pair
+    from ..image.views import detect_corners
+
+    if "on" not in entry:
+        return None
+    on, off = (_read_image(entry.get(key), folder) for key in ("on", "off"))
+    if on is None or ("off" in entry and off is None):
+        return None
+    try:
+        stripe = stripe_from_pair(on, off, normalize=normalize, channel=channel,
+                                  **stripe_options)
+    except ValueError:
+        stripe = None
+    corners = numbered.get(rep.id) if rep.ok else None
+    if corners is None and not (rep.ok and rep.corners == 0):
+        try:
+            corners = detect_corners(board_gray(on if off is None else off), detector_board)
+        except ValueError:
+            corners = None
+    if not rep.ok:  # the pipeline stopped early: report what the images show
+        view.corners = 0 if corners is None else len(corners)
+        view.stripe = {} if stripe is None else stripe.counts()
+    state = "used" if rep.ok else "rejected"
+    return draw_view(on, corners, stripe, f"{rep.id}: {state}, {view.corners} corners")
+
+
+def _unique(stem: str, taken: set[str]) -> str:
+    """``<stem>.png``, or ``<stem>-2.png``, ``-3`` ... when another view's id gave that name
+    already (ids ``a/b`` and ``a_b`` both make ``a_b``): one picture per view."""
+    name, n = f"{stem}.png", 1
+    while name.lower() in taken:
+        n += 1
+        name = f"{stem}-{n}.png"
+    taken.add(name.lower())
+    return name
 
 
 def _read_image(name: Any, folder: Path) -> np.ndarray | None:
     """A manifest entry's image (None when not named or unreadable)."""
-    import cv2
+    from .._io import read_image
 
-    if name is None:
+    if not isinstance(name, (str, os.PathLike)):
         return None
     path = Path(name)
-    return cv2.imread(str(path if path.is_absolute() else folder / path), cv2.IMREAD_UNCHANGED)
+    try:
+        return read_image(path if path.is_absolute() else folder / path)
+    except (OSError, ValueError):
+        return None
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,635 @@
+"""Faults the error policy must survive (issue 40): a user's files are never destroyed (not
+even one named like our temporaries), outputs are written through a symbolic link and keep
+their permissions, SIGTERM cleans up like Ctrl-C (exit 143) in every command that writes, and
+bad names, sizes and schemas are refused with one sentence (exit 2), never a crash."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import hmlvs
+from hmlvs import _io
+from hmlvs.cli import main
+from hmlvs.sim.general import general_session, render_general_session
+import numpy as np
+import pytest
+
+
+def _run(argv, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    out = capsys.readouterr()
+    return e.value.code, out.out, out.err
+
+
+def _tree(folder: Path) -> dict[str, str]:
+    """Every file under ``folder`` (relative name -> sha256), links as their target's name."""
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        key = str(p.relative_to(folder))
+        if p.is_symlink():
+            out[key] = "link:" + os.readlink(p)
+        elif p.is_file():
+            out[key] = hashlib.sha256(p.read_bytes()).hexdigest()
+        else:
+            out[key] = "folder"
+    return out
+
+
+def _temporaries(folder: Path) -> list[Path]:
+    return [p for p in folder.rglob(".hmlvs-*")]
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("fault")
+    ds = hmlvs.simulate.session(num_poses=8, seed=1).dataset.save(d / "sim.npz")
+    cal = d / "cal.yaml"
+    with pytest.raises(SystemExit):
+        main(["calibrate", str(ds), "--method", "lm", "--out", str(cal), "-q"])
+    sess = d / "sess"
+    render_general_session(general_session(views=3, seed=2), sess)
+    return d, ds, cal, sess
+
+
+# -- 1. temporary names --------------------------------------------------------------------
+def _dead_pid() -> int:
+    p = subprocess.Popen([sys.executable, "-c", "pass"])
+    p.wait()
+    return p.pid
+
+
+def test_a_users_file_named_like_a_temporary_is_never_removed(tmp_path):
+    names = [".hmlvs-abc123.tmp", ".hmlvs-tmp-x.tmp", f".hmlvs-tmp-{_dead_pid()}.tmp",
+             ".hmlvs-tmp-1-abc.tmp"]
+    for n in names:
+        (tmp_path / n).write_text("the user's own\n")
+        os.utime(tmp_path / n, (1, 1))  # a year-old file: old enough to look stale
+    (tmp_path / ".hmlvs-folder.tmp").mkdir()
+    (tmp_path / ".hmlvs-folder.tmp" / "keep").write_text("mine")
+    os.utime(tmp_path / ".hmlvs-folder.tmp", (1, 1))
+    before = _tree(tmp_path)
+    with _io.atomic_write(tmp_path / "out.txt") as fh:
+        fh.write("ok")
+    with _io.atomic_folder(tmp_path / "pics") as tmp:
+        (tmp / "a.png").write_bytes(b"x")
+    after = _tree(tmp_path)
+    assert {k: v for k, v in after.items() if k not in ("out.txt", "pics", "pics/a.png")} \
+        == before
+
+
+def test_only_our_temporaries_of_a_finished_process_are_removed(tmp_path):
+    dead, alive = _dead_pid(), os.getppid()
+    stale = tmp_path / f".hmlvs-tmp-{dead}-abcd1234.tmp"
+    running = tmp_path / f".hmlvs-tmp-{alive}-abcd1234.tmp"
+    fresh = tmp_path / f".hmlvs-tmp-{dead}-efgh5678.tmp"
+    stale_dir = tmp_path / f".hmlvs-tmp-{dead}-dir12345.tmp"
+    for p in (stale, running, fresh):
+        p.write_text("half")
+    stale_dir.mkdir()
+    (stale_dir / "v000_on.png").write_bytes(b"half")
+    for p in (stale, running, stale_dir):
+        os.utime(p, (1, 1))
+    with _io.atomic_write(tmp_path / "out.txt") as fh:
+        # our own temporary carries the marker and this process's id
+        ours = [p.name for p in tmp_path.iterdir() if p.name.startswith(
+            f".hmlvs-tmp-{os.getpid()}-") and p.name.endswith(".tmp")]
+        assert len(ours) == 1
+        fh.write("ok")
+    with _io.atomic_folder(tmp_path / "pics") as tmp:
+        assert tmp.name.startswith(f".hmlvs-tmp-{os.getpid()}-")
+    assert not stale.exists() and not stale_dir.exists()
+    assert running.exists() and fresh.exists()  # its writer may still run; too recent
+
+
+# -- 2. symbolic links and permissions -----------------------------------------------------
+def test_an_output_through_a_link_replaces_the_target_and_keeps_its_mode(files, tmp_path,
+                                                                          capsys):
+    _, _, cal, _ = files
+    target = tmp_path / "real" / "exported.json"
+    target.parent.mkdir()
+    target.write_text("old\n")
+    target.chmod(0o600)
+    link = tmp_path / "link.json"
+    link.symlink_to(target)
+    code, _, err = _run(["export", str(cal), "--format", "json", "--out", str(link)], capsys)
+    assert code in (0, None), err
+    assert link.is_symlink() and os.readlink(link) == str(target)
+    assert target.read_text() != "old\n"
+    assert json.loads(target.read_text())  # the export is in the target
+    assert target.stat().st_mode & 0o777 == 0o600
+    assert _temporaries(tmp_path) == []
+
+
+def test_a_dangling_link_and_a_link_to_a_folder_are_written_through(files, tmp_path, capsys):
+    _, ds, _, _ = files
+    link = tmp_path / "cal.yaml"
+    link.symlink_to(tmp_path / "made.yaml")
+    code, _, err = _run(["calibrate", str(ds), "--method", "lm", "--out", str(link), "-q"],
+                        capsys)
+    assert code in (0, None), err
+    assert link.is_symlink() and (tmp_path / "made.yaml").is_file()
+    real = tmp_path / "real-pics"
+    real.mkdir()
+    with _io.atomic_folder(tmp_path / "pics-link") as tmp:
+        (tmp / "a.png").write_bytes(b"x")
+    (tmp_path / "pics").symlink_to(real)
+    with _io.atomic_folder(tmp_path / "pics") as tmp:
+        (tmp / "b.png").write_bytes(b"y")
+    assert (tmp_path / "pics").is_symlink() and (real / "b.png").read_bytes() == b"y"
+
+
+def test_a_new_output_gets_the_usual_permissions(tmp_path):
+    umask = os.umask(0o022)
+    try:
+        with _io.atomic_write(tmp_path / "new.txt") as fh:
+            fh.write("x")
+    finally:
+        os.umask(umask)
+    assert (tmp_path / "new.txt").stat().st_mode & 0o777 == 0o644
+
+
+# -- 3. SIGTERM ----------------------------------------------------------------------------
+# The command runs in its own process with every fsync (the last step of each atomic write)
+# stalled, so SIGTERM arrives while a temporary file (and for a multi-file output, a
+# temporary folder) exists: the worst moment.
+STALLED = textwrap.dedent("""
+    import os, sys, time
+    from pathlib import Path
+    ready = Path(sys.argv[1])
+    real = os.fsync
+    def stalled(fd):
+        ready.write_text("writing")
+        time.sleep(60)
+        real(fd)
+    os.fsync = stalled
+    from hmlvs.__main__ import run
+    sys.argv = ["hmlvs", *sys.argv[2:]]
+    run()
+""")
+
+
+def _terminate_while_writing(argv: list[str], work: Path, ready_dir: Path
+                             ) -> tuple[int, str]:
+    ready = ready_dir / "ready"
+    ready.unlink(missing_ok=True)
+    p = subprocess.Popen([sys.executable, "-c", STALLED, str(ready), *argv],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=work)
+    try:
+        t = time.monotonic()
+        while not ready.exists():
+            if p.poll() is not None or time.monotonic() - t > 90:
+                out, err = p.communicate(timeout=5)
+                pytest.fail(f"the command never wrote (exit {p.returncode}): {err}")
+            time.sleep(0.05)
+        assert _temporaries(work), "a temporary exists while the write is under way"
+        p.send_signal(signal.SIGTERM)
+        _, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    return p.returncode, err
+
+
+def _sigterm_cases(d: Path, ds: Path, cal: Path, sess: Path) -> dict[str, list[str]]:
+    return {
+        "simulate": ["simulate", "new.npz", "--poses", "3", "--images", "imgs", "-q"],
+        "calibrate": ["calibrate", str(ds), "--method", "lm", "--out", "old.yaml", "-q"],
+        "measure": ["measure", str(cal), str(ds), "--out", "old.ply"],
+        "inspect": ["inspect", str(sess), "--out", "pictures"],
+        "export": ["export", str(cal), "--format", "opencv", "--out", "old.yaml"],
+        "report": ["report", str(cal), str(ds), "--out", "old.html"],
+        "demo": ["demo", "--poses", "16", "--out", "pictures", "-q"],
+    }
+
+
+def _work(tmp_path: Path) -> Path:
+    """A folder of existing outputs a command is about to replace."""
+    work = tmp_path / "work"
+    work.mkdir()
+    for name in ("old.yaml", "old.ply", "old.html"):
+        (work / name).write_text("the user's file\n")
+    (work / "pictures").mkdir()
+    (work / "pictures" / "keep.png").write_bytes(b"the user's picture")
+    return work
+
+
+@pytest.mark.parametrize("command", ["simulate", "calibrate", "measure", "inspect", "export",
+                                     "report", "demo"])
+def test_sigterm_while_writing_cleans_up_and_exits_143(files, tmp_path, monkeypatch, capsys,
+                                                       command):
+    # in this process (the command line's handler is installed by main and removed after):
+    # SIGTERM is sent from inside the first fsync, while the temporaries exist
+    d, ds, cal, sess = files
+    work = _work(tmp_path)
+    before, inputs = _tree(work), _tree(d)
+    real, seen = os.fsync, []
+
+    def terminate(fd):
+        seen.append(_temporaries(work))
+        if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, signal.SIG_IGN, None):
+            raise AssertionError("no SIGTERM handler: the signal would kill the test run")
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(30)  # the handler raises here
+        real(fd)
+
+    monkeypatch.chdir(work)
+    monkeypatch.setattr(os, "fsync", terminate)
+    code, _, err = _run(_sigterm_cases(d, ds, cal, sess)[command], capsys)
+    monkeypatch.setattr(os, "fsync", real)
+    assert seen and seen[0], "the signal came while a temporary existed"
+    assert code == 143, err
+    assert err.strip().splitlines()[-1] == "terminated"
+    assert _temporaries(tmp_path) == []
+    assert _tree(work) == before  # nothing new, nothing changed
+    assert _tree(d) == inputs
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # main put it back
+
+
+def test_sigterm_to_the_hmlvs_program_while_writing(files, tmp_path):
+    # the installed entry point (hmlvs.__main__.run) in its own process
+    d, ds, cal, sess = files
+    work = _work(tmp_path)
+    (tmp_path / "ready").mkdir()
+    before = _tree(work)
+    code, err = _terminate_while_writing(_sigterm_cases(d, ds, cal, sess)["simulate"], work,
+                                         tmp_path / "ready")
+    assert code == 143, err
+    assert err.strip().splitlines()[-1] == "terminated"
+    assert _temporaries(tmp_path) == []
+    assert _tree(work) == before
+
+
+@pytest.mark.parametrize("delay, argv", [
+    (1.0, ["study", "--runs-lm", "100000", "--s", "0.1", "--out", "out", "--no-progress"]),
+    (1.0, ["scenario", "gauge-block", "--out", "out", "--json"]),
+    (1.0, ["design", "--out", "out"]),
+    (0.2, ["scenario", "gauge-block", "--out", "out", "--json"]),
+], ids=["study", "scenario", "design", "while-loading"])
+def test_sigterm_while_computing_exits_143_without_output(tmp_path, delay, argv):
+    # long solves (the signal reaches Python through the solver's progress calls), the
+    # design's plots, and a command still loading (typer ends a KeyboardInterrupt there with
+    # a silent exit 130)
+    script = textwrap.dedent("""
+        import os, signal, sys, threading
+        from hmlvs.__main__ import run
+        delay = float(sys.argv.pop(1))
+        threading.Timer(delay, lambda: os.kill(os.getpid(), signal.SIGTERM)).start()
+        sys.argv = ["hmlvs", *sys.argv[1:]]
+        run()
+    """)
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "keep.md").write_text("the user's notes\n")
+    before = _tree(tmp_path)
+    r = subprocess.run([sys.executable, "-c", script, str(delay), *argv], capture_output=True,
+                       text=True, cwd=tmp_path, timeout=120)
+    assert r.returncode == 143, r.stderr
+    assert r.stderr.strip().splitlines()[-1].startswith("terminated")
+    assert _tree(tmp_path) == before
+
+
+# -- 4. simulate --images into an existing session -------------------------------------------
+@pytest.mark.parametrize("out", ["x.npz", "x.txt"])
+def test_simulate_never_replaces_an_existing_session(tmp_path, capsys, out):
+    sess = tmp_path / "sess"
+    sess.mkdir()
+    (sess / "manifest.json").write_text('{"format": "hmlvs-images", "the": "user\'s"}\n')
+    before = _tree(tmp_path)
+    code, _, err = _run(["simulate", str(tmp_path / out), "--poses", "3", "--images",
+                         str(sess)], capsys)
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1
+    assert (str(sess) in err and "not empty" in err) if out == "x.npz" else \
+        (out in err and ".npz or .json" in err)
+    assert _tree(tmp_path) == before
+
+
+def test_simulate_with_a_bad_suffix_refuses_before_making_the_folder(tmp_path, capsys):
+    code, _, err = _run(["simulate", str(tmp_path / "x.txt"), "--poses", "3", "--images",
+                         str(tmp_path / "new")], capsys)
+    assert code == 2 and "x.txt" in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_simulate_into_an_empty_folder_is_fine(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    code, _, err = _run(["simulate", str(tmp_path / "x.npz"), "--poses", "2", "--images",
+                         str(tmp_path / "empty"), "-q"], capsys)
+    assert code in (0, None), err
+    assert (tmp_path / "empty" / "manifest.json").is_file()
+
+
+# -- 5. names and sizes ----------------------------------------------------------------------
+def _copy_session(sess: Path, to: Path, change=None) -> Path:
+    """A copy of the rendered session at ``to`` (a str or bytes path), its manifest changed by
+    ``change(doc)``."""
+    import shutil
+
+    shutil.copytree(os.fsencode(sess), os.fsencode(to))
+    to = Path(os.fsdecode(to))
+    if change is not None:
+        doc = json.loads((to / "manifest.json").read_text())
+        change(doc)
+        (to / "manifest.json").write_text(json.dumps(doc))
+    return to
+
+
+def _hmlvs(*argv: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    # in a process of its own: a crash (SIGSEGV) must show as such, not take the suite down
+    return subprocess.run([sys.executable, "-m", "hmlvs", *argv], capture_output=True,
+                          text=True, cwd=cwd, timeout=300, errors="surrogateescape")
+
+
+def test_names_that_are_not_utf8_never_crash(files, tmp_path):
+    # in a process of its own: cv2.imread on such a name was a SIGSEGV (exit -11). The
+    # session's folder name is not UTF-8; v000's laser-on image has the byte 0xff in its
+    # name (read by its bytes); v001's names an unpaired surrogate, which no file system
+    # holds (its entry is rejected, naming the file)
+    _, _, _, sess = files
+
+    def rename(doc):
+        doc["poses"][0]["on"] = "v000_on-\udcff.png"
+        doc["poses"][1]["on"] = "v001_on-\ud800.png"
+
+    weird = _copy_session(sess, os.fsencode(tmp_path) + b"/sess-\xff\xfe", rename)
+    os.rename(weird / "v000_on.png", os.fsencode(weird) + b"/v000_on-\xff.png")
+    r = _hmlvs("inspect", str(weird), "--out", str(tmp_path / "pics"))
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    assert lines[0].startswith("v000: ") and lines[0].endswith("-> v000.png")
+    assert lines[1].startswith("v001: rejected (the laser-on image file ")
+    assert "v001_on-\\ud800.png': its name holds a character no file name can (an unpaired " \
+           "surrogate); rename it)" in lines[1]
+    assert lines[2].startswith("v002: ") and lines[2].endswith("-> v002.png")
+    assert sorted(p.name for p in (tmp_path / "pics").iterdir()) == ["v000.png", "v002.png"]
+
+
+def test_deep_nesting_is_a_sentence_not_a_recursion_error(files, tmp_path, capsys):
+    _, _, cal, _ = files
+    from hmlvs.data.manifest import read_manifest
+
+    deep = tmp_path / "manifest.json"
+    deep.write_text('{"format": "hmlvs-images", "version": 1, "poses": '
+                    + "[" * 100_000 + "]" * 100_000 + "}")
+    with pytest.raises(ValueError, match=r"manifest.json: malformed manifest: its lists and "
+                                         r"mappings nest more than 32 levels deep"):
+        read_manifest(deep)
+    deep_cal = tmp_path / "cal.yaml"
+    deep_cal.write_text(cal.read_text() + "extra: " + "[" * 3000 + "]" * 3000 + "\n")
+    code, _, err = _run(["export", str(deep_cal), "--format", "json"], capsys)
+    assert code == 2
+    assert err.strip() == (f"error: {deep_cal}: malformed calibration file: its lists and "
+                           "mappings nest more than 32 levels deep")
+    shallow = tmp_path / "shallow.json"  # 32 levels are fine for the reader
+    shallow.write_text("[" * 32 + "]" * 32)
+    assert _io.read_document(shallow, "x") == json.loads("[" * 32 + "]" * 32)
+
+
+def test_a_huge_board_is_a_sentence_not_a_memory_error(files, tmp_path, capsys):
+    _, _, _, sess = files
+    copy = _copy_session(sess, tmp_path / "sess",
+                         lambda doc: doc["board"].update(rows=1_000_000))
+    before = _tree(copy)
+    code, _, err = _run(["calibrate", str(copy), "--out", str(tmp_path / "c.yaml"), "-q"],
+                        capsys)
+    assert code == 2
+    assert err.startswith(f"error: {copy}: board: ")
+    assert "at most 1000 inner corners per side, got 1000000 x 9" in err
+    assert _tree(copy) == before and not (tmp_path / "c.yaml").exists()
+    from hmlvs.geometry.board import BoardSpec, Checkerboard
+
+    for make in (lambda: Checkerboard(rows=6, cols=1001), lambda: BoardSpec(1001, 6, 20.0)):
+        with pytest.raises(ValueError, match="at most 1000 inner corners per side"):
+            make()
+    Checkerboard(rows=1000, cols=1000)  # the bound itself is allowed
+
+
+# -- 6. schemas ------------------------------------------------------------------------------
+def _opencv_doc(**sensor_changes) -> dict:
+    from hmlvs.data.calibration_file import Calibration
+    from hmlvs.models.opencv import OpenCvSensor
+
+    sensor = OpenCvSensor(camera_matrix=[[1000, 0, 320], [0, 1000, 240], [0, 0, 1]],
+                          dist_coeffs=[0, 0, 0, 0, 0], image_size=(640, 480),
+                          laser_plane=[0, 0.5, 0.866, -200], hand_from_camera=np.eye(4))
+    doc = Calibration(sensor=sensor, model="opencv").to_dict()
+    doc["sensor"].update(sensor_changes)
+    return doc
+
+
+@pytest.mark.parametrize("size", [[True, True], ["640", "480"], [640.9, 480.5], [640],
+                                  [0, 480], [-640, 480], None])
+def test_a_calibrations_image_size_is_two_positive_whole_numbers(size):
+    from hmlvs.data.calibration_file import Calibration
+
+    with pytest.raises(ValueError, match=r"^cal.yaml: sensor: image_size must be two positive "
+                                         r"whole numbers of pixels \(width, height\), got "):
+        Calibration.from_dict(_opencv_doc(image_size=size), source="cal.yaml")
+
+
+def test_a_whole_float_image_size_is_still_fine():
+    from hmlvs.data.calibration_file import Calibration
+
+    cal = Calibration.from_dict(_opencv_doc(image_size=[640.0, 480]), source="cal.yaml")
+    assert cal.sensor.image_size == (640, 480)
+    assert all(type(v) is int for v in cal.sensor.image_size)
+
+
+def test_a_laser_plane_through_the_camera_is_refused():
+    from hmlvs.data.calibration_file import Calibration
+
+    with pytest.raises(ValueError, match=r"^cal.yaml: sensor: laser_plane .* has d = 0"):
+        Calibration.from_dict(_opencv_doc(laser_plane=[0, 0.5, 0.866, 0]), source="cal.yaml")
+    with pytest.raises(ValueError, match="non-zero normal"):
+        Calibration.from_dict(_opencv_doc(laser_plane=[0, 0, 0, -200]), source="cal.yaml")
+
+
+@pytest.mark.parametrize("name", ["Su", "Sv", "f"])
+def test_zero_intrinsics_are_refused_at_load(files, tmp_path, capsys, name):
+    import yaml
+
+    _, _, cal, _ = files
+    doc = yaml.safe_load(cal.read_text())
+    doc["parameters"][name] = 0
+    bad = tmp_path / "zero.yaml"
+    bad.write_text(yaml.safe_dump(doc))
+    code, out, err = _run(["export", str(bad), "--format", "opencv"], capsys)
+    assert code == 2 and out == ""
+    assert err.strip() == (f"error: {bad}: parameters: {name} is 0; the focal length f and the "
+                           "pixel pitches Su, Sv scale every pixel to mm and must not be 0")
+
+
+@pytest.mark.parametrize("key", ["base_from_link0", "flange_from_hand"])
+@pytest.mark.parametrize("matrix", [
+    np.diag([1.01, 1.01, 1.01, 1.0]),                                    # a scale
+    np.diag([1.0, 1.0, -1.0, 1.0]),                                      # a mirror
+    np.array([[1, 0.1, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]]),  # a shear
+    np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 1, 1.0]]),    # a last row
+], ids=["scale", "mirror", "shear", "last-row"])
+def test_a_robots_base_and_tool_transforms_must_be_rigid(key, matrix):
+    from hmlvs.data.robot_file import robot_from_dict
+
+    d = hmlvs.Robot.scorbot_er7().to_dict()
+    d[key] = matrix.tolist()
+    with pytest.raises(ValueError, match=rf"^arm.yaml: malformed robot description \({key} is "
+                                         r"not a rigid transform .* to within 0\.001\)$"):
+        robot_from_dict(d, "arm.yaml")
+    # a rotation of 45 deg about z written by hand with four decimals: fine
+    d[key] = [[0.7071, -0.7071, 0, 10], [0.7071, 0.7071, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
+    robot_from_dict(d, "arm.yaml")
+
+
+def test_manifest_poses_in_metres_are_refused_like_a_pose_files(files, tmp_path):
+    from hmlvs.data.manifest import read_manifest
+
+    _, _, _, sess = files
+
+    def metres(doc):
+        for e in doc["poses"]:
+            pose = np.array(e["pose"])
+            pose[:3, 3] *= 1e-3
+            e["pose"] = pose.tolist()
+
+    copy = _copy_session(sess, tmp_path / "sess", metres)
+    with pytest.raises(ValueError, match=r"manifest.json: the hand positions are 0\.\d+ mm from "
+                                         r"the robot base \(median\): they look like metres; "
+                                         r"name it as the manifest's pose_format: \{unit: m\}$"):
+        read_manifest(copy)
+    doc = json.loads((copy / "manifest.json").read_text())
+    doc["pose_format"] = {"unit": "m"}
+    (copy / "manifest.json").write_text(json.dumps(doc))
+    entries, _, _ = read_manifest(copy)
+    assert np.linalg.norm(entries[0]["pose"][:3, 3]) > 100  # read as metres, given in mm
+
+
+def test_a_stripe_list_of_one_column_is_refused(tmp_path):
+    from hmlvs.data.manifest import read_stripe_list
+
+    one = tmp_path / "s.csv"
+    one.write_text("320\n300\n")
+    with pytest.raises(ValueError, match=r"s.csv must hold rows of u, v\[, intensity\]; its "
+                                         r"rows have 1 column$"):
+        read_stripe_list(one)
+    one.write_text("320,300\n")  # one pixel is still one pixel
+    assert read_stripe_list(one)[0].tolist() == [[320.0, 300.0]]
+
+
+def test_images_of_another_size_than_the_calibrations_are_refused(files, tmp_path, capsys):
+    from hmlvs.data.calibration_file import Calibration
+
+    _, _, _, sess = files
+    cal = tmp_path / "cal640.yaml"
+    Calibration.from_dict(_opencv_doc(), source="x").save(cal)
+    code, _, err = _run(["measure", str(cal), str(sess), "--out", str(tmp_path / "c.ply")],
+                        capsys)
+    assert code == 2 and not (tmp_path / "c.ply").exists()
+    assert err.strip() == (f"error: {sess}: the manifest's image_size is 1024 x 768 pixels but "
+                           f"the calibration {cal} is for 640 x 480 pixel images: measure with "
+                           "a calibration of this camera at this resolution")
+    copy = _copy_session(sess, tmp_path / "sess", lambda doc: doc.pop("image_size"))
+    code, _, err = _run(["measure", str(cal), str(copy), "--out", str(tmp_path / "c.ply")],
+                        capsys)
+    assert code == 2 and not (tmp_path / "c.ply").exists()
+    assert err.strip() == (f"error: {copy}: entry v000: the images v000_on.png and "
+                           f"v000_off.png are 1024 x 768 pixels but the calibration {cal} is "
+                           "for 640 x 480 pixel images: measure with a calibration of this "
+                           "camera at this resolution")
+
+
+def test_the_manifests_image_size_holds_on_the_opencv_path(files, tmp_path, capsys):
+    _, _, _, sess = files
+    copy = _copy_session(sess, tmp_path / "sess", lambda doc: doc.update(image_size=[640, 480]))
+    code, _, err = _run(["calibrate", str(copy), "--model", "opencv", "--out",
+                         str(tmp_path / "c.yaml"), "-q"], capsys)
+    assert code == 2 and not (tmp_path / "c.yaml").exists()
+    assert err.strip() == f"error: {copy}: no image pair could be read: " + "; ".join(
+        f"v00{i}: the images are 1024 x 768 pixels but the session's are 640 x 480"
+        for i in range(3))
+
+
+# -- 7. messages -----------------------------------------------------------------------------
+def test_a_pose_file_with_a_byte_order_mark_and_named_columns(tmp_path):
+    from hmlvs.data.poses import read_poses
+
+    rows = [("v000", 0.1, -0.2, 0.3, 500.0, 20.0, 300.0),
+            ("v001", 0.0, 0.1, -0.1, 480.0, -10.0, 320.0)]
+    plain = tmp_path / "plain.csv"
+    plain.write_text("id,x,y,z,rx,ry,rz\n" + "".join(
+        f"{i},{x},{y},{z},{a},{b},{c}\n" for i, a, b, c, x, y, z in rows))
+    named = tmp_path / "named.csv"  # the same poses, rotation first, with Excel's BOM
+    named.write_bytes(("id,rx,ry,rz,x,y,z\n" + "".join(
+        f"{i},{a},{b},{c},{x},{y},{z}\n" for i, a, b, c, x, y, z in rows)).encode("utf-8-sig"))
+    ids, want = read_poses(plain, unit="mm")
+    ids2, got = read_poses(named, unit="mm")
+    assert ids == ids2 == ["v000", "v001"]
+    np.testing.assert_allclose(got, want, atol=1e-12)
+    assert np.allclose(got[0][:3, 3], [500.0, 20.0, 300.0])
+
+
+def test_read_poses_of_none_is_a_value_error():
+    from hmlvs.data.poses import read_poses
+
+    with pytest.raises(ValueError, match=r"^no pose file given: expected a file name, got "
+                                         r"None$"):
+        read_poses(None, unit="mm")
+
+
+def test_an_empty_poses_list_is_one_sentence(files, tmp_path, capsys):
+    _, _, _, sess = files
+    copy = _copy_session(sess, tmp_path / "sess", lambda doc: doc.update(poses=[]))
+    code, _, err = _run(["calibrate", str(copy), "--out", str(tmp_path / "c.yaml")], capsys)
+    assert code == 2
+    assert err.strip() == (f"error: {copy}: the session lists no image pairs (its poses list "
+                           "is empty)")
+    assert not err.strip().endswith(":")
+
+
+def test_an_uppercase_yaml_manifest_is_read_as_yaml(files, tmp_path):
+    from hmlvs.data.manifest import read_manifest
+    import yaml
+
+    _, _, _, sess = files
+    copy = _copy_session(sess, tmp_path / "sess")
+    doc = json.loads((copy / "manifest.json").read_text())
+    (copy / "manifest.json").unlink()
+    (copy / "MANIFEST.YAML").write_text(yaml.safe_dump(doc))
+    entries, _, _ = read_manifest(copy / "MANIFEST.YAML")
+    assert [e["id"] for e in entries] == ["v000", "v001", "v002"]
+
+
+# -- 8. inspect: one picture per view ----------------------------------------------------------
+def test_ids_that_make_one_file_name_get_one_picture_each(files, tmp_path, capsys):
+    _, _, _, sess = files
+
+    def ids(doc):
+        for e, pid in zip(doc["poses"], ["a/b", "a_b", "A_B"]):
+            e["id"] = pid
+
+    copy = _copy_session(sess, tmp_path / "sess", ids)
+    code, out, err = _run(["inspect", str(copy), "--out", str(tmp_path / "pics"), "--json"],
+                          capsys)
+    assert code in (0, None), err
+    images = [Path(v["image"]).name for v in json.loads(out)]
+    assert images == ["a_b.png", "a_b-2.png", "A_B-3.png"]
+    assert sorted(p.name for p in (tmp_path / "pics").iterdir()) == sorted(images)
+
+
+def test_export_says_its_warning_without_a_source_line(files, tmp_path):
+    _, _, cal, _ = files
+    bent = tmp_path / "k.yaml"
+    bent.write_text(cal.read_text().replace(" k: 0.0,", " k: 0.05,"))
+    assert bent.read_text() != cal.read_text()
+    r = _hmlvs("export", str(bent), "--format", "opencv", "--out", str(tmp_path / "o.yaml"))
+    assert r.returncode == 0, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("warning UserWarning: the division model")
+    assert ".py:" not in r.stderr and "warnings.warn" not in r.stderr
