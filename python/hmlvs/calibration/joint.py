@@ -88,6 +88,9 @@ class JointCalibration:
     #: chain mode with uncertain robot poses: the estimated spread of the robot pose errors,
     #: (translation mm, rotation deg) per axis; None with exact poses
     robot_pose_sigma: tuple[float, float] | None = None
+    #: RMS corner reprojection (px) of the camera calibration with every view's board pose
+    #: free (Zhang's, or the held camera's solvePnP): what the detector's noise leaves
+    free_rms_px: float | None = None
 
     @property
     def determined(self) -> bool:
@@ -547,7 +550,7 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         camera_from_board={} if chain else {v.id: state.camera_from_board[i]
                                             for i, v in enumerate(views)},
         warnings=warnings_out, test_rms_mm=test_rms, test_views=len(test or ()),
-        robot_pose_sigma=pose_sigma,
+        robot_pose_sigma=pose_sigma, free_rms_px=float(cv_rms),
         residuals={v.id: {"corner_pixels": np.asarray(v.corner_pixels, float)[keep_c[i]],
                           "corner_residuals": np.asarray(corners_r[i]),
                           "laser_pixels": laser_px[i][keep_l[i]],
