@@ -67,7 +67,7 @@ def _fmt(v: float | None, digits: str = ".3g") -> str:
     return "-" if v is None or not math.isfinite(v) else format(v, digits)
 
 
-def render_joint_report(result: Any, image_reports: Any = None,
+def render_joint_report(result: Any, image_reports: Any = None, verdict: Any = None,
                         title: str = "hmlvs calibration report (opencv model)") -> str:
     """The report of a :class:`~hmlvs.calibration.joint.JointCalibration` as an HTML string."""
     s = result.sensor
@@ -113,6 +113,7 @@ def render_joint_report(result: Any, image_reports: Any = None,
     how = "robot poses (hand-eye and board pose estimated)" if chain else \
         "no robot poses (camera and laser plane only)"
     return _page(title, f"""<h1>{html.escape(title)}</h1>
+{verdict_html(verdict)}
 <table class="summary">
 <tr><td>model, mode</td><td>opencv, {html.escape(how)}</td></tr>
 <tr><td>solve</td><td>{html.escape(result.termination.lower())} after {result.iterations}
@@ -142,12 +143,39 @@ def render_joint_report(result: Any, image_reports: Any = None,
 """)
 
 
-def write_joint_report(result: Any, path: str | os.PathLike, image_reports: Any = None) -> Path:
-    """Write the report atomically; returns its path."""
+def verdict_html(verdict: Any) -> str:
+    """The verdict, first in a report: whether to trust the calibration, why, the predicted
+    3D uncertainty and every check with its limit and the reason for that limit."""
+    if verdict is None:
+        return ""
+    if verdict.trustworthy:
+        head = ('<p class="verdict ok"><b>Verdict: this calibration can be trusted.</b> '
+                'Every check passed.</p>')
+    else:
+        items = "".join(f"<li>{html.escape(r)}</li>" for r in verdict.reasons)
+        head = ('<p class="verdict warn"><b>Verdict: this calibration is NOT to be trusted.'
+                f'</b></p><ul class="warn">{items}</ul>')
+    ms = verdict.map_sigma_mm
+    unc = ("" if ms is None else
+           f"<p>Predicted 3D uncertainty of measured points over the laser line's image "
+           f"footprint: {ms['rms']:.3f} mm RMS, {ms['p95']:.3f} mm at the 95th percentile.</p>")
+    rows = "".join(
+        f"<tr><td>{'ok' if c.ok else '<b>FAIL</b>'}</td><td>{html.escape(c.name)}</td>"
+        f"<td>{c.value:.4g} {html.escape(c.unit)}</td><td>{'&le;' if c.kind == 'max' else '&ge;'}"
+        f" {c.limit:.4g} {html.escape(c.unit)}</td><td>{html.escape(c.why)}</td></tr>"
+        for c in verdict.checks)
+    return (f"<h2>Verdict</h2>{head}{unc}<table><tr><th></th><th>check</th><th>value</th>"
+            f"<th>limit</th><th>why this limit</th></tr>{rows}</table>")
+
+
+def write_joint_report(result: Any, path: str | os.PathLike, image_reports: Any = None,
+                       verdict: Any = None) -> Path:
+    """Write the report atomically (``verdict``, a
+    :class:`hmlvs.diagnostics.verdict.Verdict`, shown first); returns its path."""
     path = Path(path)
     if path.suffix not in (".html", ".htm"):
         raise ValueError(f"{path}: the report is an .html file")
-    text = render_joint_report(result, image_reports)
+    text = render_joint_report(result, image_reports, verdict)
     with atomic_write(path) as fh:
         fh.write(text)
     return path
