@@ -28,7 +28,7 @@ pytestmark = pytest.mark.scene  # rendered images
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
     out = tmp_path_factory.mktemp("verdict")
-    session = general_session(views=12, seed=1)
+    session = general_session(views=10, seed=1)
     render_general_session(session, out)
     views, board, size, _, _ = views_from_images(out)
     return session, out, views, board, size
@@ -74,7 +74,11 @@ def test_correct_render_is_trustworthy_exit_0_verdict_in_file_json_and_report(
 def test_wrong_square_exits_3_names_the_square_and_measure_refuses(rendered, tmp_path,
                                                                    capsys):
     _, folder, *_ = rendered
-    m = _manifest(folder, "square15.json", lambda d: d["board"].update(square=15.0))
+    def edit(doc):  # 8 views are enough, and faster
+        doc["board"]["square"] = 15.0
+        doc["poses"] = doc["poses"][:8]
+
+    m = _manifest(folder, "square15.json", edit)
     out = tmp_path / "cal.yaml"
     code, io = _run(["calibrate", str(m), "--out", str(out), "--quiet"], capsys)
     assert code == 3
@@ -100,6 +104,7 @@ def test_quaternion_order_declared_wrong_exits_3_with_the_order_named(rendered, 
 
     def edit(doc):
         doc["pose_format"] = {"quaternion_order": "wxyz"}  # but written x y z w
+        doc["poses"] = doc["poses"][:8]
         for p in doc["poses"]:
             m = np.asarray(p["pose"], float)
             p["pose"] = {"position": m[:3, 3].tolist(),
@@ -123,7 +128,7 @@ def _moved(i, m):
     t = np.eye(4)
     t[:2, :2] = [[c, -s], [s, c]]
     t[:3, 3] = [30.0, -20.0, 0.0]
-    return t @ m if i in (1, 5, 8, 10) else m
+    return t @ m if i in (1, 5, 8) else m
 
 
 _SWAP = {2: 7, 7: 2, 4: 9, 9: 4}
@@ -136,7 +141,7 @@ MISTAKES = {
                    "quaternions are written xyzw, not wxyz"),
     "metres": (None, lambda i, m: np.vstack([np.c_[m[:3, :3], m[:3, 3] / 1000], [0, 0, 0, 1]]),
                "the robot positions are metres read as millimetres: set the poses' unit to m"),
-    "board moved": (None, _moved, "view(s) v001, v005, v008, v010 put the board elsewhere"),
+    "board moved": (None, _moved, "view(s) v001, v005, v008 put the board elsewhere"),
     "images of other poses": (None, lambda i, m: m, "view(s) v002, v004, v007, v009 put the "
                               "board elsewhere"),
 }
