@@ -233,3 +233,13 @@ def test_paper_model_gets_a_verdict_too(tmp_path, capsys):
     v = json.loads(io.out)["verdict"]
     assert not v["trustworthy"] and "from their reference positions" in v["reasons"][0]
     assert Calibration.load(tmp_path / "b.yaml").trustworthy is False
+
+
+def test_another_sessions_images_with_these_poses_are_refused_as_disagreeing(rendered):
+    """Every image from another session: no view's numbering fits its pose, so the input
+    is refused (exit 2 on the command line) with the disagreement named."""
+    _, _, views, board, size = rendered
+    other = general_session(views=len(views), seed=2).base_from_hand
+    vs = [dataclasses.replace(v, base_from_hand=other[i]) for i, v in enumerate(views)]
+    with pytest.raises(ValueError, match="the images disagree with their robot poses"):
+        calibrate_joint(vs, board, size)

@@ -396,9 +396,12 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
                                          "the other views' robot motion (or both do)")
             keep = [i for i in range(len(views)) if flips[i] is not None]
             if len(keep) < 3:
-                raise ValueError("the corner numbering agrees with the robot poses in only "
-                                 f"{len(keep)} views; rejected: " + "; ".join(
-                                     f"{k}: {r}" for k, r in rejected.items()))
+                raise ValueError(
+                    f"the images disagree with their robot poses: the board's orientation "
+                    f"fits the robot motion in only {len(keep)} of {len(views)} views (left "
+                    f"out: {', '.join(rejected)}); check that the images belong to these poses "
+                    "(same session, same order), the poses' convention and that the board "
+                    "stayed put")
             warnings_out.append("views left out, their corner numbering undecided: "
                                 + ", ".join(rejected))
             views, bfh, flips = [views[i] for i in keep], [bfh[i] for i in keep], \
