@@ -597,7 +597,9 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
         result = calibrate_joint(views, board, size, distortion=terms,
                                  base_from_board=board_pose, test=test_views or None,
                                  camera=camera)
-        verdict = require_check(judge_joint(result, views, board), require)
+        verdict = require_check(judge_joint(
+            result, views, board, options={"distortion": terms, "base_from_board": board_pose,
+                                           "camera": camera}), require)
         report_path = None
         with _outputs(out) as made:
             blur = next((r.blur_var for r in reports if r.ok), None)

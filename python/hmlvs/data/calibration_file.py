@@ -28,6 +28,7 @@ Format ``hmlvs-calibration`` version 1, as YAML (``.yaml``/``.yml``) or JSON (``
       reasons: [...]                         # one sentence per failed check
       checks: [{name, value, limit, ok, unit, why}, ...]
       map_sigma_mm: {rms: 0.14, p95: 0.23}   # predicted 3D uncertainty, or null
+      cross_validation_mm: {rms: .., p95: ..}  # two halves' maps apart, or null
       likely_mistake: null                   # the usual mistake that explains the data
 
 A file without ``model`` is a paper-model file.
@@ -95,6 +96,9 @@ def _schema() -> "schema.Field":
                                 "map_sigma_mm": sc.Field("map", "{rms, p95} in mm",
                                                          items=sc.number(nullable=True),
                                                          nullable=True),
+                                "cross_validation_mm": sc.Field(
+                                    "map", "{rms, p95} in mm",
+                                    items=sc.number(nullable=True), nullable=True),
                                 "likely_mistake": sc.text(nullable=True)}),
     })
 

@@ -112,22 +112,29 @@ class Verdict:
     checks: list[Check]
     map_sigma_mm: dict[str, float] | None = None
     likely_mistake: str | None = None
+    #: the two halves' maps' difference ({"rms", "p95"}, mm), None when not computed
+    cross_validation_mm: dict[str, float] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"trustworthy": bool(self.trustworthy), "reasons": list(self.reasons),
                 "checks": [c.to_dict() for c in self.checks],
                 "map_sigma_mm": None if self.map_sigma_mm is None else
                 {k: _num(v) for k, v in self.map_sigma_mm.items()},
+                "cross_validation_mm": None if self.cross_validation_mm is None else
+                {k: _num(v) for k, v in self.cross_validation_mm.items()},
                 "likely_mistake": self.likely_mistake}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Verdict":
         ms = d.get("map_sigma_mm")
+        cv = d.get("cross_validation_mm")
         return cls(trustworthy=bool(d["trustworthy"]), reasons=[str(r) for r in
                                                                   d.get("reasons") or []],
                    checks=[Check.from_dict(c) for c in d.get("checks") or []],
                    map_sigma_mm=None if ms is None else {k: _float(v) for k, v in ms.items()},
-                   likely_mistake=d.get("likely_mistake"))
+                   likely_mistake=d.get("likely_mistake"),
+                   cross_validation_mm=None if cv is None else
+                   {k: _float(v) for k, v in cv.items()})
 
     def text(self) -> str:
         """The verdict in words a technician reads first."""
@@ -140,6 +147,10 @@ class Verdict:
             lines.append(f"predicted 3D uncertainty of measured points: "
                          f"{self.map_sigma_mm['rms']:.3f} mm RMS, "
                          f"{self.map_sigma_mm['p95']:.3f} mm at the 95th percentile")
+        if self.cross_validation_mm is not None:
+            lines.append(f"calibrated on two halves of the views, the maps differ by "
+                         f"{self.cross_validation_mm['rms']:.3f} mm RMS, "
+                         f"{self.cross_validation_mm['p95']:.3f} mm at the 95th percentile")
         for c in self.checks:
             rel = "<=" if c.kind == "max" else ">="
             lines.append(f"  {'ok  ' if c.ok else 'FAIL'} {c.name}: {c.value:.4g} {c.unit} "
@@ -377,13 +388,30 @@ def verdict_from_checks(checks: list[Check], likely_mistake: str | None = None,
 
 
 def judge_joint(result: Any, views: Sequence[Any], board: Any, *,
-                map_sigma: bool = True, mistakes: bool = True) -> Verdict:
+                map_sigma: bool = True, mistakes: bool = True,
+                cross_validate: bool = True, options: dict[str, Any] | None = None
+                ) -> Verdict:
     """The verdict on a general-model calibration (``calibrate_joint``'s result) from the
     views it was given. ``map_sigma``: predict the 3D uncertainty
     (:func:`hmlvs.diagnostics.map_sigma.map_sigma_mm`); ``mistakes``: when a check fails,
-    look for the likely mistake (:func:`find_mistake`)."""
+    look for the likely mistake (:func:`find_mistake`); ``cross_validate``: calibrate the
+    two halves of the views again (``calibrate_joint`` with ``options``, those of the
+    calibration judged) and compare their maps (:func:`cross_validation`)."""
     board = BoardSpec.of(board)
     checks = joint_checks(result, views, board)
+    cv = None
+    if cross_validate:
+        cv = cross_validation(result, views, board, options or {})
+        if cv is not None:
+            ratio = cv["rms"] / max(cv["predicted_rms"], 1e-9)
+            checks.append(_check(
+                "cross_validation", ratio, CROSS_VALIDATION_LIMIT, "",
+                "two calibrations on the two halves of the views map the same stripe pixels "
+                "about their combined predicted uncertainty apart (renders: 0.8-2.2 times); "
+                f"beyond {CROSS_VALIDATION_LIMIT:g} times the halves disagree",
+                f"calibrated on two halves of the views, the maps differ by "
+                f"{cv['rms']:.3f} mm RMS, {ratio:.1f} times their predicted uncertainty: the "
+                "views disagree with one another (or the uncertainty is understated)"))
     mistake = None
     if mistakes and result.mode == "chain" and not all(c.ok for c in checks):
         mistake = find_mistake(views, board, tuple(result.sensor.image_size)).sentence
@@ -392,7 +420,48 @@ def judge_joint(result: Any, views: Sequence[Any], board: Any, *,
         from .map_sigma import map_sigma_mm
 
         ms = map_sigma_mm(result, views)
-    return verdict_from_checks(checks, mistake, ms)
+    v = verdict_from_checks(checks, mistake, ms)
+    v.cross_validation_mm = None if cv is None else {"rms": cv["rms"], "p95": cv["p95"]}
+    return v
+
+
+#: the two halves' maps may differ by this many times their combined predicted uncertainty
+CROSS_VALIDATION_LIMIT = 4.0
+
+
+def cross_validation(result: Any, views: Sequence[Any], board: BoardSpec,
+                     options: dict[str, Any]) -> dict[str, float] | None:
+    """Calibrate on the two halves of the views (alternate views, in their order) and map
+    the calibration's stripe footprint with both (in the flange frame with robot poses,
+    else the camera frame): their difference (``rms``, ``p95`` mm) and the RMS of their
+    combined predicted uncertainty (``predicted_rms``, the parameters' alone: the same
+    pixels are mapped). None when a half has fewer than 3 views with corners or cannot be
+    calibrated."""
+    from ..calibration.joint import calibrate_joint
+    from .map_sigma import _points, footprint, point_sigmas
+
+    used = [v for v in views if v.id in result.per_view]
+    halves = [used[0::2], used[1::2]]
+    if any(sum(len(v.corner_index) >= 6 for v in h) < 3 for h in halves):
+        return None
+    size = tuple(result.sensor.image_size)
+    try:
+        a, b = (calibrate_joint(h, board, size, **options) for h in halves)
+    except ValueError:
+        return None
+    if a.mode != result.mode or b.mode != result.mode:
+        return None
+    chain = result.mode == "chain"
+    px = footprint(result)
+    if len(px) == 0:
+        return None
+    d = np.linalg.norm(_points(a.sensor, px, chain) - _points(b.sensor, px, chain), axis=1)
+    sig = np.sqrt(point_sigmas(a, px, 0.0) ** 2 + point_sigmas(b, px, 0.0) ** 2)
+    ok = np.isfinite(d) & np.isfinite(sig)
+    if not ok.any():
+        return None
+    return {"rms": float(np.sqrt(np.mean(d[ok] ** 2))), "p95": float(np.percentile(d[ok], 95)),
+            "predicted_rms": float(np.sqrt(np.mean(sig[ok] ** 2)))}
 
 
 # -- the likely mistake --------------------------------------------------------------------
@@ -675,13 +744,22 @@ def require_check(verdict: Verdict, require_mm: float | None) -> Verdict:
     if not (math.isfinite(require_mm) and require_mm > 0):
         raise ValueError(f"--require must be a positive number of mm, got {require_mm}")
     p95 = float("inf") if verdict.map_sigma_mm is None else verdict.map_sigma_mm["p95"]
-    check = _check(
+    checks = [*verdict.checks, _check(
         "map_sigma_p95", p95, require_mm, "mm",
         "the user's demand (--require) on the predicted 95th-percentile 3D uncertainty",
         f"the predicted 3D uncertainty reaches {p95:.3f} mm at the 95th percentile, more "
-        f"than the {require_mm:g} mm required")
-    return verdict_from_checks([*verdict.checks, check], verdict.likely_mistake,
-                               verdict.map_sigma_mm)
+        f"than the {require_mm:g} mm required")]
+    if verdict.cross_validation_mm is not None:
+        cv95 = verdict.cross_validation_mm["p95"]
+        checks.append(_check(
+            "cross_validation_p95", cv95, require_mm, "mm",
+            "the user's demand (--require) on the 95th percentile of the difference between "
+            "the two halves' maps",
+            f"calibrations on two halves of the views map points up to {cv95:.3f} mm apart "
+            f"(95th percentile), more than the {require_mm:g} mm required"))
+    out = verdict_from_checks(checks, verdict.likely_mistake, verdict.map_sigma_mm)
+    out.cross_validation_mm = verdict.cross_validation_mm
+    return out
 
 
 # -- the paper model ------------------------------------------------------------------------

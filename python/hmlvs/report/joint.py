@@ -159,6 +159,10 @@ def verdict_html(verdict: Any) -> str:
     unc = ("" if ms is None else
            f"<p>Predicted 3D uncertainty of measured points over the laser line's image "
            f"footprint: {ms['rms']:.3f} mm RMS, {ms['p95']:.3f} mm at the 95th percentile.</p>")
+    cv = getattr(verdict, "cross_validation_mm", None)
+    if cv is not None:
+        unc += (f"<p>Calibrated on two halves of the views, the maps differ by "
+                f"{cv['rms']:.3f} mm RMS, {cv['p95']:.3f} mm at the 95th percentile.</p>")
     rows = "".join(
         f"<tr><td>{'ok' if c.ok else '<b>FAIL</b>'}</td><td>{html.escape(c.name)}</td>"
         f"<td>{c.value:.4g} {html.escape(c.unit)}</td><td>{'&le;' if c.kind == 'max' else '&ge;'}"
