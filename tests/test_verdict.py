@@ -71,7 +71,8 @@ def test_correct_render_is_trustworthy_exit_0_verdict_in_file_json_and_report(
     cal = Calibration.load(out)
     assert cal.trustworthy is True
     html = rep.read_text()
-    assert html.index("Verdict: this calibration can be trusted") < html.index("Camera (OpenCV")
+    assert html.index("Verdict: this calibration can be trusted") < html.index(
+        "Predicted 3D uncertainty over the image") < html.index("Camera (OpenCV")
 
 
 def test_wrong_square_exits_3_names_the_square_and_measure_refuses(rendered, tmp_path,

@@ -134,9 +134,9 @@ def point_sigmas(result: Any, pixels: np.ndarray, stripe_sigma_px: float) -> np.
     return np.sqrt(np.clip(var, 0, None))
 
 
-def map_sigma_mm(result: Any, views: Sequence[Any] | None = None) -> dict[str, float] | None:
-    """{"rms", "p95"}: the predicted 3D uncertainty (mm) over the laser line's image
-    footprint (:func:`footprint`), the stripe noise measured from the stripes themselves
+def predicted_map(result: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """The footprint's pixels (k, 2) and their predicted 3D standard deviations (k, mm), the
+    stripe noise measured from the stripes themselves
     (:func:`hmlvs.diagnostics.verdict.stripe_noise_px`); None without stripe pixels."""
     from .verdict import stripe_noise_px
 
@@ -146,7 +146,17 @@ def map_sigma_mm(result: Any, views: Sequence[Any] | None = None) -> dict[str, f
     sets = [r["laser_pixels"] for r in result.residuals.values()]
     sig = stripe_noise_px(sets)
     s = point_sigmas(result, px, sig if math.isfinite(sig) else 0.0)
-    s = s[np.isfinite(s)]
-    if s.size == 0:
-        return None
-    return {"rms": float(np.sqrt(np.mean(s**2))), "p95": float(np.percentile(s, 95))}
+    ok = np.isfinite(s)
+    return (px[ok], s[ok]) if ok.any() else None
+
+
+def summary(sigmas: np.ndarray) -> dict[str, float]:
+    """{"rms", "p95"} of predicted standard deviations (mm)."""
+    return {"rms": float(np.sqrt(np.mean(sigmas**2))), "p95": float(np.percentile(sigmas, 95))}
+
+
+def map_sigma_mm(result: Any, views: Sequence[Any] | None = None) -> dict[str, float] | None:
+    """{"rms", "p95"}: the predicted 3D uncertainty (mm) over the laser line's image
+    footprint (:func:`predicted_map`); None without stripe pixels."""
+    m = predicted_map(result)
+    return None if m is None else summary(m[1])

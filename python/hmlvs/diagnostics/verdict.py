@@ -114,6 +114,11 @@ class Verdict:
     likely_mistake: str | None = None
     #: the two halves' maps' difference ({"rms", "p95"}, mm), None when not computed
     cross_validation_mm: dict[str, float] | None = None
+    #: the uncertainty map (k, 3): pixel u, v and predicted 3D standard deviation (mm) over
+    #: the laser line's footprint; not stored in files
+    map_points: np.ndarray | None = field(default=None, repr=False, compare=False)
+    #: the image size (w, h) the map's pixels belong to
+    image_size: tuple[int, int] | None = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
         return {"trustworthy": bool(self.trustworthy), "reasons": list(self.reasons),
@@ -311,8 +316,8 @@ def joint_checks(result: Any, views: Sequence[Any], board: Any) -> list[Check]:
         lr = result.laser_rms_mm
         checks.append(_check(
             "laser_rms", lr, limit, "mm",
-            f"the stripe's own noise ({sigma_px:.3f} px, from its row-to-row scatter) carried "
-            f"to mm is {expected:.4f} mm; a correct calibration leaves at most "
+            f"the stripe's own noise ({sigma_px:.3f} px, its rows' scatter about a smooth "
+            f"curve) carried to mm is {expected:.4f} mm; a correct calibration leaves at most "
             f"{LASER_NOISE_FACTOR:g} times that (board-pose error, stripe bias at albedo "
             f"steps), and never asks less than {LASER_FLOOR_MM:g} mm",
             f"the stripe points lie {lr:.3f} mm RMS from the laser plane, more than the "
@@ -415,13 +420,17 @@ def judge_joint(result: Any, views: Sequence[Any], board: Any, *,
     mistake = None
     if mistakes and result.mode == "chain" and not all(c.ok for c in checks):
         mistake = find_mistake(views, board, tuple(result.sensor.image_size)).sentence
-    ms = None
+    ms = pm = None
     if map_sigma:
-        from .map_sigma import map_sigma_mm
+        from .map_sigma import predicted_map, summary
 
-        ms = map_sigma_mm(result, views)
+        m = predicted_map(result)
+        if m is not None:
+            ms, pm = summary(m[1]), np.c_[m[0], m[1]]
     v = verdict_from_checks(checks, mistake, ms)
     v.cross_validation_mm = None if cv is None else {"rms": cv["rms"], "p95": cv["p95"]}
+    v.map_points = pm
+    v.image_size = tuple(result.sensor.image_size)
     return v
 
 
@@ -759,6 +768,7 @@ def require_check(verdict: Verdict, require_mm: float | None) -> Verdict:
             f"(95th percentile), more than the {require_mm:g} mm required"))
     out = verdict_from_checks(checks, verdict.likely_mistake, verdict.map_sigma_mm)
     out.cross_validation_mm = verdict.cross_validation_mm
+    out.map_points, out.image_size = verdict.map_points, verdict.image_size
     return out
 
 

@@ -143,6 +143,43 @@ def render_joint_report(result: Any, image_reports: Any = None, verdict: Any = N
 """)
 
 
+#: the uncertainty map's cells over the image (columns, rows)
+_MAP_GRID = (8, 6)
+
+
+def _uncertainty_map(verdict: Any) -> str:
+    """The predicted 3D uncertainty over the image, as a table of cells: the 95th
+    percentile (mm) of the stripe pixels' predicted standard deviations in each cell,
+    shaded by it; "-" where the calibration saw no stripe (measurements there rest on
+    extrapolation)."""
+    pts = getattr(verdict, "map_points", None)
+    size = getattr(verdict, "image_size", None)
+    if pts is None or len(pts) == 0 or size is None:
+        return ""
+    gx, gy = _MAP_GRID
+    w, h = size
+    i = np.clip((pts[:, 0] / w * gx).astype(int), 0, gx - 1)
+    j = np.clip((pts[:, 1] / h * gy).astype(int), 0, gy - 1)
+    top = float(np.percentile(pts[:, 2], 95)) or 1.0
+    rows = []
+    for r in range(gy):
+        cells = []
+        for c in range(gx):
+            sel = pts[(i == c) & (j == r), 2]
+            if sel.size == 0:
+                cells.append('<td style="background:#eee">-</td>')
+                continue
+            q = float(np.percentile(sel, 95))
+            x = min(q / top, 1.0)
+            colour = f"rgb({int(255 * x)},{int(200 * (1 - x) + 55)},80)"
+            cells.append(f'<td style="background:{colour}">{q:.3f}</td>')
+        rows.append("<tr>" + "".join(cells) + "</tr>")
+    return ("<p>Predicted 3D uncertainty over the image (95th percentile in mm of the "
+            "stripe points seen in each part of the image; '-': no stripe seen there, "
+            f"measurements there rest on extrapolation):</p><table class=\"map\">"
+            f"{''.join(rows)}</table>")
+
+
 def verdict_html(verdict: Any) -> str:
     """The verdict, first in a report: whether to trust the calibration, why, the predicted
     3D uncertainty and every check with its limit and the reason for that limit."""
@@ -168,6 +205,7 @@ def verdict_html(verdict: Any) -> str:
         f"<td>{c.value:.4g} {html.escape(c.unit)}</td><td>{'&le;' if c.kind == 'max' else '&ge;'}"
         f" {c.limit:.4g} {html.escape(c.unit)}</td><td>{html.escape(c.why)}</td></tr>"
         for c in verdict.checks)
+    unc += _uncertainty_map(verdict)
     return (f"<h2>Verdict</h2>{head}{unc}<table><tr><th></th><th>check</th><th>value</th>"
             f"<th>limit</th><th>why this limit</th></tr>{rows}</table>")
 
