@@ -721,7 +721,9 @@ def find_mistake(views: Sequence[Any], board: Any, image_size: tuple[int, int]) 
                         "given)")
             return Mistake(sentence, table, best, bf.scale, free)
     bad, fit = _split_views(obs, given_bfh, given_flips, 1.0)
-    if bad and len(bad) < n - 2 and _good(
+    # a minority of the views: when most views disagree with the rest, it is the poses or
+    # the chain that are wrong, not a few views
+    if bad and len(bad) < n / 2 and _good(
             _rms_over(fit, [obs.views[i].id for i in range(n) if i not in bad]), free):
         names = [obs.views[i].id for i in bad]
         sentence = (f"likely mistake: view(s) {', '.join(names)} put the board elsewhere "
@@ -734,8 +736,9 @@ def find_mistake(views: Sequence[Any], board: Any, image_size: tuple[int, int]) 
     if not _good(as_given, free):
         sentence = (f"no usual mistake explains the data (square size, metres or "
                     f"millimetres, inverted poses, quaternion order, a few moved views: best "
-                    f"{bf.rms:.2f} px RMS against {as_given:.2f} px as given): check that the "
-                    "images belong to these robot poses and that the board stayed put")
+                    f"{bf.rms:.2f} px RMS against {as_given:.2f} px as given): check the robot "
+                    "poses' accuracy and timing (taken when the robot stood still?), that the "
+                    "images belong to these poses and that the board stayed put")
         return Mistake(sentence, table, best, bf.scale, free)
     return Mistake(None, table, "as given", 1.0, free)
 
