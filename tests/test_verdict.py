@@ -278,3 +278,19 @@ def test_predicted_map_uncertainty_on_the_render_within_3x_of_held_out_error(ren
     measured = float(np.sqrt(np.mean(np.concatenate(errs) ** 2)))
     assert pred is not None
     assert 1 / 3 < pred["rms"] / measured < 3, (pred, measured)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_stripe_noise_is_measured_from_the_stripes_themselves(seed):
+    """A smooth distorted line plus 0.1 px noise over 3 views: the estimate within 10 %
+    (the map uncertainty and the laser check rest on it)."""
+    from hmlvs.diagnostics.verdict import stripe_noise_px
+
+    rng = np.random.default_rng(seed)
+    sets = []
+    for _ in range(3):
+        u = np.arange(100.0, 900.0)
+        x = (u - 500) / 400
+        v = 300 + rng.uniform(-80, 80) * x + rng.uniform(-30, 30) * x**2 + 8 * x**3
+        sets.append(np.c_[u, v + rng.normal(0, 0.1, len(u))])
+    assert stripe_noise_px(sets) == pytest.approx(0.1, rel=0.1)

@@ -494,7 +494,7 @@ def _reorder(m: np.ndarray, order: tuple[int, int, int, int]) -> np.ndarray:
     return out
 
 
-#: the pose hypotheses: name -> (what the poses' reader did wrong, the fix)
+#: the pose hypotheses: name -> the base_from_hand the given pose would be under it
 _POSE_HYPOTHESES: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "as given": lambda m: m,
     "inverted": _inv,
