@@ -652,7 +652,9 @@ def _split_views(obs: _Obs, bfh: list[np.ndarray], flips: list[bool | None], sca
         return [], _chain_rms(obs, bfh, flips, scale, decided, all_i)
     fit = _chain_rms(obs, bfh, [flips[i] if i in fit_on else None for i in all_i], scale,
                      fit_on, all_i)
-    bad = [i for i in all_i if fit.per_view[obs.views[i].id] > limit]
+    if not fit.per_view:  # the chain cannot be fitted on the consensus (e.g. too little turn)
+        return [], fit
+    bad = [i for i in all_i if fit.per_view.get(obs.views[i].id, np.inf) > limit]
     return bad, fit
 
 
