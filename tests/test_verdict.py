@@ -16,7 +16,7 @@ from hmlvs.data.calibration_file import Calibration
 from hmlvs.data.poses import rotation_to_quaternion
 from hmlvs.data.views import ViewData
 from hmlvs.diagnostics.map_sigma import map_sigma_mm
-from hmlvs.diagnostics.verdict import _reorder, judge_joint, require_check
+from hmlvs.diagnostics.verdict import Verdict, _reorder, judge_joint, require_check
 from hmlvs.image.views import views_from_images
 from hmlvs.sim.general import general_session, render_general_session
 import numpy as np
@@ -181,6 +181,10 @@ def test_the_verdict_round_trips_and_old_files_load_without_one(rendered, tmp_pa
     cal.verdict = v.to_dict()
     back = Calibration.load(cal.save(tmp_path / "new.json"))
     assert back.trustworthy is False and back.verdict["reasons"] == v.reasons
+    again = Verdict.from_dict(back.verdict)
+    assert [(c.name, c.ok, c.kind) for c in again.checks] == [
+        (c.name, c.ok, c.kind) for c in v.checks]
+    assert again.text().splitlines()[:3] == v.text().splitlines()[:3]
 
 
 def _noisy_views(session, seed, corner_px=0.05, stripe_px=0.1):

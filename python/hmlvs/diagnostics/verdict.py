@@ -84,13 +84,13 @@ class Check:
 
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "value": _num(self.value), "limit": _num(self.limit),
-                "ok": bool(self.ok), "unit": self.unit, "why": self.why}
+                "ok": bool(self.ok), "unit": self.unit, "kind": self.kind, "why": self.why}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Check":
         return cls(name=str(d["name"]), value=_float(d.get("value")),
                    limit=_float(d.get("limit")), ok=bool(d["ok"]), why=str(d.get("why", "")),
-                   unit=str(d.get("unit", "")))
+                   unit=str(d.get("unit", "")), kind=str(d.get("kind", "max")))
 
 
 def _num(x: float) -> float | None:
