@@ -574,12 +574,15 @@ def _held_camera(initial: Optional[Path]) -> Any:
 
 def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: Optional[Path],
                       distortion: str, report: Optional[Path], quiet: bool,
-                      as_json: bool, initial: Optional[Path] = None) -> None:
-    """hmlvs calibrate --model opencv: images -> views -> joint calibration -> file. With
-    ``initial`` (an opencv calibration, e.g. of a bench session) its camera and laser plane
-    are held and the hand-eye transform and board pose calibrated."""
+                      as_json: bool, initial: Optional[Path] = None,
+                      require: Optional[float] = None) -> None:
+    """hmlvs calibrate --model opencv: images -> views -> joint calibration -> verdict ->
+    file. With ``initial`` (an opencv calibration, e.g. of a bench session) its camera and
+    laser plane are held and the hand-eye transform and board pose calibrated. Exits 3 when
+    the verdict is not trustworthy (the file is still written, marked so)."""
     from .calibration.joint import calibrate_joint
     from .data.calibration_file import Calibration
+    from .diagnostics.verdict import judge_joint, require_check
     from .image.views import views_from_images
 
     with _guard(as_json), _collect_warnings() as caught:
@@ -611,19 +614,26 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
         result = calibrate_joint(views, board, size, distortion=terms,
                                  base_from_board=board_pose, test=test_views or None,
                                  camera=camera)
+        verdict = require_check(judge_joint(
+            result, views, board, options={"distortion": terms, "base_from_board": board_pose,
+                                           "camera": camera}), require)
         report_path = None
         with _outputs(out) as made:
             blur = next((r.blur_var for r in reports if r.ok), None)
-            path = Calibration.from_joint(result, robot=arm, blur_var=blur).save(out)
+            cal = Calibration.from_joint(result, robot=arm, blur_var=blur)
+            cal.verdict = verdict.to_dict()
+            path = cal.save(out)
             made.append(path)
             if report is not None:
                 from .report.joint import write_joint_report
 
-                report_path = write_joint_report(result, report, image_reports=reports)
+                report_path = write_joint_report(result, report, image_reports=reports,
+                                                 verdict=verdict)
     warns = _gather(caught, result.warnings)
     if as_json:
         s = result.sensor
         _echo_json({"calibration": str(path), "model": "opencv", "mode": result.mode,
+                    "verdict": verdict.to_dict(),
                     "report": None if report_path is None else str(report_path),
                     "camera_matrix": s.camera_matrix.tolist(),
                     "dist_coeffs": s.dist_coeffs.tolist(), "image_size": list(s.image_size),
@@ -640,13 +650,26 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
                     "warnings": warns,
                     "images": [{"id": r.id, "ok": r.ok, "reason": r.reason,
                                 "corners": r.corners} for r in reports]})
+        _exit_untrusted(verdict)
         return
+    typer.echo(verdict.text())
     typer.echo(result.summary())
     if not quiet:
         _show_warnings(warns)
-    typer.echo(f"calibration written to {path}")
+    typer.echo(f"calibration written to {path}"
+               + ("" if verdict.trustworthy else " (marked not trustworthy)"))
     if report_path is not None:
         typer.echo(f"report written to {report_path}")
+    _exit_untrusted(verdict)
+
+
+#: the exit status of a calibration whose verdict is not trustworthy (its file is written)
+EXIT_UNTRUSTED = 3
+
+
+def _exit_untrusted(verdict: Any) -> None:
+    if not verdict.trustworthy:
+        raise typer.Exit(EXIT_UNTRUSTED)
 
 
 _ROBOT_OPTION = typer.Option(
@@ -711,8 +734,15 @@ def calibrate(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, no per-image "
                                "lines and no warnings on the terminal (--json collects them)."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary, warnings included."),
+    require: Optional[float] = typer.Option(
+        None, "--require", help="Also call the calibration untrustworthy (exit 3) when its "
+        "predicted 95th-percentile 3D uncertainty exceeds this many mm."),
 ) -> None:
     """Calibrate the sensor from laser on/off images (or, paper model, a calibration data set).
+
+    Every calibration gets a verdict, printed first: trustworthy or not, from named checks.
+    The exit status is 3 when it is not (the calibration file is still written, marked
+    "trustworthy: false" with the reasons).
 
     --model opencv (the default for images without a measured board pose) estimates the
     camera, the laser plane, the hand-eye transform and the board's pose from the images and
@@ -744,6 +774,9 @@ def calibrate(
         _check_suffix("--report", report, (".html", ".htm"), "an HTML report")
         _check_suffix("--save-data", save_data, (".npz", ".json"), "a data set")
         chosen = _resolve_model(model, data)
+        if chosen == "paper" and require is not None:
+            raise ValueError("--require judges the predicted 3D uncertainty, which only the "
+                             "opencv model computes so far; use --model opencv")
         if chosen == "opencv":
             _paper_only_options(method=method != "pso+lm", fixed=bool(fixed), free=bool(free),
                                 runs=runs != 1, iterations=iterations != 5000,
@@ -753,7 +786,7 @@ def calibrate(
                                 mode=mode != "corners")
     if chosen == "opencv":
         _calibrate_opencv(data, out, holdout, seed, robot, distortion, report, quiet, as_json,
-                          initial)
+                          initial, require)
         return
     with _guard(as_json), _collect_warnings() as caught:
         fixed_names, why = _resolve_fixed(fixed, free)
@@ -796,21 +829,27 @@ def calibrate(
                                  iterations=iterations, loss=loss, loss_scale=loss_scale,
                                  seed=seed, threads=threads,
                                  progress=_solve_progress(as_json or quiet))
+        from .diagnostics.verdict import judge_paper
+
+        verdict = judge_paper(result)
         report_path = None
         with _outputs(out) as made:
-            path = Calibration.from_result(result, ds, robot=arm).save(out)
+            cal = Calibration.from_result(result, ds, robot=arm)
+            cal.verdict = verdict.to_dict()
+            path = cal.save(out)
             made.append(path)
             if report is not None:
                 from .report.html import write_report
 
                 report_path = write_report(result, ds, report, test=test_ds,
-                                           image_reports=image_reports)
+                                           image_reports=image_reports, verdict=verdict)
     summary = result.summary()
     warns = _gather(caught, result.warnings, summary)
     det, undet = _determined(result)
     if as_json:
         _echo_json({"calibration": str(path), "report": None if report_path is None
-                    else str(report_path), "fit_rms_mm": result.fit_rms,
+                    else str(report_path), "verdict": verdict.to_dict(),
+                    "fit_rms_mm": result.fit_rms,
                     "test_rms_mm": result.test_rms, "method": method,
                     "parameters": result.params.to_dict(), "fixed": list(result.fixed),
                     "determined": det, "not_determined": undet,
@@ -820,7 +859,9 @@ def calibrate(
                     "images": [{"id": r.id, "ok": r.ok, "reason": r.reason,
                                 "points": r.points, "rejected": dict(r.rejected)}
                                for r in image_reports]})
+        _exit_untrusted(verdict)
         return
+    typer.echo(verdict.text())
     typer.echo(_without_warning_lines(summary))
     for note in widened:
         typer.echo(f"note: {note}")
@@ -831,9 +872,11 @@ def calibrate(
                   + f" (see {GLOSSARY_URL}#flat-direction)" if undet else ""))
     if not quiet:
         _show_warnings(warns)
-    typer.echo(f"calibration written to {path}")
+    typer.echo(f"calibration written to {path}"
+               + ("" if verdict.trustworthy else " (marked not trustworthy)"))
     if report_path is not None:
         typer.echo(f"report written to {report_path}")
+    _exit_untrusted(verdict)
 
 
 @app.command()
@@ -965,8 +1008,13 @@ def measure(
                              help="Point cloud to write (.ply or .csv)."),
     robot: Optional[Path] = _ROBOT_OPTION,
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+    accept_untrusted: bool = typer.Option(
+        False, "--accept-untrusted", help="Measure even with a calibration whose verdict "
+        "says not to trust it."),
 ) -> None:
     """Measure 3D points in the robot base frame with a calibrated sensor.
+
+    A calibration marked not trustworthy (its verdict) is refused unless --accept-untrusted.
 
     Example: hmlvs measure calibration.yaml scan/ --out cloud.ply
     """
@@ -982,6 +1030,11 @@ def measure(
 
         refuse_overwrite([calibration, *_inputs_of(source), robot], [("--out", out)])
         cal = Calibration.load(calibration)
+        if cal.trustworthy is False and not accept_untrusted:
+            first = (cal.verdict or {}).get("reasons") or ["no reason recorded"]
+            raise ValueError(f"{calibration} is marked not trustworthy ({first[0]}); "
+                             "calibrate again, or pass --accept-untrusted to measure with it "
+                             "anyway")
         if _is_manifest(source):
             result = measure_images(cal, source, robot=_load_robot(robot),
                                     image_size_of=f"the calibration {calibration}")

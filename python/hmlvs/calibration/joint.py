@@ -88,6 +88,9 @@ class JointCalibration:
     #: chain mode with uncertain robot poses: the estimated spread of the robot pose errors,
     #: (translation mm, rotation deg) per axis; None with exact poses
     robot_pose_sigma: tuple[float, float] | None = None
+    #: RMS corner reprojection (px) of the camera calibration with every view's board pose
+    #: free (Zhang's, or the held camera's solvePnP): what the detector's noise leaves
+    free_rms_px: float | None = None
 
     @property
     def determined(self) -> bool:
@@ -394,9 +397,12 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
                                          "the other views' robot motion (or both do)")
             keep = [i for i in range(len(views)) if flips[i] is not None]
             if len(keep) < 3:
-                raise ValueError("the corner numbering agrees with the robot poses in only "
-                                 f"{len(keep)} views; rejected: " + "; ".join(
-                                     f"{k}: {r}" for k, r in rejected.items()))
+                raise ValueError(
+                    f"the images disagree with their robot poses: the board's orientation "
+                    f"fits the robot motion in only {len(keep)} of {len(views)} views (left "
+                    f"out: {', '.join(rejected)}); check that the images belong to these poses "
+                    "(same session, same order), the poses' convention and that the board "
+                    "stayed put")
             warnings_out.append("views left out, their corner numbering undecided: "
                                 + ", ".join(rejected))
             views, bfh, flips = [views[i] for i in keep], [bfh[i] for i in keep], \
@@ -548,7 +554,7 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         camera_from_board={} if chain else {v.id: state.camera_from_board[i]
                                             for i, v in enumerate(views)},
         warnings=warnings_out, test_rms_mm=test_rms, test_views=len(test or ()),
-        robot_pose_sigma=pose_sigma,
+        robot_pose_sigma=pose_sigma, free_rms_px=float(cv_rms),
         residuals={v.id: {"corner_pixels": np.asarray(v.corner_pixels, float)[keep_c[i]],
                           "corner_residuals": np.asarray(corners_r[i]),
                           "laser_pixels": laser_px[i][keep_l[i]],

@@ -23,6 +23,13 @@ Format ``hmlvs-calibration`` version 1, as YAML (``.yaml``/``.yml``) or JSON (``
     model: paper                             # or opencv (then 'sensor' holds the calibration
     sensor: {...}                            # and 'parameters' may be absent):
                                              # hmlvs.models.opencv.OpenCvSensor.to_dict
+    verdict:                                 # optional (older files have none): whether
+      trustworthy: false                     # to trust it, hmlvs.diagnostics.verdict
+      reasons: [...]                         # one sentence per failed check
+      checks: [{name, value, limit, ok, unit, why}, ...]
+      map_sigma_mm: {rms: 0.14, p95: 0.23}   # predicted 3D uncertainty, or null
+      cross_validation_mm: {rms: .., p95: ..}  # two halves' maps apart, or null
+      likely_mistake: null                   # the usual mistake that explains the data
 
 A file without ``model`` is a paper-model file.
 
@@ -79,6 +86,20 @@ def _schema() -> "schema.Field":
         "hand_from_camera": sc.matrix(4, 4, "a 4x4 transform", nullable=True),
         "robot": sc.Field("any"), "sensor": sc.Field("map", "the opencv sensor", nullable=True),
         "stripe_blur_var_px2": sc.number("a blur variance in px^2", nullable=True),
+        "verdict": sc.Field("struct", "a verdict (trustworthy, reasons, checks)",
+                            required=("trustworthy",), nullable=True, keys={
+                                "trustworthy": sc.Field("bool", "true or false"),
+                                "reasons": sc.Field("list", "a list of sentences",
+                                                    items=sc.text("a sentence")),
+                                "checks": sc.Field("list", "a list of checks",
+                                                   items=sc.Field("any")),
+                                "map_sigma_mm": sc.Field("map", "{rms, p95} in mm",
+                                                         items=sc.number(nullable=True),
+                                                         nullable=True),
+                                "cross_validation_mm": sc.Field(
+                                    "map", "{rms, p95} in mm",
+                                    items=sc.number(nullable=True), nullable=True),
+                                "likely_mistake": sc.text(nullable=True)}),
     })
 
 
@@ -115,6 +136,14 @@ class Calibration:
     #: the camera blur variance (px^2) the image calibration fitted (its stripes' correction
     #: at albedo steps, ``stripe_from_pair`` ``blur_var``); measurement from images uses it
     blur_var: float | None = None
+    #: the verdict (:meth:`hmlvs.diagnostics.verdict.Verdict.to_dict`); None in files
+    #: written before verdicts
+    verdict: dict[str, Any] | None = None
+
+    @property
+    def trustworthy(self) -> bool | None:
+        """The verdict's: True, False, or None when the file carries no verdict."""
+        return None if self.verdict is None else bool(self.verdict["trustworthy"])
 
     def __post_init__(self) -> None:
         if self.model not in MODELS:
@@ -186,6 +215,8 @@ class Calibration:
         })
         if self.blur_var is not None:
             d["stripe_blur_var_px2"] = float(self.blur_var)
+        if self.verdict is not None:
+            d["verdict"] = self.verdict
         if self.sensor is not None:
             d["sensor"] = self.sensor.to_dict()
             if self.params is None:
@@ -271,7 +302,8 @@ class Calibration:
                    method=d.get("method"), data_sha256=d.get("data_sha256"),
                    created=d.get("created"), hmlvs_version=d.get("hmlvs_version"), robot=robot,
                    sensor=sensor, model=model,
-                   blur_var=None if blur_var is None else float(blur_var))
+                   blur_var=None if blur_var is None else float(blur_var),
+                   verdict=d.get("verdict"))
 
     def table(self) -> str:
         if self.params is None:

@@ -188,9 +188,11 @@ def _figures_html(figs: dict[str, str], captions: dict[str, str]) -> str:
 def render_report(result: Any, ds: Dataset, test: Dataset | None = None,
                   truth: Parameters | None = None, title: str = "hmlvs calibration report",
                   std: dict[str, float | None] | None = None, image_reports: Any = None,
-                  paper_sensor: bool | None = None) -> str:
-    """The report as an HTML string; ``std`` overrides the result's standard deviations (e.g.
-    those stored in a calibration file). "n.d.": not determined by the data.
+                  paper_sensor: bool | None = None, verdict: Any = None) -> str:
+    """The report as an HTML string (``verdict``, a
+    :class:`hmlvs.diagnostics.verdict.Verdict`, first); ``std`` overrides the result's
+    standard deviations (e.g. those stored in a calibration file). "n.d.": not determined
+    by the data.
 
     ``image_reports`` (from :func:`hmlvs.dataset_from_images`) adds a per-view account.
     ``paper_sensor`` shows the paper's Table 2 bounds and best fit beside the result;
@@ -236,7 +238,10 @@ def render_report(result: Any, ds: Dataset, test: Dataset | None = None,
     img = _figures_html(figs, captions)
     now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     stopped = getattr(result, "termination_message", "") or str(result.termination)
+    from .joint import verdict_html
+
     return _page(title, f"""<h1>{html.escape(title)}</h1>
+{verdict_html(verdict)}
 <table class="summary">
 <tr><td>method</td><td>{html.escape(result.method)}: {html.escape(stopped)}</td></tr>
 <tr><td>fit RMS of ||E_i||</td><td>{fit_txt}</td></tr>
@@ -262,13 +267,13 @@ def render_report(result: Any, ds: Dataset, test: Dataset | None = None,
 def write_report(result: Any, ds: Dataset, path: str | os.PathLike, test: Dataset | None = None,
                  truth: Parameters | None = None,
                  std: dict[str, float | None] | None = None, image_reports: Any = None,
-                 paper_sensor: bool | None = None) -> Path:
+                 paper_sensor: bool | None = None, verdict: Any = None) -> Path:
     """Write the report atomically; returns its path. See :func:`render_report`."""
     path = Path(path)
     if path.suffix not in (".html", ".htm"):
         raise ValueError(f"{path}: the report is an .html file")
     text = render_report(result, ds, test, truth, std=std, image_reports=image_reports,
-                         paper_sensor=paper_sensor)
+                         paper_sensor=paper_sensor, verdict=verdict)
     with atomic_write(path) as fh:
         fh.write(text)
     return path

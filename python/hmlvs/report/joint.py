@@ -68,7 +68,7 @@ def _fmt(v: float | None, digits: str = ".3g") -> str:
     return "-" if v is None or not math.isfinite(v) else format(v, digits)
 
 
-def render_joint_report(result: Any, image_reports: Any = None,
+def render_joint_report(result: Any, image_reports: Any = None, verdict: Any = None,
                         title: str = "hmlvs calibration report (opencv model)") -> str:
     """The report of a :class:`~hmlvs.calibration.joint.JointCalibration` as an HTML string."""
     s = result.sensor
@@ -114,6 +114,7 @@ def render_joint_report(result: Any, image_reports: Any = None,
     how = "robot poses (hand-eye and board pose estimated)" if chain else \
         "no robot poses (camera and laser plane only)"
     return _page(title, f"""<h1>{html.escape(title)}</h1>
+{verdict_html(verdict)}
 <table class="summary">
 <tr><td>model, mode</td><td>opencv, {html.escape(how)}</td></tr>
 <tr><td>solve</td><td>{html.escape(result.termination.lower())} after {result.iterations}
@@ -143,12 +144,81 @@ def render_joint_report(result: Any, image_reports: Any = None,
 """)
 
 
-def write_joint_report(result: Any, path: str | os.PathLike, image_reports: Any = None) -> Path:
-    """Write the report atomically; returns its path."""
+#: the uncertainty map's cells over the image (columns, rows)
+_MAP_GRID = (8, 6)
+
+
+def _uncertainty_map(verdict: Any) -> str:
+    """The predicted 3D uncertainty over the image, as a table of cells: the 95th
+    percentile (mm) of the stripe pixels' predicted standard deviations in each cell,
+    shaded by it; "-" where the calibration saw no stripe (measurements there rest on
+    extrapolation)."""
+    pts = getattr(verdict, "map_points", None)
+    size = getattr(verdict, "image_size", None)
+    if pts is None or len(pts) == 0 or size is None:
+        return ""
+    gx, gy = _MAP_GRID
+    w, h = size
+    i = np.clip((pts[:, 0] / w * gx).astype(int), 0, gx - 1)
+    j = np.clip((pts[:, 1] / h * gy).astype(int), 0, gy - 1)
+    top = float(np.percentile(pts[:, 2], 95)) or 1.0
+    rows = []
+    for r in range(gy):
+        cells = []
+        for c in range(gx):
+            sel = pts[(i == c) & (j == r), 2]
+            if sel.size == 0:
+                cells.append('<td style="background:#eee">-</td>')
+                continue
+            q = float(np.percentile(sel, 95))
+            x = min(q / top, 1.0)
+            colour = f"rgb({int(255 * x)},{int(200 * (1 - x) + 55)},80)"
+            cells.append(f'<td style="background:{colour}">{q:.3f}</td>')
+        rows.append("<tr>" + "".join(cells) + "</tr>")
+    return ("<p>Predicted 3D uncertainty over the image (95th percentile in mm of the "
+            "stripe points seen in each part of the image; '-': no stripe seen there, "
+            f"measurements there rest on extrapolation):</p><table class=\"map\">"
+            f"{''.join(rows)}</table>")
+
+
+def verdict_html(verdict: Any) -> str:
+    """The verdict, first in a report: whether to trust the calibration, why, the predicted
+    3D uncertainty and every check with its limit and the reason for that limit."""
+    if verdict is None:
+        return ""
+    if verdict.trustworthy:
+        head = ('<p class="verdict ok"><b>Verdict: this calibration can be trusted.</b> '
+                'Every check passed.</p>')
+    else:
+        items = "".join(f"<li>{html.escape(r)}</li>" for r in verdict.reasons)
+        head = ('<p class="verdict warn"><b>Verdict: this calibration is NOT to be trusted.'
+                f'</b></p><ul class="warn">{items}</ul>')
+    ms = verdict.map_sigma_mm
+    unc = ("" if ms is None else
+           f"<p>Predicted 3D uncertainty of measured points over the laser line's image "
+           f"footprint: {ms['rms']:.3f} mm RMS, {ms['p95']:.3f} mm at the 95th percentile.</p>")
+    cv = getattr(verdict, "cross_validation_mm", None)
+    if cv is not None:
+        unc += (f"<p>Calibrated on two halves of the views, the maps differ by "
+                f"{cv['rms']:.3f} mm RMS, {cv['p95']:.3f} mm at the 95th percentile.</p>")
+    rows = "".join(
+        f"<tr><td>{'ok' if c.ok else '<b>FAIL</b>'}</td><td>{html.escape(c.name)}</td>"
+        f"<td>{c.value:.4g} {html.escape(c.unit)}</td><td>{'&le;' if c.kind == 'max' else '&ge;'}"
+        f" {c.limit:.4g} {html.escape(c.unit)}</td><td>{html.escape(c.why)}</td></tr>"
+        for c in verdict.checks)
+    unc += _uncertainty_map(verdict)
+    return (f"<h2>Verdict</h2>{head}{unc}<table><tr><th></th><th>check</th><th>value</th>"
+            f"<th>limit</th><th>why this limit</th></tr>{rows}</table>")
+
+
+def write_joint_report(result: Any, path: str | os.PathLike, image_reports: Any = None,
+                       verdict: Any = None) -> Path:
+    """Write the report atomically (``verdict``, a
+    :class:`hmlvs.diagnostics.verdict.Verdict`, shown first); returns its path."""
     path = Path(path)
     if path.suffix not in (".html", ".htm"):
         raise ValueError(f"{path}: the report is an .html file")
-    text = render_joint_report(result, image_reports)
+    text = render_joint_report(result, image_reports, verdict)
     with atomic_write(path) as fh:
         fh.write(text)
     return path
