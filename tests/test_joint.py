@@ -399,3 +399,15 @@ def test_a_laser_only_view_needs_robot_poses():
     dark = ViewData("dark", np.zeros((0, 2)), np.zeros(0, int), views[0].laser_pixels, None)
     with pytest.raises(ValueError, match="view dark has no corners: a laser-only view needs"):
         calibrate_joint(views + [dark], board, (1024, 768))
+
+
+def test_stripe_correlation_counts_neighbours_that_act_as_one():
+    from hmlvs.calibration.joint import stripe_correlation
+
+    rng = np.random.default_rng(0)
+    white = [rng.normal(size=400) for _ in range(5)]
+    assert 0.8 < stripe_correlation(white) < 1.5
+    # noise smoothed over 9 neighbours (a box filter): about 9 of them act as one
+    smooth = [np.convolve(rng.normal(size=4000), np.ones(9) / 9, mode="valid") for _ in range(5)]
+    assert 6.0 < stripe_correlation(smooth) < 12.0
+    assert stripe_correlation([np.zeros(5)]) == 1.0  # too few to say: independent

@@ -91,6 +91,10 @@ class JointCalibration:
     #: RMS corner reprojection (px) of the camera calibration with every view's board pose
     #: free (Zhang's, or the held camera's solvePnP): what the detector's noise leaves
     free_rms_px: float | None = None
+    #: the stripe residuals' correlation length along the stripe (neighbouring stripe pixels
+    #: that count as one independent one, :func:`stripe_correlation`); the covariance takes
+    #: the stripe pixels as that many times fewer
+    stripe_correlation: float = 1.0
 
     @property
     def determined(self) -> bool:
@@ -506,6 +510,16 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
     corners_r, laser_r = _core._evaluate_joint(jv, state, opts)
     pose_err = _core._joint_pose_errors(jv, state, opts) if pose_sigma else []
     jac, names = _core._joint_jacobian(jv, state, opts)
+    # The Jacobian's rows: the corners (2 each), then the stripe pixels, then any pose prior.
+    # Neighbouring stripe pixels' errors are correlated (speckle, the smoothing along the
+    # stripe, the blur): counted as independent they would make the covariance claim a
+    # precision the data do not have (renders: 7-15 pixels act as one; the two halves of a
+    # session's views then disagreed by up to 4 times the uncertainty claimed).
+    stripe_corr = stripe_correlation(laser_r)
+    n_c = 2 * int(sum(int(k.sum()) for k in keep_c))
+    n_l = int(sum(len(r) for r in laser_r))
+    jac = np.array(jac, float)
+    jac[n_c:n_c + n_l] /= math.sqrt(stripe_corr)
     cov, rank, cond = _covariance(jac)
     std = {n: float(math.sqrt(max(cov[k, k], 0.0))) for k, n in enumerate(names)}
     if rank < len(names):
@@ -554,7 +568,7 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         camera_from_board={} if chain else {v.id: state.camera_from_board[i]
                                             for i, v in enumerate(views)},
         warnings=warnings_out, test_rms_mm=test_rms, test_views=len(test or ()),
-        robot_pose_sigma=pose_sigma, free_rms_px=float(cv_rms),
+        robot_pose_sigma=pose_sigma, stripe_correlation=stripe_corr, free_rms_px=float(cv_rms),
         residuals={v.id: {"corner_pixels": np.asarray(v.corner_pixels, float)[keep_c[i]],
                           "corner_residuals": np.asarray(corners_r[i]),
                           "laser_pixels": laser_px[i][keep_l[i]],
@@ -679,6 +693,31 @@ def _solve_uncertain_poses(make_views: Any, state: Any, opts: Any, keep_c: list[
             break
     opts.pose_sigma_r, opts.pose_sigma_t = sig_r, sig_t
     return result, state, (sig_t, math.degrees(sig_r))
+
+
+def stripe_correlation(residuals: Sequence[np.ndarray], max_lag: int = 60) -> float:
+    """How many neighbouring stripe pixels act as one independent one: per view, the
+    residuals' (in their order along the stripe) effective correlation length 1 + 2 sum rho_k
+    (their autocorrelation, summed until it first drops to 0, at most ``max_lag`` lags); the
+    median over the views with at least 20 residuals, at least 1."""
+    lengths = []
+    for r in residuals:
+        r = np.asarray(r, float)
+        r = r[np.isfinite(r)]
+        if len(r) < 20:
+            continue
+        r = r - r.mean()
+        v = float(r @ r)
+        if v <= 0:
+            continue
+        total = 1.0
+        for k in range(1, min(max_lag, len(r) // 2)):
+            rho = float(r[:-k] @ r[k:]) / v
+            if rho <= 0:
+                break
+            total += 2.0 * rho
+        lengths.append(total)
+    return max(1.0, float(np.median(lengths))) if lengths else 1.0
 
 
 def _covariance(jac: np.ndarray) -> tuple[np.ndarray, int, float]:
