@@ -20,3 +20,21 @@ def random_params(rng: np.random.Generator) -> np.ndarray:
     q[7] = rng.uniform(0.3, 0.7)
     q[5] = rng.uniform(0.0, 0.02)
     return q
+
+
+@pytest.fixture(scope="module")
+def cli_files(tmp_path_factory):
+    """A folder with a simulated data set, its calibration and a rendered 3-view image
+    session, for the command-line fault tests: (folder, data set, calibration, session)."""
+    from hmlvs.cli import main
+    from hmlvs.sim.general import general_session, render_general_session
+    import hmlvs.simulate
+
+    d = tmp_path_factory.mktemp("cli")
+    ds = hmlvs.simulate.session(num_poses=8, seed=1).dataset.save(d / "sim.npz")
+    cal = d / "cal.yaml"
+    with pytest.raises(SystemExit):
+        main(["calibrate", str(ds), "--method", "lm", "--out", str(cal), "-q"])
+    sess = d / "sess"
+    render_general_session(general_session(views=3, seed=2), sess)
+    return d, ds, cal, sess

@@ -18,7 +18,6 @@ import time
 import hmlvs
 from hmlvs import _io
 from hmlvs.cli import main
-from hmlvs.sim.general import general_session, render_general_session
 import numpy as np
 import pytest
 
@@ -49,15 +48,8 @@ def _temporaries(folder: Path) -> list[Path]:
 
 
 @pytest.fixture(scope="module")
-def files(tmp_path_factory):
-    d = tmp_path_factory.mktemp("fault")
-    ds = hmlvs.simulate.session(num_poses=8, seed=1).dataset.save(d / "sim.npz")
-    cal = d / "cal.yaml"
-    with pytest.raises(SystemExit):
-        main(["calibrate", str(ds), "--method", "lm", "--out", str(cal), "-q"])
-    sess = d / "sess"
-    render_general_session(general_session(views=3, seed=2), sess)
-    return d, ds, cal, sess
+def files(cli_files):
+    return cli_files
 
 
 # -- 1. temporary names --------------------------------------------------------------------

@@ -9,9 +9,7 @@ import hashlib
 import json
 from pathlib import Path
 
-import hmlvs
 from hmlvs.cli import main
-from hmlvs.sim.general import general_session, render_general_session
 import pytest
 
 
@@ -28,15 +26,8 @@ def _digest(folder: Path) -> dict[str, str]:
 
 
 @pytest.fixture(scope="module")
-def files(tmp_path_factory):
-    d = tmp_path_factory.mktemp("sacred")
-    ds = hmlvs.simulate.session(num_poses=8, seed=1).dataset.save(d / "sim.npz")
-    cal = d / "cal.yaml"
-    with pytest.raises(SystemExit):
-        main(["calibrate", str(ds), "--method", "lm", "--out", str(cal), "-q"])
-    sess = d / "sess"
-    render_general_session(general_session(views=3, seed=2), sess)
-    return d, ds, cal, sess
+def files(cli_files):
+    return cli_files
 
 
 @pytest.mark.scene
