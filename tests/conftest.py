@@ -26,9 +26,9 @@ def random_params(rng: np.random.Generator) -> np.ndarray:
 def cli_files(tmp_path_factory):
     """A folder with a simulated data set, its calibration and a rendered 3-view image
     session, for the command-line fault tests: (folder, data set, calibration, session)."""
+    import hmlvs
     from hmlvs.cli import main
     from hmlvs.sim.general import general_session, render_general_session
-    import hmlvs.simulate
 
     d = tmp_path_factory.mktemp("cli")
     ds = hmlvs.simulate.session(num_poses=8, seed=1).dataset.save(d / "sim.npz")
