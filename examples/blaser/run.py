@@ -22,6 +22,7 @@ import time
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import authors  # noqa: E402
+import hmlvs  # noqa: E402
 from make_session import make_session  # noqa: E402
 import score  # noqa: E402
 
@@ -63,7 +64,8 @@ def run_resolution(checkout: Path, work: Path, res: str) -> dict:
                                 sess.image_size, MATS[res]).save(auth)
     scores = [score.score(auth, "the authors' own", sess),
               score.score(cal, "hmlvs calibrate (defaults)", sess)]
-    return {"res": res, "seconds": seconds, "lines": lines, "session": sess, "scores": scores}
+    return {"res": res, "seconds": seconds, "lines": lines, "session": sess, "scores": scores,
+            "verdict": hmlvs.Calibration.load(cal).verdict}
 
 
 def section(results: list[dict]) -> list[str]:
@@ -95,6 +97,18 @@ def section(results: list[dict]) -> list[str]:
             "fit) 0.284 / 2.38 and 0.393 / 4.96, vision-calibration 0.9 with its defaults "
             "0.239 / 2.55 and 0.417 / 9.74; the authors' own calibration scores 0.298 / 5.30 "
             "and 0.377 / 13.70 here, so this scorer's planarity runs a few per cent higher."]
+    out += ["", "hmlvs' own verdict on each of its calibrations (`hmlvs calibrate` exits 3 "
+            "when it is not trustworthy):", ""]
+    for r in results:
+        v = r["verdict"]
+        if v is None:
+            continue
+        ms = v.get("map_sigma_mm") or {}
+        cv = v.get("cross_validation_mm") or {}
+        out.append(f"- {r['res']}: {'trustworthy' if v['trustworthy'] else 'not trustworthy'}; "
+                   f"predicted 3D uncertainty {ms.get('rms', float('nan')):.3f} mm RMS, the "
+                   f"two halves of the views {cv.get('rms', float('nan')):.3f} mm RMS apart; "
+                   + "; ".join(v["reasons"]))
     out += ["", "Per view, as `hmlvs calibrate` printed it:", ""]
     for r in results:
         out.append(f"- {r['res']} ({r['seconds']:.1f} s wall): " + "; ".join(
