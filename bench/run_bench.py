@@ -442,9 +442,26 @@ def main() -> None:
         *image_lines,
         "",
     ]
+    text += _kept_sections(args.out, text)
     with atomic_write(args.out) as fh:
         fh.write("\n".join(text))
     print("\n".join(text))
+
+
+def _kept_sections(path: Path, written: list[str]) -> list[str]:
+    """The sections of the existing RESULTS.md that this run does not write (e.g. the real
+    sensor's, written by examples/blaser/run.py where that data is at hand), as they were."""
+    if not path.exists():
+        return []
+    ours = {ln for ln in written if ln.startswith("## ")}
+    kept: list[str] = []
+    keep = False
+    for ln in path.read_text().splitlines():
+        if ln.startswith("## "):
+            keep = ln not in ours
+        if keep:
+            kept.append(ln)
+    return kept + [""] if kept else []
 
 
 if __name__ == "__main__":
