@@ -85,3 +85,42 @@ def test_bad_frames_and_calibrations_are_refused(rendered, tmp_path):
         m.points("frame.png", s.base_from_hand[0])
     with pytest.raises(ValueError, match="bogus"):
         hmlvs.Measurer(s.sensor, bogus=1)
+
+
+def test_measure_streams_a_scan_into_the_cloud_file(rendered, tmp_path):
+    """`hmlvs measure` writes the cloud frame by frame (measure_images_to): the same points,
+    in the same file format, as measuring the whole scan in memory; a failed run writes
+    nothing."""
+    from hmlvs.cli import main
+    from hmlvs.measurement.measure import measure_images, measure_images_to, read_ply
+    from hmlvs.sim.general import render_general_session
+
+    s, _ = rendered
+    folder = tmp_path / "scan"
+    render_general_session(s, folder)
+    cal_path = tmp_path / "true.yaml"
+    hmlvs.Calibration(sensor=s.sensor, model="opencv", method="truth").save(cal_path)
+    whole = measure_images(cal_path, folder)
+    done = []
+    streamed = measure_images_to(cal_path, folder, tmp_path / "a.ply",
+                                 progress=lambda k, n: done.append((k, n)))
+    assert done == [(k + 1, len(s)) for k in range(len(s))]
+    assert streamed.points == whole.cloud.num_valid and streamed.ids == whole.ids
+    got = read_ply(tmp_path / "a.ply")
+    np.testing.assert_array_equal(np.c_[got["x"], got["y"], got["z"]],
+                                  whole.cloud.valid_points())
+    np.testing.assert_array_equal(got["pose_index"], whole.cloud.pose_index[whole.cloud.valid])
+    whole.cloud.save(tmp_path / "whole.csv")
+    with pytest.raises(SystemExit) as e:
+        main(["measure", str(cal_path), str(folder), "--out", str(tmp_path / "b.csv")])
+    assert e.value.code == 0
+    assert (tmp_path / "b.csv").read_bytes() == (tmp_path / "whole.csv").read_bytes()
+    # a scan of frames none of which has a stripe: refused, and no file written
+    dark = tmp_path / "dark"
+    render_general_session(s, dark)
+    for png in dark.glob("*_on.png"):
+        png.write_bytes((dark / png.name.replace("_on", "_off")).read_bytes())
+    with pytest.raises(SystemExit) as e:
+        main(["measure", str(cal_path), str(dark), "--out", str(tmp_path / "c.ply")])
+    assert e.value.code == 2
+    assert not (tmp_path / "c.ply").exists()

@@ -918,19 +918,22 @@ def design(
         ]
         files = []
         if out is not None:
-            if as_json:
-                files = dsg.plot(report, out, errors=errors)
-            else:
-                from rich.console import Console
+            from contextlib import nullcontext
 
-                with Console(stderr=True).status(f"writing the design plots to {out} (about "
-                                                 "10-30 s)"):
-                    files = dsg.plot(report, out, errors=errors)
+            from rich.console import Console
+
+            from ._io import atomic_folder
+
+            status = nullcontext() if as_json else Console(stderr=True).status(
+                f"writing the design plots to {out} (about 10-30 s)")
+            # the plots and design.md as one: a run stopped while writing leaves none of them
+            with status, atomic_folder(out, last=("design.md",)) as tmp:
+                plots = dsg.plot(report, tmp, errors=errors)
+                with atomic_write(tmp / "design.md") as fh:
+                    fh.write(report.markdown(errors=errors, files=plots))
+            files = [out / p.name for p in plots] + [out / "design.md"]
+            if not as_json:
                 typer.echo(f"plots written to {out}", err=True)
-            md = out / "design.md"
-            with atomic_write(md) as fh:
-                fh.write(report.markdown(errors=errors, files=files))
-            files.append(md)
     except ValueError as e:
         typer.echo(f"error: {' '.join(str(e).split())}", err=True)
         raise typer.Exit(2) from None
@@ -1023,7 +1026,7 @@ def measure(
     from .data.calibration_file import Calibration
     from .data.dataset import Dataset
     from .measurement.measure import measure as measure_points
-    from .measurement.measure import measure_images
+    from .measurement.measure import measure_images_to
 
     with _guard(as_json), _collect_warnings() as caught:
         from .guard import refuse_overwrite
@@ -1035,28 +1038,33 @@ def measure(
             raise ValueError(f"{calibration} is marked not trustworthy ({first[0]}); "
                              "calibrate again, or pass --accept-untrusted to measure with it "
                              "anyway")
+        if out.suffix not in (".ply", ".csv"):
+            raise ValueError(f"--out {out}: point clouds are written as .ply or .csv")
         if _is_manifest(source):
-            result = measure_images(cal, source, robot=_load_robot(robot),
-                                    image_size_of=f"the calibration {calibration}")
-            cloud, info = result.cloud, {**result.summary(), "blur_var_px2": cal.blur_var}
+            # frame by frame into the cloud file: the memory of one frame, whatever the scan
+            streamed = measure_images_to(cal, source, out, robot=_load_robot(robot),
+                                         image_size_of=f"the calibration {calibration}",
+                                         progress=_bar("measuring frames", as_json))
+            path, n_valid, n_invalid = streamed.path, streamed.points, streamed.invalid
+            info = {**streamed.summary(), "blur_var_px2": cal.blur_var}
         else:
             ds = Dataset.load(source)
             cloud = measure_points(cal, [ds.pixels[i:i + 1] for i in range(len(ds))], ds.poses)
             err = np.linalg.norm(cloud.points - ds.points, axis=1)[cloud.valid]
             info = {"rms_mm": float(np.sqrt(np.mean(err**2))) if err.size else None}
-        if cloud.num_valid == 0:
-            raise ValueError(f"none of the {len(cloud)} stripe pixels' rays meets the laser "
-                             f"plane of {calibration}: nothing to write (is this calibration "
-                             "of the sensor that took these data?)")
-        path = cloud.save(out)
+            if cloud.num_valid == 0:
+                raise ValueError(f"none of the {len(cloud)} stripe pixels' rays meets the laser "
+                                 f"plane of {calibration}: nothing to write (is this "
+                                 "calibration of the sensor that took these data?)")
+            path = cloud.save(out)
+            n_valid, n_invalid = cloud.num_valid, len(cloud) - cloud.num_valid
     warns = _gather(caught)
-    summary = {"cloud": str(path), "points": cloud.num_valid,
-               "invalid": len(cloud) - cloud.num_valid, **info}
+    summary = {"cloud": str(path), "points": n_valid, "invalid": n_invalid, **info}
     if as_json:
         _echo_json({**summary, "warnings": warns} if warns else summary)
         return
     _show_warnings(warns)
-    typer.echo(f"{cloud.num_valid} points measured ({len(cloud) - cloud.num_valid} stripe "
+    typer.echo(f"{n_valid} points measured ({n_invalid} stripe "
                "pixels without a measurement: their rays miss the laser plane, meet it at a "
                "grazing angle or lie outside the image)")
     for pid, why in (info.get("rejected") or {}).items():

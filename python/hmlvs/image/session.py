@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -469,11 +469,12 @@ def _record_names(rec: Any) -> tuple[str, str]:
                  for k in ("on", "off"))  # type: ignore[return-value]
 
 
-def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | None = None,
-                        channel: int | None = None, normalize: bool = True,
-                        min_stripe: int = 20, image_size: tuple[int, int] | None = None,
-                        image_size_of: str = "the calibration", **stripe_options: Any
-                        ) -> tuple[list[str], list[Any], np.ndarray, list[ImageReport]]:
+def iter_stripes_from_images(source: Any, *, robot: Any = None,
+                             joint_unit: str | None = None, channel: int | None = None,
+                             normalize: bool = True, min_stripe: int = 20,
+                             image_size: tuple[int, int] | None = None,
+                             image_size_of: str = "the calibration", **stripe_options: Any
+                             ) -> Iterator[tuple[ImageReport, Any, np.ndarray | None]]:
     """Laser on/off pairs + joint readings (a manifest or a list of records) -> stripes.
 
     The measurement counterpart of :func:`dataset_from_images` (no checkerboard needed): for
@@ -483,6 +484,11 @@ def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | Non
     base_from_hand poses (n, 4, 4), reports). With ``image_size`` (width, height: that of
     ``image_size_of``, the calibration) images of another size are refused, a ValueError
     naming both sizes: a calibration holds for one camera at one resolution.
+
+    One pair at a time, in the session's order: (its report, its stripe or None when it was
+    rejected, its base_from_hand pose or None); the frames are read as the iteration asks, so
+    a scan of any length needs the memory of one frame. The manifest and the options are
+    checked before the first pair is read. :func:`stripes_from_images` collects them.
     """
     from ..geometry.robot import Robot
 
@@ -512,10 +518,20 @@ def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | Non
     robot = Robot.scorbot_er7() if robot is None else robot
     # option typos fail here
     extract_stripe(np.zeros((4, 4), np.uint8), **_core_options(stripe_options))
-    blur_var = _blur_var(stripe_options.get("blur_var"))
+    _blur_var(stripe_options.get("blur_var"))
+    return _iter_pairs(records, folder, source, unit, robot, channel, normalize, min_stripe,
+                       image_size, image_size_of, manifest_size, stripe_options)
+
+
+def _iter_pairs(records: list[Any], folder: Any, source: Any, unit: str, robot: Any,
+                channel: int | None, normalize: bool, min_stripe: int,
+                image_size: tuple[int, int] | None, image_size_of: str,
+                manifest_size: tuple[int, int] | None, stripe_options: dict[str, Any]
+                ) -> Iterator[tuple[ImageReport, Any, np.ndarray | None]]:
+    """The pairs of :func:`iter_stripes_from_images`, once its checks have passed."""
     from ..data.manifest import read_stripe_list
 
-    ids, stripes, poses, reports = [], [], [], []
+    blur_var = _blur_var(stripe_options.get("blur_var"))
     size = manifest_size
     for index, rec in enumerate(records):
         pid = _record_id(rec, index)
@@ -548,15 +564,26 @@ def stripes_from_images(source: Any, *, robot: Any = None, joint_unit: str | Non
                                      "measure with a calibration of this camera at this "
                                      "resolution")
         except _Reject as e:
-            reports.append(ImageReport(pid, index, on_name, off_name, False, str(e), {}, 0, 0,
-                                       {}))
+            yield (ImageReport(pid, index, on_name, off_name, False, str(e), {}, 0, 0, {}),
+                   None, None)
             continue
-        ids.append(pid)
-        stripes.append(item)
-        poses.append(pose)
-        reports.append(ImageReport(pid, index, on_name, off_name, True, "",
-                                   getattr(item, "counts", lambda: {})(), 0, found, {},
-                                   None if isinstance(item, StripeList) else blur_var))
+        yield (ImageReport(pid, index, on_name, off_name, True, "",
+                           getattr(item, "counts", lambda: {})(), 0, found, {},
+                           None if isinstance(item, StripeList) else blur_var), item, pose)
+
+
+def stripes_from_images(source: Any, **options: Any
+                        ) -> tuple[list[str], list[Any], np.ndarray, list[ImageReport]]:
+    """:func:`iter_stripes_from_images` (same arguments) collected: (ids, stripes,
+    base_from_hand poses (n, 4, 4), reports) of the pairs that gave a stripe, and every
+    pair's report."""
+    ids, stripes, poses, reports = [], [], [], []
+    for report, item, pose in iter_stripes_from_images(source, **options):
+        reports.append(report)
+        if item is not None:
+            ids.append(report.id)
+            stripes.append(item)
+            poses.append(pose)
     return ids, stripes, np.array(poses).reshape(-1, 4, 4), reports
 
 

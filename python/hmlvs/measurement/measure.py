@@ -58,42 +58,84 @@ class PointCloud:
 
     def save(self, path: str | os.PathLike, only_valid: bool = True) -> Path:
         """Write atomically as binary PLY (``.ply``) or CSV (``.csv``) by the suffix."""
-        path = Path(path)
-        if path.suffix == ".ply":
-            return self.save_ply(path, only_valid)
-        if path.suffix == ".csv":
-            return self.save_csv(path, only_valid)
-        raise ValueError(f"{path}: point clouds are written as .ply or .csv")
+        with CloudWriter(path) as w:
+            w.add(self, only_valid)
+        return Path(path)
 
     def save_ply(self, path: str | os.PathLike, only_valid: bool = True) -> Path:
         """Binary little-endian PLY: x, y, z (double, mm), intensity (float), pose_index (int)."""
-        keep = self.valid if only_valid else np.ones(len(self), bool)
-        n = int(keep.sum())
-        rec = np.empty(n, dtype=[("x", "<f8"), ("y", "<f8"), ("z", "<f8"),
-                                 ("intensity", "<f4"), ("pose_index", "<i4")])
-        rec["x"], rec["y"], rec["z"] = self.points[keep].T
-        rec["intensity"] = self.intensity[keep]
-        rec["pose_index"] = self.pose_index[keep]
-        header = ("ply\nformat binary_little_endian 1.0\n"
-                  "comment hmlvs point cloud, robot base frame, units mm\n"
-                  f"element vertex {n}\nproperty double x\nproperty double y\n"
-                  "property double z\nproperty float intensity\nproperty int pose_index\n"
-                  "end_header\n")
-        with atomic_write(path, "wb") as fh:
-            fh.write(header.encode("ascii"))
-            fh.write(rec.tobytes())
+        with CloudWriter(path, "ply") as w:
+            w.add(self, only_valid)
         return Path(path)
 
     def save_csv(self, path: str | os.PathLike, only_valid: bool = True) -> Path:
         """CSV with a header: x_mm, y_mm, z_mm, intensity, pose_index, u_px, v_px."""
-        keep = self.valid if only_valid else np.ones(len(self), bool)
-        with atomic_write(path) as fh:
-            fh.write("x_mm,y_mm,z_mm,intensity,pose_index,u_px,v_px\n")
-            for p, i, k, px in zip(self.points[keep], self.intensity[keep],
-                                   self.pose_index[keep], self.pixels[keep]):
-                fh.write(f"{p[0]:.6f},{p[1]:.6f},{p[2]:.6f},{i:.6g},{int(k)},"
-                         f"{px[0]:.4f},{px[1]:.4f}\n")
+        with CloudWriter(path, "csv") as w:
+            w.add(self, only_valid)
         return Path(path)
+
+
+_PLY_RECORD = np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<f4"),
+                        ("pose_index", "<i4")])
+
+
+class CloudWriter:
+    """A point cloud file written piece by piece (:meth:`add`), then atomically as a whole
+    when the ``with`` block ends without an error (nothing is written otherwise): binary PLY
+    (``kind="ply"``) or CSV. The points go to an anonymous temporary file (gone with the
+    process, whatever stops it) until then, so memory holds one piece at a time."""
+
+    def __init__(self, path: str | os.PathLike, kind: str | None = None) -> None:
+        self.path = Path(path)
+        self.kind = kind or self.path.suffix.lstrip(".")
+        if self.kind not in ("ply", "csv"):
+            raise ValueError(f"{self.path}: point clouds are written as .ply or .csv")
+        self.count = 0
+        self._body: Any = None
+
+    def __enter__(self) -> "CloudWriter":
+        import tempfile
+
+        self._body = tempfile.TemporaryFile()
+        return self
+
+    def add(self, cloud: "PointCloud", only_valid: bool = True) -> None:
+        keep = cloud.valid if only_valid else np.ones(len(cloud), bool)
+        if self.kind == "ply":
+            rec = np.empty(int(keep.sum()), dtype=_PLY_RECORD)
+            rec["x"], rec["y"], rec["z"] = cloud.points[keep].T
+            rec["intensity"] = cloud.intensity[keep]
+            rec["pose_index"] = cloud.pose_index[keep]
+            self._body.write(rec.tobytes())
+        else:
+            self._body.write("".join(
+                f"{p[0]:.6f},{p[1]:.6f},{p[2]:.6f},{i:.6g},{int(k)},{px[0]:.4f},{px[1]:.4f}\n"
+                for p, i, k, px in zip(cloud.points[keep], cloud.intensity[keep],
+                                       cloud.pose_index[keep], cloud.pixels[keep])
+            ).encode("ascii"))
+        self.count += int(keep.sum())
+
+    def __exit__(self, kind: Any, value: Any, tb: Any) -> None:
+        import shutil
+
+        body, self._body = self._body, None
+        try:
+            if kind is not None:
+                return
+            body.seek(0)
+            with atomic_write(self.path, "wb") as fh:
+                if self.kind == "ply":
+                    fh.write(("ply\nformat binary_little_endian 1.0\n"
+                              "comment hmlvs point cloud, robot base frame, units mm\n"
+                              f"element vertex {self.count}\nproperty double x\n"
+                              "property double y\nproperty double z\n"
+                              "property float intensity\nproperty int pose_index\n"
+                              "end_header\n").encode("ascii"))
+                else:
+                    fh.write(b"x_mm,y_mm,z_mm,intensity,pose_index,u_px,v_px\n")
+                shutil.copyfileobj(body, fh, 1 << 20)
+        finally:
+            body.close()
 
 
 def read_ply(path: str | os.PathLike) -> dict[str, np.ndarray]:
@@ -279,6 +321,89 @@ def _calibration_robot(calibration: Any, source: Any) -> Robot | None:
     return robot if declared is None or declared == robot.name else None
 
 
+def _prepared(calibration: Any, source: Any, robot: Robot | None, options: dict[str, Any]
+              ) -> tuple[Any, Robot | None, dict[str, Any]]:
+    """The calibration (loaded), the robot and the stripe options for measuring ``source``:
+    the calibration's camera blur and image size unless given."""
+    if robot is None:
+        robot = _calibration_robot(calibration, source)
+    cal_name = None
+    if isinstance(calibration, (str, os.PathLike)):
+        cal_name = str(calibration)
+        calibration = Calibration.load(calibration)
+    options = dict(options)
+    if options.get("blur_var") is None and getattr(calibration, "blur_var", None) is not None:
+        options["blur_var"] = calibration.blur_var
+    sensor = getattr(calibration, "sensor", None)
+    if sensor is None and hasattr(calibration, "image_size"):  # an OpenCvSensor itself
+        sensor = calibration
+    if sensor is not None and options.get("image_size") is None:
+        options["image_size"] = tuple(sensor.image_size)
+        options.setdefault("image_size_of", f"the calibration {cal_name}" if cal_name
+                           else "the calibration")
+    return calibration, robot, options
+
+
+@dataclass(frozen=True)
+class StreamedMeasure:
+    """What :func:`measure_images_to` wrote: the file, its points, the stripe pixels
+    without a measurement, the pairs read and used (their ids) and those rejected."""
+
+    path: Path
+    points: int
+    invalid: int
+    images: int
+    ids: list[str]
+    rejected: tuple[RejectedPair, ...] = ()
+
+    def summary(self) -> dict[str, Any]:
+        """As :meth:`MeasureResult.summary`: images, used, rejected (id -> reason), ids."""
+        return {"images": self.images, "used": len(self.ids),
+                "rejected": {r.id: r.reason for r in self.rejected}, "ids": list(self.ids)}
+
+
+def measure_images_to(calibration: Any, source: Any, out: str | os.PathLike, *,
+                      robot: Robot | None = None, progress: Any = None,
+                      **options: Any) -> StreamedMeasure:
+    """:func:`measure_images` written to the point cloud ``out`` (.ply or .csv) as the frames
+    are read: one frame in memory at a time, whatever the scan's length; ``out`` appears
+    whole, or not at all when the run fails. ``progress``: a callable (done, total) after
+    each frame."""
+    from ..data.manifest import read_manifest
+    from ..image.session import iter_stripes_from_images
+
+    calibration, robot, options = _prepared(calibration, source, robot, options)
+    pairs = iter_stripes_from_images(source, robot=robot, **options)  # checks the session
+    total = len(source) if isinstance(source, (list, tuple)) else len(read_manifest(source)[0])
+    _require_hand_eye(calibration)
+    model = sensor_model(calibration)
+    ids: list[str] = []
+    rejected: list[RejectedPair] = []
+    points = invalid = images = 0
+    with CloudWriter(out) as writer:
+        for report, item, pose in pairs:
+            images += 1
+            if item is None:
+                rejected.append(RejectedPair(str(report.id), str(report.reason)))
+            else:
+                cloud = measure(model, [item], pose[None])
+                writer.add(dataclasses.replace(
+                    cloud, pose_index=np.full(len(cloud), report.index, np.int32)))
+                ids.append(str(report.id))
+                points += cloud.num_valid
+                invalid += len(cloud) - cloud.num_valid
+            if progress is not None:
+                progress(images, total)
+        if not ids:
+            raise ValueError("no image pair gave a stripe: " +
+                             "; ".join(f"{r.id}: {r.reason}" for r in rejected))
+        if points == 0:
+            raise ValueError(f"none of the {invalid} stripe pixels' rays meets the calibration's "
+                             "laser plane: nothing to write (is this calibration of the sensor "
+                             "that took these images?)")
+    return StreamedMeasure(Path(out), points, invalid, images, ids, tuple(rejected))
+
+
 def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
                    **options: Any) -> MeasureResult:
     """Laser on/off image pairs + joint readings (an image manifest, see docs/file-formats.md,
@@ -295,21 +420,7 @@ def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
     """
     from ..image.session import stripes_from_images
 
-    if robot is None:
-        robot = _calibration_robot(calibration, source)
-    cal_name = None
-    if isinstance(calibration, (str, os.PathLike)):
-        cal_name = str(calibration)
-        calibration = Calibration.load(calibration)
-    if options.get("blur_var") is None and getattr(calibration, "blur_var", None) is not None:
-        options["blur_var"] = calibration.blur_var
-    sensor = getattr(calibration, "sensor", None)
-    if sensor is None and hasattr(calibration, "image_size"):  # an OpenCvSensor itself
-        sensor = calibration
-    if sensor is not None and options.get("image_size") is None:
-        options["image_size"] = tuple(sensor.image_size)
-        options.setdefault("image_size_of", f"the calibration {cal_name}" if cal_name
-                           else "the calibration")
+    calibration, robot, options = _prepared(calibration, source, robot, options)
     ids, stripes, poses, reports = stripes_from_images(source, robot=robot, **options)
     rejected = tuple(RejectedPair(str(r.id), str(r.reason)) for r in reports if not r.ok)
     if not stripes:

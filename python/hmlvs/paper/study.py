@@ -32,7 +32,7 @@ import zlib
 
 import numpy as np
 
-from .._io import atomic_write
+from .._io import atomic_folder, atomic_write
 from ..calibration.solvers import _fitness_data, calibrate
 from ..models.params import NUM_PARAMS, Bounds
 
@@ -309,11 +309,12 @@ class StudyResult:
     def write(self, out_dir: str | os.PathLike) -> list[Path]:
         """Write ``study.md`` (:meth:`table`) and the plots (:meth:`plot`) into ``out_dir``."""
         out = _out_dir(out_dir)
-        files = self.plot(out)
-        md = out / "study.md"
-        self.files = [md, *files]
-        with atomic_write(md) as fh:
-            fh.write(self.table())
+        # all three files or none (a run stopped while writing leaves the folder as it was)
+        with atomic_folder(out, last=("study.md",)) as tmp:
+            files = self.plot(tmp)
+            with atomic_write(tmp / "study.md") as fh:
+                fh.write(self.table())
+        self.files = [out / "study.md", *(out / f.name for f in files)]
         return self.files
 
 
