@@ -38,3 +38,13 @@ def cli_files(tmp_path_factory):
     sess = d / "sess"
     render_general_session(general_session(views=3, seed=2), sess)
     return d, ds, cal, sess
+
+
+def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
+    """Run the command line in-process: (exit code, stdout, stderr)."""
+    from hmlvs.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    out = capsys.readouterr()
+    return e.value.code, out.out, out.err

@@ -15,18 +15,11 @@ import sys
 import textwrap
 import time
 
+from conftest import run_cli as _run  # noqa: E402
 import hmlvs
 from hmlvs import _io
-from hmlvs.cli import main
 import numpy as np
 import pytest
-
-
-def _run(argv, capsys):
-    with pytest.raises(SystemExit) as e:
-        main(argv)
-    out = capsys.readouterr()
-    return e.value.code, out.out, out.err
 
 
 def _tree(folder: Path) -> dict[str, str]:

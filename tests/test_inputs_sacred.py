@@ -9,15 +9,8 @@ import hashlib
 import json
 from pathlib import Path
 
-from hmlvs.cli import main
+from conftest import run_cli as _run  # noqa: E402
 import pytest
-
-
-def _run(argv, capsys):
-    with pytest.raises(SystemExit) as e:
-        main(argv)
-    out = capsys.readouterr()
-    return e.value.code, out.out, out.err
 
 
 def _digest(folder: Path) -> dict[str, str]:
