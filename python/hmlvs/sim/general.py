@@ -443,8 +443,14 @@ def pixel_rays(sensor: OpenCvSensor, supersample: int = 1) -> np.ndarray:
     uu, vv = np.meshgrid(us, vs)
     px = np.stack([uu.ravel(), vv.ravel()], axis=1)
     crit = (cv2.TERM_CRITERIA_COUNT, 20, 0.0)  # fixed-point steps; checked below
-    xy = cv2.undistortPoints(px.reshape(-1, 1, 2), sensor.camera_matrix, sensor.dist_coeffs,
-                             None, None, None, crit).reshape(-1, 2)
+    # with stopping criteria: cv2.undistortPointsIter up to OpenCV 4.x, undistortPoints from 5
+    iterate = getattr(cv2, "undistortPointsIter", None)
+    if iterate is not None:
+        xy = iterate(px.reshape(-1, 1, 2), sensor.camera_matrix, sensor.dist_coeffs, None,
+                     None, crit).reshape(-1, 2)
+    else:
+        xy = cv2.undistortPoints(px.reshape(-1, 1, 2), sensor.camera_matrix,
+                                 sensor.dist_coeffs, None, None, None, crit).reshape(-1, 2)
     rays = np.hstack([xy, np.ones((len(xy), 1))])
     # check every 7th sample (all rows and columns of samples are visited: 7 is coprime to
     # the sample grid's width unless w*s is a multiple of 7, then every 7th column only)
