@@ -22,7 +22,8 @@ from hmlvs.sim.general import general_session, render_general_session
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.scene  # rendered images
+# Only the tests whose figures are fine numerical agreements run again in the Prescott pass
+# (marker scene); the mistakes are tens to hundreds of pixels off, whatever the BLAS kernels.
 
 
 @pytest.fixture(scope="module")
@@ -48,6 +49,7 @@ def _manifest(folder, name, edit):
     return path
 
 
+@pytest.mark.scene
 def test_correct_render_is_trustworthy_exit_0_verdict_in_file_json_and_report(
         rendered, tmp_path, capsys):
     _, folder, *_ = rendered
@@ -259,6 +261,7 @@ def test_another_sessions_images_with_these_poses_are_refused_as_disagreeing(ren
         calibrate_joint(vs, board, size)
 
 
+@pytest.mark.scene
 def test_predicted_map_uncertainty_on_the_render_within_3x_of_held_out_error(rendered):
     """As above, on the rendered images: calibrated on 7 views, measured on the 3 others'
     detected stripe pixels against the true stripe point of the same column (measured
