@@ -374,6 +374,18 @@ def test_deep_nesting_is_a_sentence_not_a_recursion_error(files, tmp_path, capsy
     assert code == 2
     assert err.strip() == (f"error: {deep_cal}: malformed calibration file: its lists and "
                            "mappings nest more than 32 levels deep")
+    # a data set's .npz carries its header as JSON text: bounded the same way
+    _, ds, _, _ = files
+    with np.load(ds, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["header"] = np.array('{"meta": ' + "[" * 100_000 + "]" * 100_000 + "}")
+    deep_ds = tmp_path / "deep.npz"
+    np.savez(deep_ds, **arrays)
+    code, _, err = _run(["calibrate", str(deep_ds), "--method", "lm", "--out",
+                         str(tmp_path / "x.yaml")], capsys)
+    assert code == 2
+    assert "malformed data set header: its lists and mappings nest more than 32 levels" in err
+    assert not (tmp_path / "x.yaml").exists()
     shallow = tmp_path / "shallow.json"  # 32 levels are fine for the reader
     shallow.write_text("[" * 32 + "]" * 32)
     assert _io.read_document(shallow, "x") == json.loads("[" * 32 + "]" * 32)

@@ -260,7 +260,8 @@ class Dataset:
                 with np.load(path, allow_pickle=False) as z:
                     arrays = {k: z[k] for k in z.files}
                 validate(arrays, _npz_schema(), str(path))
-                header = json.loads(str(arrays["header"]))
+                # the header is JSON text: nested at most MAX_DEPTH deep, as every document
+                header = parse_text(str(arrays["header"]), True, path, "data set header")
                 _check_header(header, path)
                 validate(header, _header_schema(), str(path), "header")
                 return cls(arrays["pixels"], arrays["poses"], arrays["points"],
