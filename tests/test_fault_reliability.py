@@ -630,3 +630,28 @@ def test_export_says_its_warning_without_a_source_line(files, tmp_path):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("warning UserWarning: the division model")
     assert ".py:" not in r.stderr and "warnings.warn" not in r.stderr
+
+
+def test_a_paper_calibration_from_images_holds_measuring_to_its_image_size(tmp_path, capsys):
+    """A paper-model calibration from images stores the images' size; measuring images of
+    another size with it is refused like with an opencv calibration (before, only opencv
+    calibrations carried a size, so the check was skipped for the paper model)."""
+    from hmlvs.data.calibration_file import Calibration
+    from hmlvs.models.params import Parameters
+    from hmlvs.sim.general import general_session, render_general_session
+
+    cal = Calibration(params=Parameters.nominal(), image_size=(800, 600))
+    path = tmp_path / "paper.yaml"
+    cal.save(path)
+    assert Calibration.load(path).image_size == (800, 600)
+    sess = tmp_path / "sess"
+    render_general_session(general_session(views=1, seed=2), sess)  # 1024 x 768 images
+    code, _, err = _run(["measure", str(path), str(sess), "--out", str(tmp_path / "c.ply")],
+                        capsys)
+    assert code == 2
+    assert "1024 x 768" in err and "800 x 600" in err
+    assert not (tmp_path / "c.ply").exists()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(path.read_text().replace("image_size: [800, 600]", "image_size: [800.5, 600]"))
+    with pytest.raises(ValueError, match="image_size must be .width, height. in pixels"):
+        Calibration.load(bad)

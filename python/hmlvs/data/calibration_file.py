@@ -86,6 +86,7 @@ def _schema() -> "schema.Field":
         "hand_from_camera": sc.matrix(4, 4, "a 4x4 transform", nullable=True),
         "robot": sc.Field("any"), "sensor": sc.Field("map", "the opencv sensor", nullable=True),
         "stripe_blur_var_px2": sc.number("a blur variance in px^2", nullable=True),
+        "image_size": sc.Field("any"),
         "verdict": sc.Field("struct", "a verdict (trustworthy, reasons, checks)",
                             required=("trustworthy",), nullable=True, keys={
                                 "trustworthy": sc.Field("bool", "true or false"),
@@ -136,6 +137,9 @@ class Calibration:
     #: the camera blur variance (px^2) the image calibration fitted (its stripes' correction
     #: at albedo steps, ``stripe_from_pair`` ``blur_var``); measurement from images uses it
     blur_var: float | None = None
+    #: a paper-model calibration from images: the images' (width, height), which measuring
+    #: from images holds them to (an opencv calibration's sensor carries its own)
+    image_size: tuple[int, int] | None = None
     #: the verdict (:meth:`hmlvs.diagnostics.verdict.Verdict.to_dict`); None in files
     #: written before verdicts
     verdict: dict[str, Any] | None = None
@@ -171,7 +175,8 @@ class Calibration:
                    created=datetime.datetime.now(datetime.timezone.utc).isoformat(
                        timespec="seconds"),
                    hmlvs_version=__version__, robot=robot,
-                   blur_var=None if dataset is None else _blur_var_of(dataset.meta))
+                   blur_var=None if dataset is None else _blur_var_of(dataset.meta),
+                   image_size=None if dataset is None else _image_size_of(dataset.meta))
 
     @classmethod
     def from_joint(cls, result: Any, robot: Robot | None = None,
@@ -215,6 +220,8 @@ class Calibration:
         })
         if self.blur_var is not None:
             d["stripe_blur_var_px2"] = float(self.blur_var)
+        if self.image_size is not None and self.sensor is None:
+            d["image_size"] = [int(self.image_size[0]), int(self.image_size[1])]
         if self.verdict is not None:
             d["verdict"] = self.verdict
         if self.sensor is not None:
@@ -303,6 +310,7 @@ class Calibration:
                    created=d.get("created"), hmlvs_version=d.get("hmlvs_version"), robot=robot,
                    sensor=sensor, model=model,
                    blur_var=None if blur_var is None else float(blur_var),
+                   image_size=_checked_size(d.get("image_size"), source),
                    verdict=d.get("verdict"))
 
     def table(self) -> str:
@@ -319,6 +327,26 @@ class Calibration:
             s_txt = "fixed" if n in self.fixed else ("-" if s is None else f"{s:.3g}")
             lines.append(f"{n:<7} {UNITS[n]:<7} {getattr(self.params, n):>14.7g} {s_txt:>11}")
         return "\n".join(lines)
+
+
+def _image_size_of(meta: dict[str, Any]) -> tuple[int, int] | None:
+    """The (width, height) of the images a data set came from (its ``meta["image_size"]``),
+    or None."""
+    size = meta.get("image_size") if meta.get("source") == "images" else None
+    return None if size is None else (int(size[0]), int(size[1]))
+
+
+def _checked_size(size: Any, source: str) -> tuple[int, int] | None:
+    """A calibration file's ``image_size``: two positive whole numbers, or absent."""
+    if size is None:
+        return None
+    ok = isinstance(size, list) and len(size) == 2 and all(
+        isinstance(v, (int, float)) and not isinstance(v, bool) and float(v).is_integer()
+        and v > 0 for v in size)
+    if not ok:
+        raise ValueError(f"{source}: image_size must be [width, height] in pixels, two "
+                         f"positive whole numbers, got {size!r}")
+    return int(size[0]), int(size[1])
 
 
 def _blur_var_of(meta: dict[str, Any]) -> float | None:

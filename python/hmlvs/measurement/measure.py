@@ -335,10 +335,10 @@ def _prepared(calibration: Any, source: Any, robot: Robot | None, options: dict[
     if options.get("blur_var") is None and getattr(calibration, "blur_var", None) is not None:
         options["blur_var"] = calibration.blur_var
     sensor = getattr(calibration, "sensor", None)
-    if sensor is None and hasattr(calibration, "image_size"):  # an OpenCvSensor itself
-        sensor = calibration
-    if sensor is not None and options.get("image_size") is None:
-        options["image_size"] = tuple(sensor.image_size)
+    size = getattr(sensor, "image_size", None) or getattr(calibration, "image_size", None)
+    if size is not None and options.get("image_size") is None:
+        # an opencv calibration's sensor, a paper calibration from images, an OpenCvSensor
+        options["image_size"] = tuple(size)
         options.setdefault("image_size_of", f"the calibration {cal_name}" if cal_name
                            else "the calibration")
     return calibration, robot, options
