@@ -1,7 +1,9 @@
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from pathlib import Path
+from typing import Any, Iterator, Sequence
 
 import numpy as np
 
@@ -129,6 +131,20 @@ def _rendered_records(frames: list[RenderedScene], readings: np.ndarray, ids: li
                       ) -> list[dict[str, Any]]:
     return [{"id": i, "on": f.on, "off": f.off, "joints": r.tolist()}
             for i, f, r in zip(ids, frames, readings)]
+
+
+@contextmanager
+def _scan_folder(out_dir: Any) -> Iterator[Path | None]:
+    """A temporary folder whose files take their places in ``out_dir`` when the block ends
+    without an error (:func:`hmlvs._io.atomic_folder`, the manifest last); None without
+    ``out_dir``."""
+    if out_dir is None:
+        yield None
+        return
+    from .._io import atomic_folder
+
+    with atomic_folder(out_dir, last=("manifest.json", "gauge_block.json")) as tmp:
+        yield tmp
 
 
 def _write_scan(out_dir: Any, ids: list[str], frames: list[RenderedScene],
@@ -416,50 +432,54 @@ def cylinder_scan(calibration: Any = None, truth: Any = None, *, seed: int = 0,
         frames.append(render_scene(q_true, pose, scene, image_size, options, rng))
         bar.step()
     files: dict[str, Any] = {}
-    if out_dir is not None:
-        source = _write_scan(out_dir, ids, frames, readings, image_size, robot,
-                             scene=_scene_to_dict(scene), scenario="cylinder")
-        files["manifest"] = source
-    else:
-        source = _rendered_records(frames, readings, ids)
-    measured = measure_images(params, source, robot=robot)
-    cloud = measured.cloud
-    _, stripes, _, _ = stripes_from_images(source, robot=robot)
-    sigma_v = np.concatenate([s_.sigma[s_.found] for s_ in stripes])
-    if sigma_v.shape[0] != len(cloud):  # pragma: no cover - the same extraction twice
-        raise RuntimeError("stripe centres and measured points do not line up")
-    valid = cloud.valid
-    pts = cloud.points[valid]
-    px = cloud.pixels[valid]
-    pidx = cloud.pose_index[valid]
-    sigma_v = sigma_v[valid]
-    dist_all = scene.distances(pts)
-    dist = dist_all.min(axis=1)
-    nearest = dist_all.argmin(axis=1)
-    icyl = scene.primitives.index(cyl)
-    itab = next((i for i, p in enumerate(scene.primitives) if isinstance(p, Table)), -1)
-    on_c, on_t = nearest == icyl, nearest == itab
+    # the images, manifest, cloud and plot as one folder: a run stopped while writing
+    # leaves none of them
+    with _scan_folder(out_dir) as where:
+        if where is not None:
+            source = _write_scan(where, ids, frames, readings, image_size, robot,
+                                 scene=_scene_to_dict(scene), scenario="cylinder")
+            files["manifest"] = Path(out_dir) / "manifest.json"
+        else:
+            source = _rendered_records(frames, readings, ids)
+        measured = measure_images(params, source, robot=robot)
+        cloud = measured.cloud
+        _, stripes, _, _ = stripes_from_images(source, robot=robot)
+        sigma_v = np.concatenate([s_.sigma[s_.found] for s_ in stripes])
+        if sigma_v.shape[0] != len(cloud):  # pragma: no cover - the same extraction twice
+            raise RuntimeError("stripe centres and measured points do not line up")
+        valid = cloud.valid
+        pts = cloud.points[valid]
+        px = cloud.pixels[valid]
+        pidx = cloud.pose_index[valid]
+        sigma_v = sigma_v[valid]
+        dist_all = scene.distances(pts)
+        dist = dist_all.min(axis=1)
+        nearest = dist_all.argmin(axis=1)
+        icyl = scene.primitives.index(cyl)
+        itab = next((i for i, p in enumerate(scene.primitives) if isinstance(p, Table)), -1)
+        on_c, on_t = nearest == icyl, nearest == itab
 
-    def rms(x: np.ndarray) -> float:
-        return float(np.sqrt(np.mean(np.square(x)))) if x.size else float("nan")
+        def rms(x: np.ndarray) -> float:
+            return float(np.sqrt(np.mean(np.square(x)))) if x.size else float("nan")
 
-    # what the noise predicts, per point, along the true surface normal
-    nrm = _surface_normals(q_true, scene, px, poses[pidx])
-    _, jpx, jq = _point_jacobians(params, px, readings[pidx], robot)
-    p_cal, _ = points_in_base(params, px, robot.poses(readings[pidx]), on_invalid="mask")
-    p_true, _ = points_in_base(q_true, px, robot.poses(readings[pidx]), on_invalid="mask")
-    e_cal = np.einsum("ni,ni->n", nrm, p_cal - p_true)
-    # the stripe centre's noise is along v (one centre per column)
-    e_px = sigma_v * np.abs(np.einsum("ni,ni->n", nrm, jpx[:, :, 1]))
-    e_q = np.sqrt(readout.variance * np.sum(np.einsum("ni,nij->nj", nrm, jq) ** 2, axis=1))
-    parts = {"calibration": rms(e_cal), "pixels": rms(e_px), "joints": rms(e_q)}
-    expected = float(np.sqrt(sum(v ** 2 for v in parts.values())))
-    if out_dir is not None:
-        files["cloud"] = cloud.save(Path(out_dir) / "cloud.ply")
-        if plot:
-            files["plot"] = plot_cloud(pts, Path(out_dir) / "cloud.png",
-                                       title=f"cylinder scan: {len(pts)} points, RMS to the "
-                                             f"surface {rms(dist):.3f} mm")
+        # what the noise predicts, per point, along the true surface normal
+        nrm = _surface_normals(q_true, scene, px, poses[pidx])
+        _, jpx, jq = _point_jacobians(params, px, readings[pidx], robot)
+        p_cal, _ = points_in_base(params, px, robot.poses(readings[pidx]), on_invalid="mask")
+        p_true, _ = points_in_base(q_true, px, robot.poses(readings[pidx]), on_invalid="mask")
+        e_cal = np.einsum("ni,ni->n", nrm, p_cal - p_true)
+        # the stripe centre's noise is along v (one centre per column)
+        e_px = sigma_v * np.abs(np.einsum("ni,ni->n", nrm, jpx[:, :, 1]))
+        e_q = np.sqrt(readout.variance * np.sum(np.einsum("ni,nij->nj", nrm, jq) ** 2, axis=1))
+        parts = {"calibration": rms(e_cal), "pixels": rms(e_px), "joints": rms(e_q)}
+        expected = float(np.sqrt(sum(v ** 2 for v in parts.values())))
+        if where is not None:
+            cloud.save(where / "cloud.ply")
+            files["cloud"] = Path(out_dir) / "cloud.ply"
+            if plot:
+                plot_cloud(pts, where / "cloud.png", title=f"cylinder scan: {len(pts)} points, "
+                           f"RMS to the surface {rms(dist):.3f} mm")
+                files["plot"] = Path(out_dir) / "cloud.png"
     return CylinderScan(
         cloud=cloud, scene=scene, truth=Parameters.from_array(q_true),
         params=Parameters.from_array(q_plan), calibration=cal, joints=joints,
@@ -873,21 +893,23 @@ def gauge_block(calibration: Any = None, truth: Any = None, *, trials: int = 10,
             unexplained=np.array(unexplained),
             paper_e=row[3] if row else None, paper_sigma=row[4] if row else None))
     files: dict[str, Any] = {}
-    if out_dir is not None:
-        files["manifest"] = _write_scan(
-            out_dir, all_ids, all_frames, np.array(all_readings), image_size, robot,
-            scene=_scene_to_dict(scene), scenario="gauge-block")
     pooled = tuple(float(x) for x in np.percentile(np.mean(e_pool, axis=0), [0.5, 50, 99.5]))
     check = GaugeBlockCheck(tuple(results), block, Parameters.from_array(q_true),
                             Parameters.from_array(q_plan), cal, trials, home, pooled, files,
                             time.perf_counter() - start)
-    if out_dir is not None:
-        import json
+    # the images, manifest and results as one folder: a run stopped while writing leaves
+    # none of them
+    with _scan_folder(out_dir) as where:
+        if where is not None:
+            import json
 
-        from .._io import atomic_write
-        path = Path(out_dir) / "gauge_block.json"
-        with atomic_write(path) as fh:
-            json.dump(check.to_dict(), fh, indent=1, default=float)
-        files["results"] = path
+            from .._io import atomic_write
+
+            _write_scan(where, all_ids, all_frames, np.array(all_readings), image_size, robot,
+                        scene=_scene_to_dict(scene), scenario="gauge-block")
+            files["manifest"] = Path(out_dir) / "manifest.json"
+            with atomic_write(where / "gauge_block.json") as fh:
+                json.dump(check.to_dict(), fh, indent=1, default=float)
+            files["results"] = Path(out_dir) / "gauge_block.json"
     return check
 
