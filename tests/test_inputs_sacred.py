@@ -37,6 +37,9 @@ def files(cli_files):
     lambda d, ds, cal, sess: (["measure", str(cal), str(sess), "--out",
                                str(sess / "v001_off.png")], "--out"),
     lambda d, ds, cal, sess: (["inspect", str(sess), "--out", str(sess)], "--out"),
+    lambda d, ds, cal, sess: (["report", str(cal), str(ds), "--out", str(cal)], "--out"),
+    lambda d, ds, cal, sess: (["scenario", "gauge-block", "--calibration", str(cal), "--out",
+                               str(d)], "--out"),
 ])
 def test_an_output_that_is_an_input_is_refused(files, capsys, case):
     d, ds, cal, sess = files

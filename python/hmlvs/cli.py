@@ -974,6 +974,9 @@ def report(
     from .report.html import write_report
 
     with _guard(as_json), _collect_warnings() as caught:
+        from .guard import refuse_overwrite
+
+        refuse_overwrite([calibration, *_inputs_of(data), test, robot], [("--out", out)])
         cal = Calibration.load(calibration)
         image_reports = None
         if _is_manifest(data):
@@ -1231,6 +1234,9 @@ def scenario(
     with _guard(as_json):
         if name not in ("gauge-block", "cylinder"):
             raise ValueError(f"unknown scenario {name!r}; choose gauge-block or cylinder")
+        from .guard import refuse_overwrite
+
+        refuse_overwrite([calibration], [], [("--out", out)])
         cal = Calibration.load(calibration) if calibration is not None else None
         bar = None
         if not as_json:
