@@ -114,3 +114,14 @@ def test_cli_takes_initial_and_bounds_files(tmp_path, capsys):
                          "--bounds", str(bounds), "--out", str(tmp_path / "cal2.yaml")], capsys)
     assert code != 0 and "initial value of H lies outside its bounds" in err
     assert not (tmp_path / "cal2.yaml").exists()
+
+
+@pytest.mark.parametrize("text", ["f: 0\n", "Su: -0.0074\n", "Sv: 0\nf: 0\n"])
+def test_an_initial_guess_without_a_positive_focal_length_or_pitch_is_refused(tmp_path, text):
+    # before, f: 0 was taken and the search range widened to [-0.4, 10] to hold it
+    from hmlvs.data.guess import read_initial
+
+    f = tmp_path / "i.yaml"
+    f.write_text(text)
+    with pytest.raises(ValueError, match=r"i.yaml: .* must be > 0"):
+        read_initial(f)

@@ -55,6 +55,11 @@ def read_initial(path: str | os.PathLike, su: float | None = None) -> Parameters
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise ValueError(f"{path}: {name} must be a number, got {v!r}")
         values[str(name)] = float(v)
+    bad = [n for n in ("f", "Su", "Sv") if not values[n] > 0]
+    if bad:
+        raise ValueError(f"{path}: {', '.join(f'{n} = {values[n]:g}' for n in bad)}: the focal "
+                         "length f and the pixel pitches Su, Sv scale every pixel to mm and "
+                         "must be > 0")
     try:
         return Parameters.from_dict(values)
     except ValueError as e:
