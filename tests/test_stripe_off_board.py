@@ -22,12 +22,13 @@ from hmlvs.sim.general import (
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.scene  # rendered images
+# rendered images; seed 0 runs again in the Prescott pass (marker scene), seed 1 once: the map
+# error is a third of its limit (0.019-0.026 against 0.06 mm), far from any BLAS kernel's bits
 
 BOARD = Checkerboard(rows=5, cols=7, square=15.0)
 SIZE = (640, 480)
 FULL, MISS, CLIP = 6, 2, 2
-SEEDS = (0, 1)
+SEEDS = (pytest.param(0, marks=pytest.mark.scene), 1)
 
 
 def _session(seed: int):
