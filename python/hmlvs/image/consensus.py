@@ -18,6 +18,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .. import _core
 from .corners import NumberingError, grid_placements
 
 #: fewest views with corners for the intrinsics and the consensus
@@ -46,15 +47,6 @@ def grid_intrinsics(grids: Sequence[tuple[np.ndarray, np.ndarray]], square: floa
     _, k, d, _, _ = cv2.calibrateCamera(obj, img, tuple(int(x) for x in image_size),
                                         np.array(camera_matrix, float), np.zeros(5), flags=flags)
     return np.asarray(k, float), np.asarray(d, float).ravel()
-
-
-def _rotation_mean(rots: np.ndarray) -> np.ndarray:
-    """The rotation nearest the mean of rotation matrices ``rots`` (n, 3, 3)."""
-    u, _, vt = np.linalg.svd(rots.sum(axis=0))
-    r = u @ vt
-    if np.linalg.det(r) < 0:
-        r = u @ np.diag([1.0, 1.0, -1.0]) @ vt
-    return r
 
 
 def consensus_hand_eye(views: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], board: Any,
@@ -129,9 +121,7 @@ def consensus_hand_eye(views: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]
     best, which = per_view(cand[centres[int(np.argmin(scores))]])
     agree = which[best < 0.5 * cap]
     which = which[which >= 0]
-    x = np.eye(4)
-    x[:3, :3] = _rotation_mean(cand[agree, :3, :3])
-    x[:3, 3] = cand[agree, :3, 3].mean(axis=0)
+    x = np.asarray(_core._mean_transform(list(cand[agree])), float)
     s1 = float(np.minimum(per_view(x)[0], cap).mean())
     # the best rival: a candidate that moves the boards by half a square or more
     m1 = bfh_a[which] @ x[None] @ cfb_a[which]

@@ -425,16 +425,18 @@ def _number_by_agreement(found: list[Any], unnumbered: list[tuple[int, Any, dict
             hand_eye = consensus_hand_eye(grids, board, k, d)
         except (ValueError, cv2.error) as e:
             why = str(e)
-    corners_base = board.corners()
+    if not why:
+        from types import SimpleNamespace
+
+        from .partial import predicted_board_pixels
+
+        # the camera, hand-eye and board the views agree on, as predicted_board_pixels reads
+        agreed = SimpleNamespace(camera_matrix=k, dist_coeffs=d, hand_from_camera=hand_eye,
+                                 base_from_board=board.base_from_board())
     for place, pair, info, error in unnumbered:
         old = found[place]
         if not why:
-            cfb = np.linalg.inv(pair.pose @ hand_eye)
-            pts = corners_base @ cfb[:3, :3].T + cfb[:3, 3]
-            rvec = cv2.Rodrigues(cfb[:3, :3])[0]
-            expected = cv2.projectPoints(corners_base.reshape(-1, 1, 3), rvec,
-                                         cfb[:3, 3].copy(), k, d)[0].reshape(-1, 2)
-            expected[pts[:, 2] <= 0] = np.nan
+            expected = predicted_board_pixels(agreed, pair.pose, board)
             try:
                 corners = find_corners(pair.board_image, board, expected=expected)
             except (ValueError, cv2.error) as e:
