@@ -107,7 +107,7 @@ PYTEST := $(PY) -m pytest -q -n auto --dist loadfile
 test: test-install style deps-check
 	$(VENV)/bin/ctest --test-dir $(BUILD_DIR) --output-on-failure
 	$(PYTEST)
-	OPENBLAS_CORETYPE=Prescott $(PYTEST) -m scene
+	OPENBLAS_CORETYPE=Prescott $(PYTEST) -m "scene and not one_kernel"
 	$(MAKE) --no-print-directory test-lowest
 
 # The oldest releases pyproject.toml admits (uv's lowest-direct resolution), with the wheel

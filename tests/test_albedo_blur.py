@@ -86,6 +86,7 @@ def test_the_session_fit_finds_the_blur(clean, tmp_path):
     assert 0.75 < _fitted(blurred) < 1.6
 
 
+@pytest.mark.one_kernel  # the session blur fit is re-run by test_the_session_fit_finds_the_blur
 def test_calibration_sessions_fit_and_record_the_blur(tmp_path):
     """With speckle and noise the fit comes out low: 0.25 px^2 here (seed 2, 10 views; 0.18
     on seed 3) for 0.33. Not a dilution by the noise in the shifts it regresses on (their

@@ -17,8 +17,6 @@ import numpy as np
 import pytest
 import typer
 
-pytestmark = pytest.mark.scene  # simulated sessions or rendered images
-
 
 def _run(argv, capsys):
     with pytest.raises(SystemExit) as e:

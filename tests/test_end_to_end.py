@@ -23,7 +23,8 @@ def rendered(tmp_path_factory):
 
 
 @pytest.mark.filterwarnings("ignore::hmlvs.HmlvsDataWarning")
-@pytest.mark.parametrize("mode", ["corners", "homography"])
+@pytest.mark.parametrize("mode", [
+    "corners", pytest.param("homography", marks=pytest.mark.one_kernel)])
 def test_calibration_from_images_matches_perfect_extraction(rendered, mode):
     session, folder = rendered
     ds, reports = hmlvs.dataset_from_images(folder, mode=mode)

@@ -165,7 +165,7 @@ import independent_render as R  # noqa: E402
 pytestmark = pytest.mark.scene
 
 
-@pytest.fixture(scope="module", params=[0, 1])
+@pytest.fixture(scope="module", params=[0, pytest.param(1, marks=pytest.mark.one_kernel)])
 def measured(request, tmp_path_factory):
     folder = tmp_path_factory.mktemp(f"independent{request.param}")
     m = C.measure(request.param, "lm", folder)
@@ -428,7 +428,7 @@ def test_another_take_of_a_scene_keeps_its_poses_and_truth(tmp_path):
         first[0], cv2.imread(str(tmp_path / "None" / "p000_on.png"), cv2.IMREAD_UNCHANGED))
 
 
-@pytest.fixture(scope="module", params=[0, 1])
+@pytest.fixture(scope="module", params=[0, pytest.param(1, marks=pytest.mark.one_kernel)])
 def measured_as_the_issue_says(request, tmp_path_factory):
     """The issue's scene as it describes it: no speckle, 1 grey level of noise."""
     folder = tmp_path_factory.mktemp(f"independent_clean{request.param}")

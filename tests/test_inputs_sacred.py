@@ -23,7 +23,6 @@ def files(cli_files):
     return cli_files
 
 
-@pytest.mark.scene
 @pytest.mark.parametrize("case", [
     lambda d, ds, cal, sess: (["export", str(cal), "--format", "opencv", "--out", str(cal)],
                               "--out"),

@@ -13,8 +13,6 @@ from hmlvs.sim.general import general_session, render_general_session
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.scene  # rendered images
-
 
 @pytest.fixture(scope="module")
 def session(tmp_path_factory):

@@ -12,8 +12,6 @@ import numpy as np
 import pytest
 import yaml
 
-pytestmark = pytest.mark.scene  # rendered images
-
 #: a board origin 17 mm off the true one (700, 90, 0) in y and 88 mm in z: the corners
 #: predicted for pair p003 make OpenCV's perspectiveTransform assert inside find_corners
 WRONG_ORIGIN = [700.0353292197043, 73.21365954759082, 87.62796006479756]
