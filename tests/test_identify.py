@@ -73,10 +73,12 @@ def test_robust_loss_with_gross_outliers():
     points[bad] += rng.normal(0, 30, (5, 3))
     dirty = hmlvs.Dataset(fit.pixels, fit.poses, points)
     start = hmlvs.initial_candidates(sim.truth, 0.05, 1, seed=1)[0]
-    plain = hmlvs.calibrate(dirty, method="lm", initial=start, test=sim.test)
+    # Su alone held: the perturbed start's Sv, Cu, Cv must be free to reach the truth
+    su = ("Su",)
+    plain = hmlvs.calibrate(dirty, method="lm", initial=start, test=sim.test, fixed=su)
     robust = hmlvs.calibrate(dirty, method="lm", initial=start, test=sim.test, loss="cauchy",
-                             loss_scale=0.5)
-    clean = hmlvs.calibrate(fit, method="lm", initial=start, test=sim.test)
+                             loss_scale=0.5, fixed=su)
+    clean = hmlvs.calibrate(fit, method="lm", initial=start, test=sim.test, fixed=su)
     assert plain.test_rms > 10 * clean.test_rms
     assert robust.test_rms < 1.5 * clean.test_rms, (robust.test_rms, clean.test_rms)
     # the outliers stand out in the robust fit's per-point errors
@@ -154,7 +156,9 @@ def test_bounds_lower_above_upper():
 def test_too_few_points():
     ds = hmlvs.simulate(seed=0).dataset.subset(range(12))
     with pytest.raises(ValueError, match="too few points: 12 calibration points for 13 free"):
-        hmlvs.calibrate(ds)
+        hmlvs.calibrate(ds, fixed=("Su",))
+    with pytest.raises(ValueError, match="too few points: 9 calibration points for 10 free"):
+        hmlvs.calibrate(ds.subset(range(9)))  # the default gauge holds Su, Sv, Cu, Cv
 
 
 def test_lm_runs_progress_and_cancel():

@@ -9,6 +9,8 @@ from typing import Any, Iterator, Optional
 import typer
 
 from ._io import Terminated, atomic_write, json_text, on_sigterm
+from .calibration.options import LmOptions, PsoOptions
+from .models.opencv import DISTORTION_NAMES
 
 app = typer.Typer(
     name="hmlvs",
@@ -115,17 +117,6 @@ def _truth(mounting_deg) -> "object":
 
 GLOSSARY_URL = "docs/glossary.md"
 
-# What the command line holds fixed unless told otherwise: the scale gauge (Su) and the
-# three parameters the laser data cannot separate from the camera's position and tilt
-# (Sv, Cu, Cv; docs/model.md, "What the data can and cannot determine"). Give them from the
-# camera's datasheet or a prior camera calibration.
-DEFAULT_FIXED = ("Su", "Sv", "Cu", "Cv")
-_FIXED_WHY = {
-    "Su": "scale gauge: f, Su, Sv, k scale together, so one of them must be given",
-    "Sv": "with k = 0 the camera's shift along its y axis is absorbed by H, Sv and Cv",
-    "Cu": "with Su, Sv and Cv, removes the last flat directions of the paper's data",
-    "Cv": "mixes with the camera's y/z position and tilt about its x axis",
-}
 
 _GLOSSARY_ANCHOR = {
     "flat-direction": "flat-direction", "too-few-points": "too-few-points",
@@ -201,7 +192,7 @@ def _show_warnings(items: list[dict]) -> None:
 def _resolve_fixed(fixed: list[str], free: list[str]) -> tuple[tuple[str, ...], list[str]]:
     """The parameters to hold fixed: the default gauge plus --fixed, minus --free;
     ``--fixed none`` frees everything. Also one line per fixed parameter saying why."""
-    from .models.params import NAMES
+    from .models.params import DEFAULT_FIXED, FIXED_WHY, NAMES
 
     names = [f for f in fixed]
     if [n.lower() for n in names] == ["none"]:
@@ -213,7 +204,7 @@ def _resolve_fixed(fixed: list[str], free: list[str]) -> tuple[tuple[str, ...], 
             raise ValueError(f"unknown parameter {n!r} in --fixed/--free; the parameters are "
                              + ", ".join(NAMES))
     chosen = [n for n in chosen if n not in free]
-    why = [f"{n}: {_FIXED_WHY.get(n, 'held fixed on request (--fixed)')}" for n in chosen]
+    why = [f"{n}: {FIXED_WHY.get(n, 'held fixed on request (--fixed)')}" for n in chosen]
     return tuple(chosen), why
 
 
@@ -703,9 +694,9 @@ def calibrate(
         [], "--free", help="Parameter of the default gauge to estimate instead (repeat the "
         "option), e.g. --free Cu."),
     runs: int = typer.Option(1, help="Independent PSO runs (the best is kept)."),
-    iterations: int = typer.Option(5000, help="PSO iterations."),
+    iterations: int = typer.Option(PsoOptions.iterations, help="PSO iterations."),
     loss: Optional[str] = typer.Option(None, help="Robust loss for LM: huber or cauchy."),
-    loss_scale: float = typer.Option(1.0, help="Robust loss scale (mm)."),
+    loss_scale: float = typer.Option(LmOptions.loss_scale, help="Robust loss scale (mm)."),
     seed: int = typer.Option(0, help="Random seed."),
     threads: Optional[int] = typer.Option(None, help="Threads (default: all cores)."),
     report: Optional[Path] = typer.Option(None, help="Also write an HTML report here."),
@@ -720,7 +711,7 @@ def calibrate(
         "together, no guess needed) or paper (the paper's 14 parameters, from calibration "
         "points). auto: opencv for images whose manifest gives no board pose, else paper."),
     distortion: str = typer.Option(
-        "k1,k2,p1,p2,k3", help="opencv model: the distortion terms to estimate (the others "
+        ",".join(DISTORTION_NAMES), help="opencv model: the distortion terms to estimate (the others "
         "stay 0), e.g. k1,k2."),
     initial: Optional[Path] = typer.Option(
         None, help="opencv model: a calibration whose camera and laser plane are held (e.g. a "
@@ -779,8 +770,8 @@ def calibrate(
                              "opencv model computes so far; use --model opencv")
         if chosen == "opencv":
             _paper_only_options(method=method != "pso+lm", fixed=bool(fixed), free=bool(free),
-                                runs=runs != 1, iterations=iterations != 5000,
-                                loss=loss is not None, loss_scale=loss_scale != 1.0,
+                                runs=runs != 1, iterations=iterations != PsoOptions.iterations,
+                                loss=loss is not None, loss_scale=loss_scale != LmOptions.loss_scale,
                                 threads=threads is not None, bounds=bounds is not None,
                                 test=test is not None, save_data=save_data is not None,
                                 mode=mode != "corners")

@@ -16,7 +16,7 @@ from .. import _core
 from ..data.dataset import Dataset, fit_and_test
 from ..diagnostics.identifiability import warning_category
 from ..diagnostics.uncertainty import check_noise, diagnose
-from ..models.params import NAMES, NUM_PARAMS, Bounds, Parameters, param_index
+from ..models.params import DEFAULT_FIXED, NAMES, NUM_PARAMS, Bounds, Parameters, param_index
 from ..models.params import fixed_mask as params_fixed_mask
 from .options import (
     LmOptions,
@@ -343,7 +343,7 @@ def initial_candidates(center: Any, s: float, n: int, seed: int = 0,
 
 def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | None = None,
               initial: Parameters | Sequence[float] | None = None,
-              fixed: Iterable[str] = ("Su",), runs: int = 1, seed: int = 0,
+              fixed: Iterable[str] = DEFAULT_FIXED, runs: int = 1, seed: int = 0,
               threads: int | None = None, loss: str | None = None, progress: Any = None,
               pso: PsoOptions | None = None, lm: LmOptions | None = None,
               random: RandomSearchOptions | None = None, model: str = "paper",
@@ -363,7 +363,8 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
     bounds : search bounds (default Table 2)
     initial : LM start; for PSO/random with ``spread=s`` the centre of the paper's Eq. 22
         initial box; also the values of the fixed parameters (default: nominal)
-    fixed : parameter names held at their initial values. By default Su, the scale gauge
+    fixed : parameter names held at their initial values. By default Su (the scale gauge),
+        Sv, Cu and Cv, as on the command line (:data:`hmlvs.models.params.DEFAULT_FIXED`)
     runs : independent PSO runs (the best is kept) or, for "lm"/"lm-paper" with ``spread``,
         starts drawn by Eq. 22
     seed : random seed; results are identical for a seed whatever ``threads``

@@ -33,6 +33,18 @@ DESCRIPTIONS: dict[str, str] = {
     "ty": "camera origin in the hand frame, y",
     "tz": "camera origin in the hand frame, z",
 }
+#: What a calibration holds fixed unless told otherwise (library and command line alike): the
+#: scale gauge (Su) and the three parameters the laser data cannot separate from the camera's
+#: position and tilt (Sv, Cu, Cv; docs/model.md, "What the data can and cannot determine").
+#: Give them from the camera's datasheet or a prior camera calibration.
+DEFAULT_FIXED: tuple[str, ...] = ("Su", "Sv", "Cu", "Cv")
+#: why each of them is held, in a line
+FIXED_WHY: dict[str, str] = {
+    "Su": "scale gauge: f, Su, Sv, k scale together, so one of them must be given",
+    "Sv": "with k = 0 the camera's shift along its y axis is absorbed by H, Sv and Cv",
+    "Cu": "with Su, Sv and Cv, removes the last flat directions of the paper's data",
+    "Cv": "mixes with the camera's y/z position and tilt about its x axis",
+}
 NOMINAL = np.array(
     [8.0, 0.0074, 0.0074, 320.0, 240.0, 0.0, 140.0, 5 * math.pi / 36,
      0.0, 0.0, 0.0, 60.0, 0.0, -45.0]
