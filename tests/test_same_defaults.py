@@ -4,6 +4,9 @@ parameters, for both sensor models."""
 
 from __future__ import annotations
 
+import json
+
+from conftest import run_cli
 import hmlvs
 from hmlvs.calibration.options import LmOptions, PsoOptions
 from hmlvs.cli import app
@@ -11,8 +14,6 @@ from hmlvs.models.opencv import DISTORTION_NAMES
 from hmlvs.models.params import DEFAULT_FIXED
 import numpy as np
 import pytest
-
-from conftest import run_cli
 
 
 def _option_default(command: str, name: str):
@@ -56,3 +57,29 @@ def test_opencv_model_same_parameters_from_the_cli_and_the_library(cli_files, tm
                  "base_from_board"):
         np.testing.assert_array_equal(getattr(from_cli, name), getattr(from_lib, name),
                                       err_msg=name)
+
+
+@pytest.mark.filterwarnings("ignore")
+def test_report_of_an_opencv_calibration_on_its_session(cli_files, tmp_path, capsys):
+    _, ds, _, session = cli_files
+    cal = tmp_path / "cal.yaml"
+    code, _, err = run_cli(["calibrate", str(session), "--out", str(cal), "-q"], capsys)
+    assert code in (0, 3), err
+    out = tmp_path / "report.html"
+    code, text, err = run_cli(["report", str(cal), str(session), "--out", str(out), "--json"],
+                              capsys)
+    assert code == 0, err
+    summary = json.loads(text)
+    page = out.read_text()
+    # the verdict the calibration was given comes first, then the camera the file holds
+    assert page.index("Verdict: this calibration") < page.index("Camera (OpenCV conventions)")
+    held = hmlvs.Calibration.load(cal).sensor
+    assert f"{held.fx:.8g}" in page
+    # the calibration's own views: residuals at the calibration's level (renders: a few
+    # hundredths of a pixel and of a millimetre)
+    assert summary["views"] == 3 and 0 < summary["corner_rms_px"] < 1.0
+    assert 0 < summary["laser_rms_mm"] < 0.1
+    # a data set of calibration points is not what an opencv calibration is reported on
+    code, _, err = run_cli(["report", str(cal), str(ds), "--out", str(tmp_path / "r2.html")],
+                           capsys)
+    assert code == 2 and "image session" in err and not (tmp_path / "r2.html").exists()

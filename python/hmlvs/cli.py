@@ -711,8 +711,8 @@ def calibrate(
         "together, no guess needed) or paper (the paper's 14 parameters, from calibration "
         "points). auto: opencv for images whose manifest gives no board pose, else paper."),
     distortion: str = typer.Option(
-        ",".join(DISTORTION_NAMES), help="opencv model: the distortion terms to estimate (the others "
-        "stay 0), e.g. k1,k2."),
+        ",".join(DISTORTION_NAMES), help="opencv model: the distortion terms to estimate (the "
+        "others stay 0), e.g. k1,k2."),
     initial: Optional[Path] = typer.Option(
         None, help="opencv model: a calibration whose camera and laser plane are held (e.g. a "
         "bench session's), so that only the hand-eye transform and the board pose are "
@@ -770,8 +770,10 @@ def calibrate(
                              "opencv model computes so far; use --model opencv")
         if chosen == "opencv":
             _paper_only_options(method=method != "pso+lm", fixed=bool(fixed), free=bool(free),
-                                runs=runs != 1, iterations=iterations != PsoOptions.iterations,
-                                loss=loss is not None, loss_scale=loss_scale != LmOptions.loss_scale,
+                                runs=runs != 1,
+                                iterations=iterations != PsoOptions.iterations,
+                                loss=loss is not None,
+                                loss_scale=loss_scale != LmOptions.loss_scale,
                                 threads=threads is not None, bounds=bounds is not None,
                                 test=test is not None, save_data=save_data is not None,
                                 mode=mode != "corners")
@@ -957,6 +959,10 @@ def report(
 ) -> None:
     """Write a self-contained HTML report for a calibration file on a data set or images.
 
+    A paper-model calibration is evaluated on calibration points (a data set, or those its
+    images give); an opencv-model one on an image session: its camera, laser plane and
+    hand-eye transform held, the board's pose estimated, its verdict shown first.
+
     Example: hmlvs report calibration.yaml session.npz --out report.html
     """
     from .calibration.solvers import evaluate
@@ -969,6 +975,23 @@ def report(
 
         refuse_overwrite([calibration, *_inputs_of(data), test, robot], [("--out", out)])
         cal = Calibration.load(calibration)
+        if cal.model == "opencv":
+            if test is not None:
+                raise ValueError("--test takes a data set of calibration points, which only "
+                                 "paper-model calibrations use; this calibration is opencv")
+            path, ev = _report_opencv(cal, data, out, robot)
+    if cal.model == "opencv":
+        if as_json:
+            _echo_json({"report": str(path), "corner_rms_px": ev.corner_rms_px,
+                        "laser_rms_mm": ev.laser_rms_mm, "views": len(ev.per_view)})
+            return
+        _show_warnings(_gather(caught))
+        typer.echo(f"on {data.name}: corners {ev.corner_rms_px:.4g} px RMS, laser "
+                   f"{ev.laser_rms_mm:.4g} mm RMS over {len(ev.per_view)} views (camera, "
+                   "laser plane and hand-eye held; the board's pose estimated)")
+        typer.echo(f"report written to {path}")
+        return
+    with _guard(as_json), _collect_warnings() as caught:
         image_reports = None
         if _is_manifest(data):
             from .image.session import dataset_from_images
@@ -994,6 +1017,25 @@ def report(
     if result.test_rms is not None:
         typer.echo(f"RMS on {test.name}: {result.test_rms:.4g} mm over {len(test_ds)} points")
     typer.echo(f"report written to {path}")
+
+
+def _report_opencv(cal: Any, data: Path, out: Path, robot: Optional[Path]) -> tuple[Path, Any]:
+    """hmlvs report for an opencv-model calibration: the calibration on the session's images
+    (camera, laser plane and hand-eye held; the board's pose estimated), its verdict first."""
+    from .calibration.joint import evaluate_sensor
+    from .diagnostics.verdict import Verdict
+    from .image.views import views_from_images
+    from .report.joint import write_joint_report
+
+    if not _is_manifest(data):
+        raise ValueError(f"{data}: an opencv-model calibration is reported on an image session "
+                         "(a folder with manifest.json/yaml, or the manifest file)")
+    views, board, size, _, reports = views_from_images(data, robot=_load_robot(robot))
+    if not views:
+        raise ValueError(f"{data}: no view has a detected board and a stripe")
+    result = evaluate_sensor(cal.sensor, views, board, size, std=cal.std)
+    verdict = Verdict.from_dict(cal.verdict) if cal.verdict else None
+    return write_joint_report(result, out, image_reports=reports, verdict=verdict), result
 
 
 @app.command()

@@ -325,7 +325,8 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
                     test: Sequence[ViewData] | None = None,
                     stripe_margin: float | None = None,
                     robot_poses: str = "exact",
-                    camera: OpenCvSensor | None = None) -> JointCalibration:
+                    camera: OpenCvSensor | None = None,
+                    hold_hand_eye: bool = False) -> JointCalibration:
     """Calibrate the general sensor from per-view corners and stripe pixels (module doc).
 
     views : the views (:class:`ViewData`); each needs >= 6 corners, except laser-only views
@@ -356,6 +357,8 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         (e.g. a bench session's calibration, :func:`calibrate_views` of views without robot
         poses): only the hand-eye transform and the board's pose are estimated; needs robot
         poses and the same image size
+    hold_hand_eye : with ``camera``, hold its hand-eye transform too, so that only the board's
+        pose (or, without robot poses, each view's) is estimated: :func:`evaluate_sensor`
     """
     start = time.perf_counter()
     board = BoardSpec.of(board)
@@ -385,7 +388,12 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
     if camera is None:
         intr, cam_poses, cv_rms = initial_intrinsics(views, board, image_size, terms)
     else:
-        intr, cam_poses, cv_rms = _held_camera(camera, views, board, image_size, chain)
+        if hold_hand_eye and chain and camera.base_from_board is None \
+                and np.allclose(camera.hand_from_camera, np.eye(4)):
+            raise ValueError("the calibration has no hand-eye transform (a bench session's): "
+                             "it cannot be evaluated through robot poses")
+        intr, cam_poses, cv_rms = _held_camera(camera, views, board, image_size, chain,
+                                               evaluate=hold_hand_eye)
     corner_index = [np.asarray(v.corner_index, int) for v in views]
     flipped: list[str] = []
     warnings_out: list[str] = []
@@ -419,7 +427,8 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
                 cam_poses[i] = cam_poses[i] @ board.flip()
                 corner_index[i] = n_corners - 1 - corner_index[i]
                 flipped.append(views[i].id)
-        hand_eye = _core._hand_eye_park_martin(bfh, cam_poses)
+        hand_eye = np.asarray(camera.hand_from_camera, float) if hold_hand_eye and camera \
+            is not None else _core._hand_eye_park_martin(bfh, cam_poses)
         bfb0 = base_from_board if base_from_board is not None else _core._mean_transform(
             [bfh[i] @ hand_eye @ cam_poses[i] for i in range(len(views))])
         # laser-only views: the board seen through the chain
@@ -484,6 +493,9 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
     if camera is not None:
         opts.fixed = [True] * len(opts.fixed)
         opts.plane_known = True
+        opts.hand_eye_known = bool(hold_hand_eye and chain)
+    elif hold_hand_eye:
+        raise ValueError("hold_hand_eye needs camera= (the calibration whose parts are held)")
     opts.max_iterations = int(max_iterations)
     keep_c = [np.ones(len(ci), bool) for ci in corner_index]
     keep_l = [np.ones(len(p), bool) for p in laser_px]
@@ -577,10 +589,12 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
 
 
 def _held_camera(camera: OpenCvSensor, views: Sequence[ViewData], board: BoardSpec,
-                 image_size: tuple[int, int], chain: bool
+                 image_size: tuple[int, int], chain: bool, evaluate: bool = False
                  ) -> tuple[np.ndarray, list[np.ndarray], float]:
     """``calibrate_joint``'s set-up with a given camera (``camera``): its intrinsics, each
-    view's board pose from its corners (``solvePnP``) and their RMS reprojection (px)."""
+    view's board pose from its corners (``solvePnP``) and their RMS reprojection (px).
+    ``evaluate``: the hand-eye transform is held too (nothing of the sensor is calibrated),
+    so views without robot poses are fine."""
     if not isinstance(camera, OpenCvSensor):
         raise ValueError(f"camera must be an OpenCvSensor (an opencv-model calibration's "
                          f"sensor), got {type(camera).__name__}")
@@ -588,7 +602,7 @@ def _held_camera(camera: OpenCvSensor, views: Sequence[ViewData], board: BoardSp
         raise ValueError(f"the held camera was calibrated on {camera.image_size[0]} x "
                          f"{camera.image_size[1]} images, these are {image_size[0]} x "
                          f"{image_size[1]}")
-    if not chain:
+    if not (chain or evaluate):
         raise ValueError("a held camera and laser plane leave only the hand-eye transform to "
                          "calibrate, which needs the robot pose of every view")
     poses, res = [], []
@@ -768,6 +782,19 @@ def board_plane_errors(sensor: OpenCvSensor, views: Sequence[ViewData], board: A
         n, t = cb[:3, 2], cb[:3, 3]
         out[v.id] = (pts[valid] - t) @ n
     return out
+
+
+def evaluate_sensor(sensor: OpenCvSensor, views: Sequence[ViewData], board: Any,
+                    image_size: tuple[int, int], std: dict[str, float] | None = None
+                    ) -> JointCalibration:
+    """An opencv-model calibration (``sensor``) on a session's views: its camera, laser plane
+    and hand-eye transform held, only the board's pose in the base estimated (each view's,
+    without robot poses). The result's residuals are the calibration's on these views;
+    ``std`` (e.g. the calibration file's) is shown for the held quantities."""
+    from dataclasses import replace
+
+    result = calibrate_joint(views, board, image_size, camera=sensor, hold_hand_eye=True)
+    return replace(result, std={**(std or {}), **result.std})
 
 
 def calibrate_views(source: Any, *, board: Any = None, image_size: tuple[int, int] | None = None,
