@@ -357,22 +357,10 @@ def simulate(
 
 def _rotation_vector(params) -> "list[float]":
     """hand_from_camera's rotation as a rotation vector (axis times angle, rad)."""
-    import numpy as np
-
+    from .geometry.transforms import rotation_to_vector
     from .models.paper import hand_from_camera
 
-    r = hand_from_camera(params)[:3, :3]
-    cos = float(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0))
-    angle = float(np.arccos(cos))
-    if angle < 1e-12:
-        return [0.0, 0.0, 0.0]
-    axis = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
-    if np.sin(angle) > 1e-6:
-        axis = axis / (2.0 * np.sin(angle))
-    else:  # angle near pi
-        axis = np.sqrt(np.clip((np.diag(r) + 1.0) / 2.0, 0.0, None))
-    axis = axis / np.linalg.norm(axis)
-    return [float(x) for x in axis * angle]
+    return [float(x) for x in rotation_to_vector(hand_from_camera(params)[:3, :3])]
 
 
 def _rotation_text(params, truth=None) -> str:

@@ -31,6 +31,13 @@ from .. import _core
 from .._arrays import check_transform, robust_sigma
 from ..data.views import ViewData
 from ..geometry.board import BoardSpec, board_pose_from_corners
+from ..geometry.transforms import (
+    invert_transform,
+    make_transform,
+    rotation_angle,
+    rotation_from_vector,
+    rotation_to_vector,
+)
 from ..models.opencv import DISTORTION_NAMES, OpenCvSensor
 
 _ROBUST_K = 5.0  # residuals beyond this many robust sigmas are dropped (Gaussian: 6e-7)
@@ -126,7 +133,7 @@ class JointCalibration:
                          f"{self.robot_pose_sigma[1]:.4f} deg RMS per axis")
         if self.mode == "chain":
             t = s.hand_from_camera[:3, 3]
-            rv = _rotation_vector(s.hand_from_camera[:3, :3])
+            rv = rotation_to_vector(s.hand_from_camera[:3, :3])
             lines.append(f"hand_from_camera: t ({t[0]:.3f}, {t[1]:.3f}, {t[2]:.3f}) mm, rotation "
                          f"vector ({rv[0]:.5f}, {rv[1]:.5f}, {rv[2]:.5f}) rad "
                          f"({math.degrees(float(np.linalg.norm(rv))):.2f} deg)")
@@ -142,35 +149,8 @@ class JointCalibration:
         return "\n".join(lines)
 
 
-def _rotation_vector(r: np.ndarray) -> np.ndarray:
-    import cv2
-
-    return cv2.Rodrigues(np.asarray(r, float))[0].ravel()
-
-
-def _rotation_angle(r: np.ndarray) -> float:
-    return math.acos(max(-1.0, min(1.0, (np.trace(r) - 1.0) / 2.0)))
-
-
-def _rodrigues(rvec: np.ndarray) -> np.ndarray:
-    import cv2
-
-    r, _ = cv2.Rodrigues(np.asarray(rvec, float).reshape(3, 1))
-    return r
-
-
-def _transform(r: np.ndarray, t: Any) -> np.ndarray:
-    m = np.eye(4)
-    m[:3, :3] = r
-    m[:3, 3] = np.ravel(t)
-    return m
-
-
-def _inv(m: np.ndarray) -> np.ndarray:
-    out = np.eye(4)
-    out[:3, :3] = m[:3, :3].T
-    out[:3, 3] = -m[:3, :3].T @ m[:3, 3]
-    return out
+# names diagnostics.verdict imports from this module (it moves to geometry.transforms)
+_inv, _rotation_angle = invert_transform, rotation_angle
 
 
 def _cv_flags(distortion: Sequence[str]) -> int:
@@ -213,7 +193,7 @@ def initial_intrinsics(views: Sequence[ViewData], board: BoardSpec, image_size: 
     d = np.zeros(5)
     d[: min(5, dist.size)] = dist.ravel()[:5]
     intr = np.array([k[0, 0], k[1, 1], k[0, 2], k[1, 2], *d])
-    poses = [_transform(_rodrigues(r), t) for r, t in zip(rvecs, tvecs)]
+    poses = [make_transform(rotation_from_vector(r), t) for r, t in zip(rvecs, tvecs)]
     return intr, poses, float(rms)
 
 
@@ -237,7 +217,8 @@ def consistent_numbering(base_from_hand: Sequence[np.ndarray],
     if board.unambiguous:
         return [False] * n
     f = board.flip()
-    a_angle = np.array([[_rotation_angle((_inv(base_from_hand[i]) @ base_from_hand[j])[:3, :3])
+    a_angle = np.array([[rotation_angle((invert_transform(base_from_hand[i])
+                                         @ base_from_hand[j])[:3, :3])
                          for j in range(n)] for i in range(n)])
     flips = [False] * n
 
@@ -246,7 +227,8 @@ def consistent_numbering(base_from_hand: Sequence[np.ndarray],
 
     def score(j: int, flipped: bool) -> float:
         cj = pose(j, flipped)
-        d = [abs(_rotation_angle((pose(i, flips[i]) @ _inv(cj))[:3, :3]) - a_angle[i, j])
+        d = [abs(rotation_angle((pose(i, flips[i]) @ invert_transform(cj))[:3, :3])
+                 - a_angle[i, j])
              for i in range(n) if i != j]
         return float(np.median(d)) if d else 0.0
 
@@ -436,7 +418,7 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
             t = check_transform(v.base_from_hand, f"view {v.id} base_from_hand")
             views.append(v)
             bfh.append(t)
-            cam_poses.append(_inv(hand_eye) @ _inv(t) @ bfb0)
+            cam_poses.append(invert_transform(hand_eye) @ invert_transform(t) @ bfb0)
             corner_index.append(np.zeros(0, int))
 
     # Laser pixels on the board, and the initial laser plane through them.
@@ -514,7 +496,8 @@ def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int
         # every view keeps its own board pose, tied to the chain's by the robot pose error it
         # implies
         state.camera_from_board = [p if len(corner_index[i]) else
-                                   _inv(state.hand_from_camera) @ _inv(bfh[i])
+                                   invert_transform(state.hand_from_camera)
+                                   @ invert_transform(bfh[i])
                                    @ state.base_from_board for i, p in enumerate(cam_poses)]
         result, state, pose_sigma = _solve_uncertain_poses(make_views, state, opts, keep_c,
                                                            keep_l, robust)
@@ -769,7 +752,8 @@ def board_plane_errors(sensor: OpenCvSensor, views: Sequence[ViewData], board: A
         px = np.asarray(v.laser_pixels, float).reshape(-1, 2)
         chain = use_robot and v.base_from_hand is not None and sensor.base_from_board is not None
         if chain:
-            cb = _inv(sensor.hand_from_camera) @ _inv(v.base_from_hand) @ sensor.base_from_board
+            cb = (invert_transform(sensor.hand_from_camera)
+                  @ invert_transform(v.base_from_hand) @ sensor.base_from_board)
         else:
             cb = board_pose_from_corners(board.points(v.corner_index), v.corner_pixels,
                                          sensor.camera_matrix, sensor.dist_coeffs)

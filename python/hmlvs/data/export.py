@@ -19,10 +19,10 @@ import numpy as np
 import yaml
 
 from .._io import atomic_write
+from ..geometry.transforms import rotation_to_quaternion
 from ..models.opencv import OpenCvSensor
 from ..models.params import Parameters
 from .calibration_file import Calibration
-from .poses import rotation_to_quaternion
 
 FORMATS: tuple[str, ...] = ("opencv", "ros", "json")
 #: a paper calibration whose distortion the k1, k2, k3 fit misses by more than this warns

@@ -25,6 +25,13 @@ import yaml
 
 from .._io import atomic_write, existing_file, parse_text
 
+# re-exported: hmlvs.data.poses.rotation_* were defined here first
+from ..geometry.transforms import (
+    rotation_from_vector,  # noqa: F401
+    rotation_to_quaternion,
+    rotation_to_vector,
+)
+
 Rotation = Literal["matrix", "quaternion", "rotation_vector"]
 ROTATIONS: tuple[str, ...] = ("matrix", "quaternion", "rotation_vector")
 UNITS: dict[str, float] = {"mm": 1.0, "m": 1000.0}
@@ -82,27 +89,6 @@ class PoseFormat:
 # rotations
 
 
-def rotation_from_vector(rv: Any) -> np.ndarray:
-    """Rotation vector (axis times angle, rad) -> 3x3 rotation matrix (Rodrigues' formula)."""
-    r = np.asarray(rv, dtype=float).reshape(3)
-    angle = float(np.linalg.norm(r))
-    if angle < 1e-12:
-        return np.eye(3)
-    k = r / angle
-    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * kx + (1.0 - math.cos(angle)) * (kx @ kx)
-
-
-def rotation_to_vector(rot: Any) -> np.ndarray:
-    """3x3 rotation matrix -> rotation vector (axis times angle, rad, angle in [0, pi])."""
-    q = rotation_to_quaternion(rot)  # (x, y, z, w) with w >= 0
-    s = float(np.linalg.norm(q[:3]))
-    if s < 1e-15:
-        return np.zeros(3)
-    angle = 2.0 * math.atan2(s, q[3])
-    return q[:3] / s * angle
-
-
 def rotation_from_quaternion(q: Any, order: str) -> np.ndarray:
     """Unit quaternion in ``order`` ("xyzw" or "wxyz") -> 3x3 rotation matrix.
 
@@ -122,36 +108,6 @@ def rotation_from_quaternion(q: Any, order: str) -> np.ndarray:
         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
     ])
-
-
-def rotation_to_quaternion(rot: Any, order: str = "xyzw") -> np.ndarray:
-    """3x3 rotation matrix -> unit quaternion in ``order``, with w >= 0 (Shepperd's method)."""
-    r = np.asarray(rot, dtype=float).reshape(3, 3)
-    tr = float(np.trace(r))
-    if tr > max(r[0, 0], r[1, 1], r[2, 2]):
-        s = 2.0 * math.sqrt(1.0 + tr)
-        q = np.array([(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s,
-                      (r[1, 0] - r[0, 1]) / s, 0.25 * s])
-    elif r[0, 0] >= r[1, 1] and r[0, 0] >= r[2, 2]:
-        s = 2.0 * math.sqrt(max(1.0 + r[0, 0] - r[1, 1] - r[2, 2], 0.0))
-        q = np.array([0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s,
-                      (r[2, 1] - r[1, 2]) / s])
-    elif r[1, 1] >= r[2, 2]:
-        s = 2.0 * math.sqrt(max(1.0 + r[1, 1] - r[0, 0] - r[2, 2], 0.0))
-        q = np.array([(r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s,
-                      (r[0, 2] - r[2, 0]) / s])
-    else:
-        s = 2.0 * math.sqrt(max(1.0 + r[2, 2] - r[0, 0] - r[1, 1], 0.0))
-        q = np.array([(r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s,
-                      (r[1, 0] - r[0, 1]) / s])
-    q = q / np.linalg.norm(q)
-    if q[3] < 0:
-        q = -q
-    if order == "xyzw":
-        return q
-    if order == "wxyz":
-        return np.array([q[3], q[0], q[1], q[2]])
-    raise ValueError(f"the quaternion order must be 'xyzw' or 'wxyz', got {order!r}")
 
 
 # ------------------------------------------------------------------------------------------

@@ -15,6 +15,7 @@ import numpy as np
 
 from .._io import atomic_write
 from ..data.dataset import Dataset
+from ..geometry.transforms import rotation_to_vector
 from ..models.paper import points_in_base
 from ..models.params import DESCRIPTIONS, NAMES, TABLE2_LOWER, TABLE2_UPPER, UNITS, Parameters
 
@@ -106,26 +107,13 @@ def is_paper_sensor(params: Any) -> bool:
                 and np.all(q <= np.asarray(TABLE2_UPPER)[idx] + 1e-12))
 
 
-def _rotation_vector(r: np.ndarray) -> np.ndarray:
-    cos = float(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0))
-    angle = math.acos(cos)
-    if angle < 1e-12:
-        return np.zeros(3)
-    axis = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
-    if math.sin(angle) > 1e-6:
-        axis = axis / (2.0 * math.sin(angle))
-    else:
-        axis = np.sqrt(np.clip((np.diag(r) + 1.0) / 2.0, 0.0, None))
-    return axis / np.linalg.norm(axis) * angle
-
-
 def _derived(result: Any) -> str:
     """f/Su, f/Sv in pixels, hand_from_camera and its rotation vector, as HTML."""
     from ..models.paper import hand_from_camera
 
     p = result.params
     t = hand_from_camera(p)
-    rv = _rotation_vector(t[:3, :3])
+    rv = rotation_to_vector(t[:3, :3])
     mat = "".join("<tr>" + "".join(f"<td>{x:.6g}</td>" for x in row) + "</tr>" for row in t)
     return (f"<table class=\"summary\"><tr><td>f/Su (focal length in pixels, columns)</td>"
             f"<td>{p.f / p.Su:.6g} px</td></tr>"

@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 
 from .._io import atomic_write
-from .html import _figures_html, _page, _png, _rotation_vector
+from ..geometry.transforms import rotation_to_vector
+from .html import _figures_html, _page, _png
 
 
 def _figures(result: Any) -> dict[str, str]:
@@ -77,7 +78,7 @@ def render_joint_report(result: Any, image_reports: Any = None, verdict: Any = N
                    f"<td>{v:.8g}</td><td>{_fmt(std.get(n))}</td></tr>"
                    for n, v in s.intrinsics().items())
     a, b, c, d = s.laser_plane
-    rv = _rotation_vector(s.hand_from_camera[:3, :3])
+    rv = rotation_to_vector(s.hand_from_camera[:3, :3])
     t = s.hand_from_camera[:3, 3]
     chain = result.mode == "chain"
     extr = (f"<tr><td>laser plane (a, b, c, d), camera frame</td><td>({a:.6f}, {b:.6f}, "
