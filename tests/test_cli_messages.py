@@ -11,6 +11,7 @@ import warnings
 
 import hmlvs
 from hmlvs import cli
+from hmlvs.cli import common as cli_common
 from hmlvs.cli import main as cli_main
 from hmlvs.models.params import Parameters
 import numpy as np
@@ -36,7 +37,7 @@ def _hmlvs(*args, cwd=None):
 def small(tmp_path_factory):
     """A 6-pose session: too few points for 10 free parameters, so a data warning fires."""
     d = tmp_path_factory.mktemp("small")
-    s = hmlvs.simulate.session(cli._truth(cli.MOUNTING_DEG), num_poses=6, seed=3)
+    s = hmlvs.simulate.session(cli.mounted_truth(cli.MOUNTING_DEG), num_poses=6, seed=3)
     return s, s.dataset.save(d / "small.npz")
 
 
@@ -86,7 +87,7 @@ def test_a_data_warning_appears_once_without_a_source_line(small, tmp_path):
     assert r.returncode == 0, r.stderr
     text = r.stdout + r.stderr
     assert text.count("too few points") == 1, text
-    assert "cli.py" not in text and "HmlvsDataWarning:" not in text
+    assert ".py:" not in text and "HmlvsDataWarning:" not in text  # no source line
     assert "warning too-few-points: too few points" in r.stderr
     assert "docs/glossary.md#too-few-points" in r.stderr
 
@@ -147,12 +148,12 @@ def test_warning_classes_are_exported_and_classify_every_message(small):
 
 def test_rotation_vector_is_well_defined_at_the_gimbal_lock():
     p = Parameters.nominal().replace(omega=0.3, phi=0.0, varphi=0.0)
-    np.testing.assert_allclose(cli._rotation_vector(p), [0.0, 0.0, 0.3], atol=1e-12)
+    np.testing.assert_allclose(cli_common.rotation_vector(p), [0.0, 0.0, 0.3], atol=1e-12)
     # omega = -varphi = 1.546 (what an LM at phi ~ 0 can return) is a tilt of phi only
     p = Parameters.nominal().replace(omega=-1.546, phi=0.02, varphi=1.546)
-    rv = cli._rotation_vector(p)
+    rv = cli_common.rotation_vector(p)
     assert math.isclose(float(np.linalg.norm(rv)), 0.02, rel_tol=1e-9)
-    text = cli._rotation_text(p)
+    text = cli_common.rotation_text(p)
     assert "rotation vector" in text and "glossary.md#zyz-gimbal-lock" in text
 
 

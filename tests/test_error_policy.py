@@ -279,7 +279,7 @@ def test_measure_in_text_mode_names_the_rejected_pairs(data, tmp_path, capsys):
     import numpy as np
 
     ds = Dataset.load(data)
-    cal = hmlvs.Calibration(params=cli._truth(cli.MOUNTING_DEG)).save(tmp_path / "cal.yaml")
+    cal = hmlvs.Calibration(params=cli.mounted_truth(cli.MOUNTING_DEG)).save(tmp_path / "cal.yaml")
     entries = []
     for k in range(3):
         rows = ds.pose_index == k if ds.pose_index is not None else np.arange(len(ds)) == k

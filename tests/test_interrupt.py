@@ -18,7 +18,7 @@ SCRIPT = textwrap.dedent("""
     import hmlvs
     from hmlvs import cli
     warnings.simplefilter("ignore")
-    sim = hmlvs.simulate.session(cli._truth(cli.MOUNTING_DEG), num_poses=8, seed=1)
+    sim = hmlvs.simulate.session(cli.mounted_truth(cli.MOUNTING_DEG), num_poses=8, seed=1)
     kw = {"pso": dict(iterations=50_000_000), "random": dict(evaluations=10**9),
           "lm-paper": dict(spread=0.2, runs=200_000)}[sys.argv[1]]
     threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGINT)).start()

@@ -217,7 +217,7 @@ def test_threads_beyond_the_cores_are_capped_with_a_note():
     import hmlvs
     from hmlvs import cli
 
-    sim = hmlvs.simulate.session(cli._truth(cli.MOUNTING_DEG), num_poses=6, seed=2)
+    sim = hmlvs.simulate.session(cli.mounted_truth(cli.MOUNTING_DEG), num_poses=6, seed=2)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         many = hmlvs.calibrate(sim.dataset, method="pso", iterations=20, threads=20000,

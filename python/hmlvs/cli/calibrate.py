@@ -1,0 +1,364 @@
+"""hmlvs calibrate: images or a data set -> a calibration file, with its verdict."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Optional
+
+import typer
+
+from ..calibration.options import LmOptions, PsoOptions
+from ..models.opencv import DISTORTION_NAMES
+from .common import (
+    GLOSSARY_URL,
+    ROBOT_OPTION,
+    app,
+    check_suffix,
+    collect_warnings,
+    determined,
+    echo_json,
+    exit_untrusted,
+    gather,
+    guard,
+    inputs_of,
+    is_manifest,
+    load_robot,
+    outputs,
+    resolve_fixed,
+    rotation_text,
+    rotation_vector,
+    show_warnings,
+    solve_progress,
+    without_warning_lines,
+)
+
+
+def _resolve_model(model: str, data: Path) -> str:
+    """The sensor model to calibrate: as asked, or (auto) opencv for an image manifest without
+    a measured board pose, paper otherwise."""
+    if model not in ("auto", "opencv", "paper"):
+        raise ValueError(f"--model must be opencv, paper or auto, got {model!r}")
+    if model != "auto":
+        if model == "opencv" and not is_manifest(data):
+            raise ValueError(f"{data}: the opencv model is calibrated from images (a manifest); "
+                             "a data set of calibration points is for --model paper")
+        return model
+    if not is_manifest(data):
+        return "paper"
+    from ..data.manifest import read_manifest
+
+    _, doc, _ = read_manifest(data)
+    board = doc.get("board")
+    return "paper" if isinstance(board, dict) and "origin" in board else "opencv"
+
+
+def _paper_only_options(**given: bool) -> None:
+    """Refuse options that the opencv model does not use (an option that does nothing would
+    be an error the user never hears of)."""
+    names = [k.replace("_", "-") for k, v in given.items() if v]
+    if names:
+        raise ValueError("--" + ", --".join(names) + (" applies" if len(names) == 1 else
+                                                        " apply") +
+                         " to the paper model only (--model paper); the opencv model takes "
+                         "--distortion, --holdout, --initial, --robot, --report and --seed")
+
+
+def _held_camera(initial: Optional[Path]) -> Any:
+    """The sensor of an opencv-model --initial calibration (its camera and laser plane are
+    held), or None."""
+    if initial is None:
+        return None
+    from ..data.calibration_file import load_calibration
+
+    cal = load_calibration(initial)
+    if cal.model != "opencv" or cal.sensor is None:
+        raise ValueError(f"{initial}: --initial with the opencv model holds the camera and "
+                         "laser plane of an opencv-model calibration (e.g. a bench session's); "
+                         f"this is a {cal.model}-model calibration")
+    return cal.sensor
+
+
+def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: Optional[Path],
+                      distortion: str, report: Optional[Path], quiet: bool,
+                      as_json: bool, initial: Optional[Path] = None,
+                      require: Optional[float] = None) -> None:
+    """hmlvs calibrate --model opencv: images -> views -> joint calibration -> verdict ->
+    file. With ``initial`` (an opencv calibration, e.g. of a bench session) its camera and
+    laser plane are held and the hand-eye transform and board pose calibrated. Exits 3 when
+    the verdict is not trustworthy (the file is still written, marked so)."""
+    from ..calibration.joint import calibrate_joint
+    from ..data.calibration_file import Calibration
+    from ..diagnostics.verdict import judge_joint, require_check
+    from ..image.views import views_from_images
+
+    with guard(as_json), collect_warnings() as caught:
+        arm = load_robot(robot)
+        camera = _held_camera(initial)
+        terms = tuple(t.strip() for t in distortion.split(",") if t.strip())
+        views, board, size, board_pose, reports = views_from_images(data, robot=arm)
+        if not (as_json or quiet):
+            for r in reports:
+                typer.echo(f"{r.id}: rejected: {r.reason}" if not r.ok else
+                           f"{r.id}: {r.corners} corners, stripe in "
+                           f"{r.stripe.get('FOUND', 0)} scan lines" if r.corners else
+                           f"{r.id}: laser only (no board seen), stripe in "
+                           f"{r.stripe.get('FOUND', 0)} scan lines")
+        if not views:
+            raise ValueError("no view has both the whole board and a stripe:\n" + "\n".join(
+                f"  {r.id}: {r.reason}" for r in reports))
+        test_views = []
+        if holdout > 0:
+            if not 0 < holdout < 1:
+                raise ValueError(f"--holdout must be a fraction in (0, 1), got {holdout}")
+            import numpy as np
+
+            rng = np.random.default_rng(seed)
+            n_test = max(1, int(round(holdout * len(views))))
+            pick = set(rng.choice(len(views), n_test, replace=False).tolist())
+            test_views = [v for i, v in enumerate(views) if i in pick]
+            views = [v for i, v in enumerate(views) if i not in pick]
+        result = calibrate_joint(views, board, size, distortion=terms,
+                                 base_from_board=board_pose, test=test_views or None,
+                                 camera=camera)
+        verdict = require_check(judge_joint(
+            result, views, board, options={"distortion": terms, "base_from_board": board_pose,
+                                           "camera": camera}), require)
+        report_path = None
+        with outputs(out) as made:
+            blur = next((r.blur_var for r in reports if r.ok), None)
+            cal = Calibration.from_joint(result, robot=arm, blur_var=blur)
+            cal.verdict = verdict.to_dict()
+            path = cal.save(out)
+            made.append(path)
+            if report is not None:
+                from ..report.joint import write_joint_report
+
+                report_path = write_joint_report(result, report, image_reports=reports,
+                                                 verdict=verdict)
+    warns = gather(caught, result.warnings)
+    if as_json:
+        s = result.sensor
+        echo_json({"calibration": str(path), "model": "opencv", "mode": result.mode,
+                    "verdict": verdict.to_dict(),
+                    "report": None if report_path is None else str(report_path),
+                    "camera_matrix": s.camera_matrix.tolist(),
+                    "dist_coeffs": s.dist_coeffs.tolist(), "image_size": list(s.image_size),
+                    "laser_plane": s.laser_plane.tolist(),
+                    "hand_from_camera": s.hand_from_camera.tolist(),
+                    "base_from_board": None if s.base_from_board is None
+                    else s.base_from_board.tolist(),
+                    "std": result.std, "corner_rms_px": result.corner_rms_px,
+                    "laser_rms_mm": result.laser_rms_mm, "test_rms_mm": result.test_rms_mm,
+                    "determined": result.determined, "rank": result.rank,
+                    "unknowns": result.num_unknowns, "dropped": result.dropped,
+                    "flipped": result.flipped, "termination": result.termination,
+                    "iterations": result.iterations, "seconds": result.seconds,
+                    "warnings": warns,
+                    "images": [{"id": r.id, "ok": r.ok, "reason": r.reason,
+                                "corners": r.corners} for r in reports]})
+        exit_untrusted(verdict)
+        return
+    typer.echo(verdict.text())
+    typer.echo(result.summary())
+    if not quiet:
+        show_warnings(warns)
+    typer.echo(f"calibration written to {path}"
+               + ("" if verdict.trustworthy else " (marked not trustworthy)"))
+    if report_path is not None:
+        typer.echo(f"report written to {report_path}")
+    exit_untrusted(verdict)
+
+
+@app.command()
+def calibrate(
+    data: Path = typer.Argument(..., help="Calibration data set (.npz or .json), or an image "
+                                "manifest (a folder with manifest.json, or the file)."),
+    out: Path = typer.Option(Path("calibration.yaml"), "--out", "-o",
+                             help="Calibration file to write (.yaml or .json)."),
+    method: str = typer.Option("pso+lm", help="pso+lm, pso, lm, lm-paper or random."),
+    test: Optional[Path] = typer.Option(None, help="Held-out data set for the test RMS."),
+    holdout: float = typer.Option(0.0, help="Fraction of poses held out for testing when "
+                                  "no --test is given (0 = none)."),
+    fixed: list[str] = typer.Option(
+        [], "--fixed", help="Parameter held at its initial value, in addition to the default "
+        "gauge Su, Sv, Cu, Cv (repeat the option); --fixed none frees all."),
+    free: list[str] = typer.Option(
+        [], "--free", help="Parameter of the default gauge to estimate instead (repeat the "
+        "option), e.g. --free Cu."),
+    runs: int = typer.Option(1, help="Independent PSO runs (the best is kept)."),
+    iterations: int = typer.Option(PsoOptions.iterations, help="PSO iterations."),
+    loss: Optional[str] = typer.Option(None, help="Robust loss for LM: huber or cauchy."),
+    loss_scale: float = typer.Option(LmOptions.loss_scale, help="Robust loss scale (mm)."),
+    seed: int = typer.Option(0, help="Random seed."),
+    threads: Optional[int] = typer.Option(None, help="Threads (default: all cores)."),
+    report: Optional[Path] = typer.Option(None, help="Also write an HTML report here."),
+    mode: str = typer.Option("corners", help="Calibration points from images: corners (the "
+                             "paper's) or homography (every stripe point on the board)."),
+    save_data: Optional[Path] = typer.Option(None, help="Save the data set extracted from "
+                                             "images here (.npz or .json)."),
+    robot: Optional[Path] = ROBOT_OPTION,
+    model: str = typer.Option(
+        "auto", help="Sensor model: opencv (OpenCV intrinsics and distortion, a 3-DoF laser "
+        "plane, any hand-eye rotation; calibrated from the board's corners and the stripe "
+        "together, no guess needed) or paper (the paper's 14 parameters, from calibration "
+        "points). auto: opencv for images whose manifest gives no board pose, else paper."),
+    distortion: str = typer.Option(
+        ",".join(DISTORTION_NAMES), help="opencv model: the distortion terms to estimate (the "
+        "others stay 0), e.g. k1,k2."),
+    initial: Optional[Path] = typer.Option(
+        None, help="opencv model: a calibration whose camera and laser plane are held (e.g. a "
+        "bench session's), so that only the hand-eye transform and the board pose are "
+        "calibrated. paper model: initial guess, a calibration file of either model (an opencv "
+        "one is converted) or a YAML/JSON mapping of parameter names to values "
+        "(docs/file-formats.md)."),
+    bounds: Optional[Path] = typer.Option(
+        None, help="paper model: search bounds, a YAML/JSON mapping of parameter names to "
+        "[lower, upper] or {plus_minus: h} around the initial guess; others keep Table 2."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, no per-image "
+                               "lines and no warnings on the terminal (--json collects them)."),
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary, warnings included."),
+    require: Optional[float] = typer.Option(
+        None, "--require", help="Also call the calibration untrustworthy (exit 3) when its "
+        "predicted 95th-percentile 3D uncertainty exceeds this many mm."),
+) -> None:
+    """Calibrate the sensor from laser on/off images (or, paper model, a calibration data set).
+
+    Every calibration gets a verdict, printed first: trustworthy or not, from named checks.
+    The exit status is 3 when it is not (the calibration file is still written, marked
+    "trustworthy: false" with the reasons).
+
+    --model opencv (the default for images without a measured board pose) estimates the
+    camera, the laser plane, the hand-eye transform and the board's pose from the images and
+    robot poses alone.
+
+    Su, Sv, Cu and Cv are held at their initial (datasheet) values by default: laser points
+    alone cannot determine them (docs/model.md; docs/glossary.md, "scale gauge", "flat direction").
+
+    Example: hmlvs calibrate session.npz --holdout 0.3 --out calibration.yaml --report report.html
+    """
+    from ..calibration.solvers import calibrate as run_calibration
+    from ..data.calibration_file import Calibration
+    from ..data.dataset import Dataset
+
+    image_reports = []
+    with guard(as_json):
+        import math
+
+        if not (math.isfinite(holdout) and 0 <= holdout < 1):
+            raise ValueError(f"--holdout must be a fraction in [0, 1), got {holdout}")
+        if mode not in ("corners", "homography"):
+            raise ValueError(f"--mode must be corners or homography, got {mode!r}")
+        from ..guard import refuse_overwrite
+
+        refuse_overwrite([*inputs_of(data), test, initial, bounds, robot],
+                         [("--out", out), ("--report", report), ("--save-data", save_data)])
+        # every output's kind checked before the first is written
+        check_suffix("--out", out, (".yaml", ".yml", ".json"), "a calibration file")
+        check_suffix("--report", report, (".html", ".htm"), "an HTML report")
+        check_suffix("--save-data", save_data, (".npz", ".json"), "a data set")
+        chosen = _resolve_model(model, data)
+        if chosen == "paper" and require is not None:
+            raise ValueError("--require judges the predicted 3D uncertainty, which only the "
+                             "opencv model computes so far; use --model opencv")
+        if chosen == "opencv":
+            _paper_only_options(method=method != "pso+lm", fixed=bool(fixed), free=bool(free),
+                                runs=runs != 1,
+                                iterations=iterations != PsoOptions.iterations,
+                                loss=loss is not None,
+                                loss_scale=loss_scale != LmOptions.loss_scale,
+                                threads=threads is not None, bounds=bounds is not None,
+                                test=test is not None, save_data=save_data is not None,
+                                mode=mode != "corners")
+    if chosen == "opencv":
+        _calibrate_opencv(data, out, holdout, seed, robot, distortion, report, quiet, as_json,
+                          initial, require)
+        return
+    with guard(as_json), collect_warnings() as caught:
+        fixed_names, why = resolve_fixed(fixed, free)
+        arm = load_robot(robot)
+        guess = bounds_obj = board_pose = None
+        widened: list[str] = []
+        if initial is not None:
+            from ..data.guess import initial_board_pose, read_initial
+
+            guess = read_initial(initial)
+            board_pose = initial_board_pose(initial)
+        if is_manifest(data):
+            from ..image.session import dataset_from_images
+
+            # the corners are numbered with the given initial guess, else the nominal values;
+            # a board the manifest does not place sits where an opencv initial guess put it
+            ds, image_reports = dataset_from_images(data, mode=mode, robot=arm, params=guess,
+                                                    base_from_board=board_pose)
+            if not (as_json or quiet):
+                for r in image_reports:
+                    typer.echo(str(r))
+            if save_data is not None:
+                ds.save(save_data)
+        else:
+            ds = Dataset.load(data)
+        test_ds = Dataset.load(test) if test is not None else None
+        if test_ds is None and holdout > 0:
+            ds, test_ds = ds.split(1.0 - holdout, seed=seed, by_pose=True)
+        if bounds is not None:
+            from ..data.guess import read_bounds
+            from ..models.params import Parameters
+
+            bounds_obj = read_bounds(bounds, guess or Parameters.nominal())
+        elif guess is not None:
+            from ..data.guess import bounds_with
+
+            bounds_obj, widened = bounds_with(guess)
+        result = run_calibration(ds, method=method, test=test_ds, fixed=fixed_names, runs=runs,
+                                 initial=guess, bounds=bounds_obj,
+                                 iterations=iterations, loss=loss, loss_scale=loss_scale,
+                                 seed=seed, threads=threads,
+                                 progress=solve_progress(as_json or quiet))
+        from ..diagnostics.verdict import judge_paper
+
+        verdict = judge_paper(result)
+        report_path = None
+        with outputs(out) as made:
+            cal = Calibration.from_result(result, ds, robot=arm)
+            cal.verdict = verdict.to_dict()
+            path = cal.save(out)
+            made.append(path)
+            if report is not None:
+                from ..report.html import write_report
+
+                report_path = write_report(result, ds, report, test=test_ds,
+                                           image_reports=image_reports, verdict=verdict)
+    summary = result.summary()
+    warns = gather(caught, result.warnings, summary)
+    det, undet = determined(result)
+    if as_json:
+        echo_json({"calibration": str(path), "report": None if report_path is None
+                    else str(report_path), "verdict": verdict.to_dict(),
+                    "fit_rms_mm": result.fit_rms,
+                    "test_rms_mm": result.test_rms, "method": method,
+                    "parameters": result.params.to_dict(), "fixed": list(result.fixed),
+                    "determined": det, "not_determined": undet,
+                    "rotation_vector_rad": rotation_vector(result.params),
+                    "termination": result.termination, "seconds": result.seconds,
+                    "warnings": warns, "notes": widened,
+                    "images": [{"id": r.id, "ok": r.ok, "reason": r.reason,
+                                "points": r.points, "rejected": dict(r.rejected)}
+                               for r in image_reports]})
+        exit_untrusted(verdict)
+        return
+    typer.echo(verdict.text())
+    typer.echo(without_warning_lines(summary))
+    for note in widened:
+        typer.echo(f"note: {note}")
+    typer.echo(rotation_text(result.params))
+    typer.echo("held fixed: " + ("; ".join(why) if why else "nothing (--fixed none)"))
+    typer.echo("determined by the data: " + (", ".join(det) or "none")
+               + ("; NOT determined: " + ", ".join(undet)
+                  + f" (see {GLOSSARY_URL}#flat-direction)" if undet else ""))
+    if not quiet:
+        show_warnings(warns)
+    typer.echo(f"calibration written to {path}"
+               + ("" if verdict.trustworthy else " (marked not trustworthy)"))
+    if report_path is not None:
+        typer.echo(f"report written to {report_path}")
+    exit_untrusted(verdict)

@@ -1,0 +1,58 @@
+"""hmlvs inspect: one picture per view of a session, with what was found in it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from .common import (
+    ROBOT_OPTION,
+    app,
+    collect_warnings,
+    echo_json,
+    gather,
+    guard,
+    inputs_of,
+    load_robot,
+    show_warnings,
+)
+
+
+# -- hmlvs inspect ---------------------------------------------------------------------------
+@app.command("inspect")
+def inspect_images(
+    data: Path = typer.Argument(..., help="An image session: a folder with manifest.json (or "
+                                "the manifest), with a board."),
+    out: Path = typer.Option(Path("inspect"), "--out", "-o",
+                             help="Folder for the pictures: one PNG per view, named by its id."),
+    robot: Optional[Path] = ROBOT_OPTION,
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+) -> None:
+    """Draw what the image pipeline found in each view, and say why a view was dropped.
+
+    One picture per view: the numbered board corners, the stripe centres and the rejected
+    scan lines coloured by status. One line per view on the terminal: used or rejected and
+    why, corners, scan lines per stripe status.
+
+    Example: hmlvs inspect session/ --out inspect/
+    """
+    from ..report.inspect import inspect_session
+
+    with guard(as_json), collect_warnings() as caught:
+        from ..guard import refuse_overwrite
+
+        refuse_overwrite([*inputs_of(data), robot], [], [("--out", out)])
+        views = inspect_session(data, out, robot=load_robot(robot))
+    if not as_json:
+        show_warnings(gather(caught))
+    if as_json:
+        echo_json([{"id": v.id, "used": v.used, "reason": v.reason, "corners": v.corners,
+                     "stripe": v.stripe, "image": None if v.image is None else str(v.image)}
+                    for v in views])
+        return
+    for v in views:
+        typer.echo(v.line())
+    used = sum(v.used for v in views)
+    typer.echo(f"{used} of {len(views)} views used; pictures in {out}")
