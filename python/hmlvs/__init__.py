@@ -11,6 +11,7 @@ The pipeline and where each stage lives:
 - ``hmlvs.diagnostics``: identifiability, uncertainty, repeatability
 - ``hmlvs.measurement``: stripes + poses -> point clouds
 - ``hmlvs.report``: the HTML report; ``hmlvs.cli``: the command line
+- ``hmlvs.errors``: the warnings and errors it raises
 - ``hmlvs.sim``: simulated sessions and rendered images; ``hmlvs.paper``: the paper's studies
 
 The names below are loaded on first use, so ``import hmlvs`` stays light.
@@ -41,15 +42,15 @@ _PUBLIC = {
     "models.base": ("SensorModel",),
     "geometry.board": ("Checkerboard", "BoardSpec"),
     "data.views": ("ViewData",),
-    "diagnostics.identifiability": ("Direction", "HmlvsDataWarning", "FlatDirectionWarning",
+    "errors": ("BoardNotFoundError", "HmlvsDataWarning", "FlatDirectionWarning",
         "TooFewPointsWarning", "PoseVarietyWarning", "GimbalLockWarning", "AtBoundWarning",
-        "DiagnosticsFailedWarning", "SetupWarning", "warning_category", "IdentifiabilityReport",
-        "identifiability"),
+        "DiagnosticsFailedWarning", "SetupWarning", "warning_category"),
+    "diagnostics.identifiability": ("Direction", "IdentifiabilityReport", "identifiability"),
     "diagnostics.uncertainty": ("Combination", "Uncertainty", "uncertainty"),
     "diagnostics.repeatability": ("RepeatabilityReport", "Spread", "repeatability"),
     "image.stripe": ("StripeResult", "StripeStatus", "StripeOptions", "difference_image",
         "extract_stripe"),
-    "image.corners": ("Corners", "CornerOptions", "BoardNotFoundError", "find_corners",
+    "image.corners": ("Corners", "CornerOptions", "find_corners",
         "detect_board", "flip_board_numbering"),
     "image.points": ("CalibrationPoints", "calibration_points"),
     "image.session": ("ImageReport", "dataset_from_images"),

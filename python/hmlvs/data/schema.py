@@ -19,9 +19,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-
-class SchemaError(ValueError):
-    """A document that does not match its schema (a ``ValueError``)."""
+from ..errors import SchemaError  # noqa: F401 (re-exported)
 
 
 @dataclass(frozen=True)

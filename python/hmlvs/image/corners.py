@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from .._arrays import robust_sigma
+from ..errors import BoardNotFoundError, NumberingError  # noqa: F401 (re-exported)
 from ..models.paper import project
 from .stripe import _as_gray
 
@@ -68,10 +69,6 @@ class CornerOptions:
 
 #: corner refinements (:class:`CornerOptions` ``refine``)
 REFINE_METHODS = ("saddle", "cornersubpix")
-
-
-class BoardNotFoundError(ValueError):
-    """No (whole) checkerboard was found in the image."""
 
 
 # ------------------------------------------------------------------------------------------
@@ -802,10 +799,6 @@ def detect_board(image: np.ndarray, board: Any,
 
 # ------------------------------------------------------------------------------------------
 # Partly visible plain checkerboards
-
-
-class NumberingError(ValueError):
-    """Corners were found, but which board corners they are cannot be decided safely."""
 
 
 @dataclass(frozen=True)
