@@ -508,25 +508,4 @@ def evaluate_sensor(sensor: OpenCvSensor, views: Sequence[ViewData], board: Any,
     return replace(result, std={**(std or {}), **result.std})
 
 
-def calibrate_views(source: Any, *, board: Any = None, image_size: tuple[int, int] | None = None,
-                    robot: Any = None, test: Sequence[ViewData] | None = None,
-                    **options: Any) -> JointCalibration:
-    """The general model's calibration from an image session (a folder or manifest, see
-    docs/file-formats.md) or from views already extracted (a list of :class:`ViewData`, with
-    ``board`` and ``image_size``). ``options`` go to :func:`calibrate_joint`; the manifest's
-    measured board pose (``board.origin``), if any, is used unless ``base_from_board`` is
-    given."""
-    if isinstance(source, (list, tuple)):
-        if board is None or image_size is None:
-            raise ValueError("views given as a list need board= and image_size=")
-        return calibrate_joint(source, board, image_size, test=test, **options)
-    from ..image.views import views_from_images
-
-    views, spec, size, board_pose, _ = views_from_images(source, robot=robot, board=board)
-    if not views:
-        raise ValueError(f"{source}: no view has both the whole board and a stripe")
-    options.setdefault("base_from_board", board_pose)
-    return calibrate_joint(views, spec, size, test=test, **options)
-
-
 _board_plane_points = board_plane_points  # the name diagnostics.verdict imports

@@ -346,12 +346,10 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
               fixed: Iterable[str] = DEFAULT_FIXED, runs: int = 1, seed: int = 0,
               threads: int | None = None, loss: str | None = None, progress: Any = None,
               pso: PsoOptions | None = None, lm: LmOptions | None = None,
-              random: RandomSearchOptions | None = None, model: str = "paper",
+              random: RandomSearchOptions | None = None,
               **options: Any) -> CalibrationResult:
-    """Identify the 14 sensor parameters from calibration points (``model="paper"``), or
-    calibrate the general model from images (``model="opencv"``: see
-    :func:`hmlvs.calibration.joint.calibrate_views`; returns a
-    :class:`~hmlvs.calibration.joint.JointCalibration`).
+    """Identify the paper model's 14 sensor parameters from calibration points
+    (:func:`hmlvs.calibrate` is the entry point of both models).
 
     Parameters
     ----------
@@ -386,12 +384,6 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
     -------
     CalibrationResult
     """
-    if model == "opencv":
-        from .joint import calibrate_views
-
-        return calibrate_views(dataset, **options)  # type: ignore[return-value]
-    if model != "paper":
-        raise ValueError(f"unknown model {model!r}; the models are opencv and paper")
     start = time.perf_counter()
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
