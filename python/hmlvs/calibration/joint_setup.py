@@ -11,6 +11,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from .. import _core
+from .._opencv import calibrate_camera
 from ..data.views import ViewData
 from ..geometry.board import BoardSpec, board_pose_from_corners
 from ..geometry.transforms import (
@@ -53,11 +54,10 @@ def initial_intrinsics(views: Sequence[ViewData], board: BoardSpec, image_size: 
                        ) -> tuple[np.ndarray, list[np.ndarray], float]:
     """Zhang's method (``cv2.calibrateCamera``): the 9 intrinsics, each view's camera_from_board
     and the RMS reprojection error (px)."""
-    import cv2
 
     obj = [board.points(v.corner_index).astype(np.float32) for v in views]
     img = [np.asarray(v.corner_pixels, np.float32).reshape(-1, 1, 2) for v in views]
-    rms, k, dist, rvecs, tvecs = cv2.calibrateCamera(obj, img, tuple(int(s) for s in image_size),
+    rms, k, dist, rvecs, tvecs = calibrate_camera(obj, img, tuple(int(s) for s in image_size),
                                                      None, None, flags=_cv_flags(distortion))
     d = np.zeros(5)
     d[: min(5, dist.size)] = dist.ravel()[:5]

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import math
 import os
 import time
-from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 import warnings
 
 import numpy as np
@@ -30,11 +30,7 @@ from .options import (
     pso_struct,
     random_search_struct,
 )
-from .result import LmStage, PsoStage, RandomSearchStage, Termination
-
-if TYPE_CHECKING:
-    from ..diagnostics.identifiability import IdentifiabilityReport
-    from ..diagnostics.uncertainty import Uncertainty
+from .result import CalibrationResult, LmStage, PsoStage, RandomSearchStage, Termination
 
 METHODS = ("pso+lm", "pso", "lm", "lm-paper", "random")
 LOSSES = (None, "huber", "cauchy")
@@ -45,117 +41,6 @@ _GAUGE_NOTE = ("Su held fixed at {value:g} mm/px: f, Su, Sv and k form an exact 
                "must be given, e.g. from the camera's datasheet")
 
 ProgressFn = Callable[[int, int, float], Any]
-
-
-@dataclass
-class CalibrationResult:
-    """The outcome of :func:`calibrate`.
-
-    Attributes
-    ----------
-    params : the identified parameters
-    method : the method used
-    fixed : names of the parameters held at their given values
-    fit_rms, test_rms : RMS of ||E_i|| (mm) on the fitting points and on held-out points
-        (None without a test set)
-    fit_errors, test_errors : per-point ||E_i|| (mm)
-    cost : F(q) = 1/2 sum ||E_i||^2 on the fitting points (mm^2)
-    history : best fitness F after each PSO iteration of the best run (empty for LM/RS)
-    run_fitness : each PSO run's best fitness (several runs), or each LM start's final cost
-    run_params : (runs, 14) each run's final parameters, in the order of ``run_fitness``
-        (NaN rows for LM starts that failed)
-    iterations : PSO iterations of the best run, plus LM iterations after it (random search:
-        candidates evaluated)
-    termination : why the solve stopped (:class:`Termination`; the last stage's reason)
-    termination_message : the same as a sentence, e.g. "converged: Function tolerance
-        reached ... after 37 LM iterations (PSO: 5000 generations, max_iterations)"
-    seconds : wall-clock time of the solve
-    notes : what the solver assumed (e.g. the gauge held fixed)
-    warnings : problems found with the data or the solution
-    identifiability : what the data determine at the solution (Jacobian SVD, named flat
-        directions; :func:`hmlvs.identifiability`)
-    uncertainty : covariance, standard deviations, correlations and identifiable
-        combinations of the free parameters (:func:`hmlvs.uncertainty`)
-    pso, lm, random : what each stage did (:class:`PsoStage`, :class:`LmStage`,
-        :class:`RandomSearchStage`), None for stages that did not run
-    extra : deprecated, read-only: the old untyped dict, built from the stages
-    """
-
-    params: Parameters
-    method: str
-    fixed: tuple[str, ...]
-    fit_rms: float
-    test_rms: float | None
-    fit_errors: np.ndarray
-    test_errors: np.ndarray | None
-    cost: float
-    history: np.ndarray
-    run_fitness: np.ndarray
-    iterations: int
-    termination: Termination
-    seconds: float
-    seed: int
-    threads: int
-    bounds: Bounds
-    termination_message: str = ""
-    run_params: np.ndarray = field(default_factory=lambda: np.empty((0, NUM_PARAMS)))
-    pso: PsoStage | None = None
-    lm: LmStage | None = None
-    random: RandomSearchStage | None = None
-    notes: list[str] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
-    identifiability: IdentifiabilityReport | None = None
-    uncertainty: Uncertainty | None = None
-
-    def parameter_std(self) -> dict[str, float | None]:
-        """Standard deviation of each parameter from the uncertainty analysis; None for fixed
-        parameters and for those the data do not determine (their std is meaningless)."""
-        u = self.uncertainty
-        if u is None:
-            return {}
-        return {n: (float(u.std[n]) if n in u.std and u.determined.get(n, False) else None)
-                for n in NAMES}
-
-    @property
-    def extra(self) -> dict[str, Any]:
-        """Deprecated: the per-run details as the old untyped dict; use :attr:`run_params`,
-        :attr:`pso` and :attr:`lm`."""
-        d: dict[str, Any] = {}
-        if self.pso is not None:
-            d["pso_seconds"] = self.pso.seconds
-            d["pso_histories"] = self.pso.histories
-        if self.lm is not None and self.pso is None:
-            d.update(lm_message=self.lm.message, lm_errors=self.lm.errors,
-                     starts=self.lm.starts, run_iterations=self.lm.run_iterations,
-                     run_termination=self.lm.run_termination)
-        if self.pso is not None or self.lm is not None:
-            d["run_params"] = self.run_params
-        return d
-
-    @property
-    def free(self) -> tuple[str, ...]:
-        return tuple(n for n in NAMES if n not in self.fixed)
-
-    def summary(self, truth: Parameters | None = None) -> str:
-        lines = [f"method {self.method}: {self.termination_message}",
-                 f"{self.iterations} iterations in {self.seconds:.3f} s ({self.threads} "
-                 f"threads, seed {self.seed})",
-                 f"fit RMS {self.fit_rms:.4g} mm over {self.fit_errors.size} points"]
-        if self.test_rms is not None:
-            lines.append(f"held-out RMS {self.test_rms:.4g} mm over {self.test_errors.size} "
-                         "points")
-        if self.run_fitness.size > 1:
-            lines.append(f"{self.run_fitness.size} runs, best fitness per run: "
-                         + ", ".join(f"{f:.3g}" for f in self.run_fitness))
-        lines.append(self.params.table(truth) if truth is not None else self.params.table())
-        lines += [f"note: {n}" for n in self.notes]
-        lines += [f"warning: {w}" for w in self.warnings]
-        if self.uncertainty is not None:
-            lines.append(self.uncertainty.summary())
-        return "\n".join(lines)
-
-    def __str__(self) -> str:
-        return self.summary()
 
 
 def _rms(errors: np.ndarray) -> float:
@@ -390,8 +275,65 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
     if loss not in LOSSES:
         raise ValueError(f"loss must be None, 'huber' or 'cauchy', got {loss!r}")
     pso_o, lm_o, rs_o, other = _split_options(options, pso, lm, random)
-    test = other["test"]
     check_noise(other["pixel_noise"], other["point_noise"])  # issue 4: fail before the solve
+    pr = _problem(dataset, other["test"], bounds, initial, fixed, runs, seed, threads,
+                  other["spread"])
+    cb, close = _resolve_progress(progress)
+    try:
+        if method in ("pso", "pso+lm"):
+            out = _solve_pso(pr, pso_o, lm_o if method == "pso+lm" else None, loss, cb)
+        elif method in ("lm", "lm-paper"):
+            out = _solve_lm(pr, lm_o, "modern" if method == "lm" else "paper", loss, cb)
+        else:
+            out = _solve_random(pr, rs_o, cb)
+    finally:
+        close()
+    result = _result(pr, out, method, time.perf_counter() - start)
+    if other["analyze"]:
+        _analyse(result, pr, other["pixel_noise"], other["point_noise"], loss)
+    return result
+
+
+@dataclass
+class _Problem:
+    """A paper-model calibration's checked set-up: the data, the bounds and the box the
+    fixed parameters collapse it to, the start, the initial box of Eq. 22 (with a spread),
+    runs, seed, threads and the notes for the result."""
+
+    dataset: Dataset
+    test: Dataset | None
+    data: Any  # the C++ fitness data
+    bounds: Bounds
+    fixed: tuple[str, ...]
+    fixed_mask: np.ndarray
+    q0: np.ndarray
+    search: Bounds
+    init_box: Bounds | None
+    spread: float | None
+    runs: int
+    seed: int
+    threads: int
+    notes: list[str]
+
+
+@dataclass
+class _Solved:
+    """What a method's solve gives: the best parameters, the runs and the stages."""
+
+    q: np.ndarray
+    iterations: int
+    termination: Termination
+    history: np.ndarray = field(default_factory=lambda: np.empty(0))
+    run_fitness: np.ndarray = field(default_factory=lambda: np.empty(0))
+    run_params: np.ndarray = field(default_factory=lambda: np.empty((0, NUM_PARAMS)))
+    pso: PsoStage | None = None
+    lm: LmStage | None = None
+    random: RandomSearchStage | None = None
+
+
+def _problem(dataset: Any, test: Any, bounds: Any, initial: Any, fixed: Iterable[str],
+             runs: int, seed: int, threads: int | None, spread: Any) -> _Problem:
+    """Check the inputs (ValueError naming the problem) and set the problem up."""
     dataset, test = fit_and_test(dataset, test)
     bounds = Bounds.table2() if bounds is None else bounds
     if not isinstance(bounds, Bounds):
@@ -403,12 +345,35 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
     if len(dataset) < n_free:
         raise ValueError(f"too few points: {len(dataset)} calibration points for {n_free} free "
                          f"parameters (need at least {n_free}; many more are better)")
-    runs = check_runs(runs)
-    seed = check_seed(seed)
+    runs, seed = check_runs(runs), check_seed(seed)
     cores = min(os.cpu_count() or 1, 1024)
     threads_n = cores if threads is None else check_threads(threads)
-    capped = threads_n > cores
-    threads_n = min(threads_n, cores)  # more threads than cores only slow the solve down
+    q0 = _start(initial, bounds, fixed_mask)
+    # Fixed parameters: the search box collapses onto their values.
+    search = Bounds(np.where(fixed_mask, q0, bounds.lower), np.where(fixed_mask, q0, bounds.upper))
+    init_box = None
+    if spread is not None:
+        box = Bounds.around(q0, float(spread))
+        init_box = Bounds(np.where(fixed_mask, q0, box.lower), np.where(fixed_mask, q0, box.upper))
+    notes: list[str] = []
+    if "Su" in fixed:
+        notes.append(_GAUGE_NOTE.format(value=q0[param_index("Su")]))
+    if threads_n > cores:
+        notes.append(f"threads capped at {cores}, the machine's cores (asked: {threads}); the "
+                     "result is the same for any thread count")
+    others = [n for n in fixed if n != "Su"]
+    if others:
+        notes.append("held fixed at their initial values: " + ", ".join(others))
+    return _Problem(dataset=dataset, test=test, data=_fitness_data(dataset), bounds=bounds,
+                    fixed=fixed, fixed_mask=fixed_mask, q0=q0, search=search,
+                    init_box=init_box, spread=spread, runs=runs, seed=seed,
+                    # more threads than cores only slow the solve down
+                    threads=min(threads_n, cores), notes=notes)
+
+
+def _start(initial: Any, bounds: Bounds, fixed_mask: np.ndarray) -> np.ndarray:
+    """The start (and the fixed parameters' values): the given one, else the nominal values
+    (the box's centre for the free ones the bounds exclude); ValueError if outside."""
     if initial is None:
         q0 = Parameters.nominal().to_array()
         if not bounds.contains(q0):
@@ -422,139 +387,126 @@ def calibrate(dataset: Dataset | Any, method: str = "pso+lm", bounds: Bounds | N
         i = param_index(n)
         raise ValueError(f"initial {n} = {v:g} lies outside its bounds "
                          f"[{bounds.lower[i]:g}, {bounds.upper[i]:g}]")
-    # Fixed parameters: the search box collapses onto their values.
-    search = Bounds(np.where(fixed_mask, q0, bounds.lower), np.where(fixed_mask, q0, bounds.upper))
-    spread = other["spread"]
-    init_box = None
-    if spread is not None:
-        box = Bounds.around(q0, float(spread))
-        init_box = Bounds(np.where(fixed_mask, q0, box.lower), np.where(fixed_mask, q0, box.upper))
+    return q0
 
-    data = _fitness_data(dataset)
-    notes: list[str] = []
-    if "Su" in fixed:
-        notes.append(_GAUGE_NOTE.format(value=q0[param_index("Su")]))
-    if capped:
-        notes.append(f"threads capped at {cores}, the machine's cores (asked: {threads}); the "
-                     "result is the same for any thread count")
-    others = [n for n in fixed if n != "Su"]
-    if others:
-        notes.append("held fixed at their initial values: " + ", ".join(others))
-    cb, close = _resolve_progress(progress)
-    history = np.empty(0)
-    run_fitness = np.empty(0)
-    run_params = np.empty((0, NUM_PARAMS))
-    pso_stage = lm_stage = rs_stage = None
-    try:
-        if method in ("pso", "pso+lm"):
-            o = pso_struct(pso_o, runs=runs, threads=threads_n, seed=seed, lower=search.lower,
-                           upper=search.upper,
-                           init_lower=None if init_box is None else init_box.lower,
-                           init_upper=None if init_box is None else init_box.upper)
-            res = _core._run_pso(data, o, cb)
-            best = res.runs[res.best_run]
-            q = np.array(best.best)
-            history = np.array(best.history)
-            run_fitness = np.array([r.best_fitness for r in res.runs])
-            run_params = np.array([r.best for r in res.runs])
-            pso_stage = PsoStage(
-                termination=(Termination.CANCELLED if res.cancelled
-                             else Termination.from_pso(str(best.termination))),
-                iterations=int(best.iterations), best_fitness=float(best.best_fitness),
-                best_run=int(res.best_run), run_fitness=run_fitness.copy(),
-                run_params=run_params.copy(),
-                histories=[np.array(r.history) for r in res.runs], seconds=float(res.seconds))
-            iterations, termination = pso_stage.iterations, pso_stage.termination
-            if method == "pso+lm" and not res.cancelled:
-                lo = lm_struct(lm_o, mode="modern", fixed=fixed_mask, lower=search.lower,
-                               upper=search.upper, loss=loss)
-                starts = np.array([r.best for r in res.runs])
-                lms, errs = _core._run_lm_many(data, starts, lo, threads_n)
-                costs = np.array([r.final_cost if not e else np.inf for r, e in zip(lms, errs)])
-                k = int(np.argmin(costs))
-                improved = bool(np.isfinite(costs[k]) and costs[k] <= best.best_fitness)
-                lm_stage = _lm_stage(lms, errs, starts, costs, k, improved)
-                if improved:
-                    q = np.array(lms[k].params)
-                    iterations += lm_stage.iterations
-                    termination = lm_stage.termination
-                    # each run keeps the better of its swarm's best and the polished one
-                    better = costs <= run_fitness
-                    run_params = np.where(better[:, None],
-                                          np.array([r.params for r in lms]), run_params)
-                    run_fitness = np.where(better, costs, run_fitness)
-                else:
-                    notes.append("LM polishing did not improve the swarm's best")
-        elif method in ("lm", "lm-paper"):
-            mode = "modern" if method == "lm" else "paper"
-            lo = lm_struct(lm_o, mode=mode, fixed=fixed_mask, lower=search.lower,
-                           upper=search.upper, loss=loss)
-            if runs > 1 or spread is not None:
-                if spread is None:
-                    raise ValueError("several LM runs need spread=s to draw starts by Eq. 22")
-                starts = np.random.default_rng(seed).uniform(init_box.lower, init_box.upper,
-                                                             size=(runs, NUM_PARAMS))
-                if mode == "modern" and lm_o.use_bounds:  # inside the bounds LM keeps
-                    starts = np.clip(starts, search.lower, search.upper)
-            else:
-                starts = q0[None, :]
-            starts = np.ascontiguousarray(starts)
-            lms, errs = _core._run_lm_many(data, starts, lo, threads_n, cb)
-            costs = np.array([r.final_cost if not e else np.inf for r, e in zip(lms, errs)])
-            cancelled = any(e == "cancelled" for e in errs)
-            if not np.isfinite(costs).any():
-                if cancelled:
-                    raise ValueError("LM was cancelled before any start was solved")
-                raise ValueError(f"LM could not start: {next(e for e in errs if e)}")
-            k = int(np.argmin(costs))
-            q = np.array(lms[k].params)
-            lm_stage = _lm_stage(lms, errs, starts, costs, k, True)
-            iterations, termination = lm_stage.iterations, lm_stage.termination
-            if cancelled:
-                termination = Termination.CANCELLED
-            run_fitness = costs
-            run_params = lm_stage.run_params
-        else:  # random search
-            box = init_box if init_box is not None else search
-            o = random_search_struct(rs_o, threads=threads_n, seed=seed, lower=box.lower,
-                                     upper=box.upper)
-            res = _core._run_random_search(data, o, cb)
-            q = np.array(res.best)
-            iterations = int(res.evaluations)
-            termination = Termination.CANCELLED if res.cancelled else Termination.MAX_EVALUATIONS
-            rs_stage = RandomSearchStage(termination=termination, evaluations=iterations,
-                                         best_fitness=float(res.best_fitness),
-                                         seconds=float(res.seconds))
-    finally:
-        close()
 
-    if not np.all(np.isfinite(q)) or not math.isfinite(data.evaluate(q)):
+def _solve_pso(pr: _Problem, pso_o: Any, lm_o: Any, loss: str | None, cb: Any) -> _Solved:
+    """The swarm (Eq. 19-21), each run's best polished by modern LM when ``lm_o`` is given."""
+    box = pr.init_box
+    o = pso_struct(pso_o, runs=pr.runs, threads=pr.threads, seed=pr.seed, lower=pr.search.lower,
+                   upper=pr.search.upper, init_lower=None if box is None else box.lower,
+                   init_upper=None if box is None else box.upper)
+    res = _core._run_pso(pr.data, o, cb)
+    best = res.runs[res.best_run]
+    run_fitness = np.array([r.best_fitness for r in res.runs])
+    run_params = np.array([r.best for r in res.runs])
+    stage = PsoStage(
+        termination=(Termination.CANCELLED if res.cancelled
+                     else Termination.from_pso(str(best.termination))),
+        iterations=int(best.iterations), best_fitness=float(best.best_fitness),
+        best_run=int(res.best_run), run_fitness=run_fitness.copy(),
+        run_params=run_params.copy(),
+        histories=[np.array(r.history) for r in res.runs], seconds=float(res.seconds))
+    out = _Solved(q=np.array(best.best), iterations=stage.iterations,
+                  termination=stage.termination, history=np.array(best.history),
+                  run_fitness=run_fitness, run_params=run_params, pso=stage)
+    if lm_o is None or res.cancelled:
+        return out
+    lo = lm_struct(lm_o, mode="modern", fixed=pr.fixed_mask, lower=pr.search.lower,
+                   upper=pr.search.upper, loss=loss)
+    starts = np.array([r.best for r in res.runs])
+    lms, errs = _core._run_lm_many(pr.data, starts, lo, pr.threads)
+    costs = np.array([r.final_cost if not e else np.inf for r, e in zip(lms, errs)])
+    k = int(np.argmin(costs))
+    improved = bool(np.isfinite(costs[k]) and costs[k] <= best.best_fitness)
+    out.lm = _lm_stage(lms, errs, starts, costs, k, improved)
+    if not improved:
+        pr.notes.append("LM polishing did not improve the swarm's best")
+        return out
+    out.q = np.array(lms[k].params)
+    out.iterations += out.lm.iterations
+    out.termination = out.lm.termination
+    # each run keeps the better of its swarm's best and the polished one
+    better = costs <= run_fitness
+    out.run_params = np.where(better[:, None], np.array([r.params for r in lms]), run_params)
+    out.run_fitness = np.where(better, costs, run_fitness)
+    return out
+
+
+def _solve_lm(pr: _Problem, lm_o: Any, mode: str, loss: str | None, cb: Any) -> _Solved:
+    """Levenberg-Marquardt from the start, or from ``runs`` starts drawn by Eq. 22."""
+    lo = lm_struct(lm_o, mode=mode, fixed=pr.fixed_mask, lower=pr.search.lower,
+                   upper=pr.search.upper, loss=loss)
+    if pr.runs > 1 or pr.spread is not None:
+        if pr.spread is None or pr.init_box is None:
+            raise ValueError("several LM runs need spread=s to draw starts by Eq. 22")
+        starts = np.random.default_rng(pr.seed).uniform(pr.init_box.lower, pr.init_box.upper,
+                                                        size=(pr.runs, NUM_PARAMS))
+        if mode == "modern" and lm_o.use_bounds:  # inside the bounds LM keeps
+            starts = np.clip(starts, pr.search.lower, pr.search.upper)
+    else:
+        starts = pr.q0[None, :]
+    starts = np.ascontiguousarray(starts)
+    lms, errs = _core._run_lm_many(pr.data, starts, lo, pr.threads, cb)
+    costs = np.array([r.final_cost if not e else np.inf for r, e in zip(lms, errs)])
+    cancelled = any(e == "cancelled" for e in errs)
+    if not np.isfinite(costs).any():
+        if cancelled:
+            raise ValueError("LM was cancelled before any start was solved")
+        raise ValueError(f"LM could not start: {next(e for e in errs if e)}")
+    k = int(np.argmin(costs))
+    stage = _lm_stage(lms, errs, starts, costs, k, True)
+    return _Solved(q=np.array(lms[k].params), iterations=stage.iterations,
+                   termination=Termination.CANCELLED if cancelled else stage.termination,
+                   run_fitness=costs, run_params=stage.run_params, lm=stage)
+
+
+def _solve_random(pr: _Problem, rs_o: Any, cb: Any) -> _Solved:
+    """Random search (Eq. 22) in the initial box, or the search box without a spread."""
+    box = pr.init_box if pr.init_box is not None else pr.search
+    o = random_search_struct(rs_o, threads=pr.threads, seed=pr.seed, lower=box.lower,
+                             upper=box.upper)
+    res = _core._run_random_search(pr.data, o, cb)
+    termination = Termination.CANCELLED if res.cancelled else Termination.MAX_EVALUATIONS
+    stage = RandomSearchStage(termination=termination, evaluations=int(res.evaluations),
+                              best_fitness=float(res.best_fitness), seconds=float(res.seconds))
+    return _Solved(q=np.array(res.best), iterations=int(res.evaluations),
+                   termination=termination, random=stage)
+
+
+def _result(pr: _Problem, out: _Solved, method: str, seconds: float) -> CalibrationResult:
+    """The solve's outcome with its errors on the fitting and held-out points."""
+    q = out.q
+    if not np.all(np.isfinite(q)) or not math.isfinite(pr.data.evaluate(q)):
         raise ValueError(f"{method} found no parameter vector for which every pixel's ray meets "
                          "the laser plane; widen or check the bounds")
-    fit_errors = np.array(data.point_errors(q))
+    fit_errors = np.array(pr.data.point_errors(q))
     test_errors = None
-    if test is not None:
-        test_errors = np.array(_fitness_data(test).point_errors(q))
-    test_rms = _test_rms(test_errors, notes)
-    result = CalibrationResult(
-        params=Parameters.from_array(q), method=method, fixed=fixed,
+    if pr.test is not None:
+        test_errors = np.array(_fitness_data(pr.test).point_errors(q))
+    test_rms = _test_rms(test_errors, pr.notes)
+    return CalibrationResult(
+        params=Parameters.from_array(q), method=method, fixed=pr.fixed,
         fit_rms=_rms(fit_errors), test_rms=test_rms,
-        fit_errors=fit_errors, test_errors=test_errors, cost=float(data.evaluate(q)),
-        history=history, run_fitness=run_fitness, iterations=iterations,
-        termination=termination, seconds=time.perf_counter() - start, seed=int(seed),
-        threads=threads_n, bounds=bounds, notes=notes, run_params=run_params,
-        termination_message=_termination_message(termination, pso_stage, lm_stage, rs_stage),
-        pso=pso_stage, lm=lm_stage, random=rs_stage)
-    # --- identifiability and uncertainty at the solution (issue 4) ---------------------------
-    if not other["analyze"]:
-        return result
+        fit_errors=fit_errors, test_errors=test_errors, cost=float(pr.data.evaluate(q)),
+        history=out.history, run_fitness=out.run_fitness, iterations=out.iterations,
+        termination=out.termination, seconds=seconds, seed=int(pr.seed),
+        threads=pr.threads, bounds=pr.bounds, notes=pr.notes, run_params=out.run_params,
+        termination_message=_termination_message(out.termination, out.pso, out.lm, out.random),
+        pso=out.pso, lm=out.lm, random=out.random)
+
+
+def _analyse(result: CalibrationResult, pr: _Problem, pixel_noise: Any, point_noise: Any,
+             loss: str | None) -> None:
+    """Identifiability and uncertainty at the solution (issue 4); their warnings are issued
+    as their kinds' subclasses and kept in the result. A failed analysis is reported, not
+    raised: the calibration stands."""
     try:
         result.identifiability, result.uncertainty, data_warnings = diagnose(
-            dataset, q, fixed, bounds, other["pixel_noise"], other["point_noise"], loss)
-    except (ValueError, np.linalg.LinAlgError) as e:  # report, do not fail the calibration
+            pr.dataset, result.params.to_array(), pr.fixed, pr.bounds, pixel_noise,
+            point_noise, loss)
+    except (ValueError, np.linalg.LinAlgError) as e:
         data_warnings = [f"identifiability and uncertainty not computed: {e}"]
     for w in data_warnings:
-        warnings.warn(w, warning_category(w), stacklevel=2)  # the kind's subclass
+        warnings.warn(w, warning_category(w), stacklevel=4)  # at the caller of calibrate
     result.warnings.extend(data_warnings)
-    # --- end of issue 4 ------------------------------------------------------------------------
-    return result

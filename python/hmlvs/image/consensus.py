@@ -19,6 +19,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .. import _core
+from .._opencv import calibrate_camera
 from .corners import NumberingError, grid_placements
 
 #: fewest views with corners for the intrinsics and the consensus
@@ -44,7 +45,7 @@ def grid_intrinsics(grids: Sequence[tuple[np.ndarray, np.ndarray]], square: floa
            for _, ij in grids]
     img = [np.ascontiguousarray(px, np.float32).reshape(-1, 1, 2) for px, _ in grids]
     flags = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3)
-    _, k, d, _, _ = cv2.calibrateCamera(obj, img, tuple(int(x) for x in image_size),
+    _, k, d, _, _ = calibrate_camera(obj, img, tuple(int(x) for x in image_size),
                                         np.array(camera_matrix, float), np.zeros(5), flags=flags)
     return np.asarray(k, float), np.asarray(d, float).ravel()
 

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from .._arrays import robust_sigma
+from .._opencv import calibrate_camera
 from ..errors import BoardNotFoundError, NumberingError  # noqa: F401 (re-exported)
 from ..models.paper import project
 from .stripe import _as_gray
@@ -1273,11 +1274,10 @@ def predicted_corners(params: Any, pose: np.ndarray, board: Any) -> np.ndarray:
 
 def _calibration_rms(views: list[Corners], image_size: tuple[int, int]) -> float:
     """OpenCV's calibration RMS (px) of one camera (5 distortion terms) over ``views``."""
-    import cv2
 
     obj = [np.c_[c.board_xy, np.zeros(len(c))].astype(np.float32) for c in views]
     img = [np.ascontiguousarray(c.pixels, np.float32).reshape(-1, 1, 2) for c in views]
-    return float(cv2.calibrateCamera(obj, img, tuple(int(x) for x in image_size), None,
+    return float(calibrate_camera(obj, img, tuple(int(x) for x in image_size), None,
                                      None)[0])
 
 
