@@ -257,9 +257,6 @@ def calibrate(
         check_suffix("--report", report, (".html", ".htm"), "an HTML report")
         check_suffix("--save-data", save_data, (".npz", ".json"), "a data set")
         chosen = _resolve_model(model, data)
-        if chosen == "paper" and require is not None:
-            raise ValueError("--require judges the predicted 3D uncertainty, which only the "
-                             "opencv model computes so far; use --model opencv")
         if chosen == "opencv":
             _paper_only_options(method=method != "pso+lm", fixed=bool(fixed), free=bool(free),
                                 runs=runs != 1,
@@ -314,9 +311,9 @@ def calibrate(
                                  iterations=iterations, loss=loss, loss_scale=loss_scale,
                                  seed=seed, threads=threads,
                                  progress=solve_progress(as_json or quiet))
-        from ..diagnostics.verdict import judge_paper
+        from ..diagnostics.verdict import judge_paper, require_check
 
-        verdict = judge_paper(result)
+        verdict = require_check(judge_paper(result, ds), require)
         report_path = None
         with outputs(out) as made:
             cal = Calibration.from_result(result, ds, robot=arm)
