@@ -117,9 +117,14 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
             pick = set(rng.choice(len(views), n_test, replace=False).tolist())
             test_views = [v for i, v in enumerate(views) if i in pick]
             views = [v for i, v in enumerate(views) if i not in pick]
-        result = calibrate_joint(views, board, size, distortion=terms,
-                                 base_from_board=board_pose, test=test_views or None,
-                                 camera=camera)
+        try:
+            result = calibrate_joint(views, board, size, distortion=terms,
+                                     base_from_board=board_pose, test=test_views or None,
+                                     camera=camera)
+        except ValueError as e:  # with the likely mistake named when one explains it
+            from ..diagnostics.mistakes import explain_failure
+
+            raise ValueError(explain_failure(str(e), views, board, size)) from None
         verdict = require_check(judge_joint(
             result, views, board, options={"distortion": terms, "base_from_board": board_pose,
                                            "camera": camera}), require)

@@ -37,7 +37,9 @@ class PointModel:
         the order of ``names``); NaN rows where a ray misses the laser plane
     names, covariance : the parameters that enter a measurement and their covariance
     pixel_sets : the stripe pixels the calibration used, one array per view
-    stripe_sigma_px : the stripe's own noise across the stripe (px)
+    stripe_sigma_px : the stripe's own noise across the stripe (px): the RMS of each view's
+        rows about a smooth curve, pooled (poor views and tails count, as they count in the
+        RMS error of measured points)
     chain : whether the points are in the flange frame (robot poses)
     """
 
@@ -142,7 +144,7 @@ def of_joint(result: Any) -> PointModel:
         return _points(moved, px, chain)
 
     sets = [r["laser_pixels"] for r in result.residuals.values() if len(r["laser_pixels"])]
-    sig = stripe_noise_px(sets)
+    sig = stripe_noise_px(sets, robust=False)
     return PointModel(points, sub, np.asarray(result.covariance, float)[np.ix_(keep, keep)],
                       sets, sig if math.isfinite(sig) else 0.0, chain)
 
@@ -154,8 +156,8 @@ def _euler_to_rotation_vector(q: np.ndarray, which: Sequence[str]) -> np.ndarray
     """(3, len(which)) d(rotation vector)/d(Euler angles ``which``) of hand_from_camera's
     rotation at the parameters ``q``, the rotation vector applied on the left (hand frame):
     R(q + d) = exp([B d]x) R(q). Central differences of 1e-6 rad."""
-    from ..models.params import NAMES
     from ..models.paper import hand_from_camera
+    from ..models.params import NAMES
 
     r0 = hand_from_camera(q)[:3, :3]
     out = np.zeros((3, len(which)))
@@ -212,7 +214,7 @@ def of_paper(result: Any, dataset: Any) -> PointModel | None:
         return np.where(ok[:, None], pts @ rot.T + h[:3, 3], np.nan)
 
     sets = _pixels_per_pose(dataset)
-    sig = stripe_noise_px(sets)
+    sig = stripe_noise_px(sets, robust=False)
     if not math.isfinite(sig):
         sig = float(unc.pixel_noise or 0.0)
     return PointModel(points, names, (cov + cov.T) / 2, sets, sig, True)

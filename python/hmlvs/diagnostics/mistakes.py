@@ -241,11 +241,13 @@ def find_mistake(views: Sequence[Any], board: Any, image_size: tuple[int, int]) 
     if moved is not None:
         return moved
     if not _good(as_given, free):
+        fits_txt = (f": best {bf.rms:.2f} px RMS against {as_given:.2f} px as given"
+                    if math.isfinite(bf.rms) and math.isfinite(as_given) else "")
         sentence = (f"no usual mistake explains the data (square size, metres or "
-                    f"millimetres, inverted poses, quaternion order, a few moved views: best "
-                    f"{bf.rms:.2f} px RMS against {as_given:.2f} px as given): check the robot "
-                    "poses' accuracy and timing (taken when the robot stood still?), that the "
-                    "images belong to these poses and that the board stayed put")
+                    f"millimetres, inverted poses, quaternion order, a few moved views"
+                    f"{fits_txt}): check the robot poses' accuracy and timing (taken when the "
+                    "robot stood still?), that the images belong to these poses and that the "
+                    "board stayed put")
         return Mistake(sentence, table, best, bf.scale, free)
     return Mistake(None, table, "as given", 1.0, free)
 
@@ -319,3 +321,19 @@ def _rms_over(fit: ChainFit, ids: list[str]) -> float:
     return float(np.sqrt(np.mean(np.square(e)))) if e else float("inf")
 
 
+
+
+def explain_failure(error: str, views: Sequence[Any], board: Any,
+                    image_size: tuple[int, int]) -> str:
+    """The likely mistake (:func:`find_mistake`) when one explains the views, with
+    ``error`` (why a calibration with robot poses could not be made, e.g. a solve run off
+    to a negative focal length under wrong poses) after it; else ``error`` as it is."""
+    if not any(v.base_from_hand is not None for v in views):
+        return error
+    try:
+        sentence = find_mistake(views, board, image_size).sentence
+    except ValueError:
+        return error
+    if sentence is None or not sentence.startswith("likely mistake"):
+        return error  # "no usual mistake" adds nothing to the error's own account
+    return f"{sentence}\n(the calibration failed: {error})"

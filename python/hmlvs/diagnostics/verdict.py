@@ -87,13 +87,29 @@ class Verdict:
                    cross_validation_mm=None if cv is None else
                    {k: _float(v) for k, v in cv.items()})
 
+    def advice(self) -> str:
+        """What the verdict means for the person about to measure, in a sentence or two."""
+        if not self.trustworthy:
+            return ("Do not measure with it: fix the first reason and calibrate again. The "
+                    "calibration file is marked not trustworthy, and hmlvs measure refuses it "
+                    "unless told --accept-untrusted.")
+        ms = self.map_sigma_mm
+        if ms is None:
+            return "It may be used to measure."
+        return (f"It may be used to measure: where the stripe was seen while calibrating, 95 % "
+                f"of the measured points should lie within about {2 * ms['p95']:.2f} mm of the "
+                f"truth (twice the predicted {ms['p95']:.3f} mm at the 95th percentile); "
+                "elsewhere in the image they rest on extrapolation.")
+
     def text(self) -> str:
-        """The verdict in words a technician reads first."""
+        """The verdict in words a technician reads first: trusted or not, why (the likely
+        mistake first), what to do; then the figures and every check."""
         if self.trustworthy:
             lines = ["VERDICT: this calibration can be trusted: every check passed."]
         else:
             lines = ["VERDICT: this calibration is NOT to be trusted:"]
             lines += [f"  - {r}" for r in self.reasons]
+        lines.append(self.advice())
         if self.map_sigma_mm is not None:
             lines.append(f"predicted 3D uncertainty of measured points: "
                          f"{self.map_sigma_mm['rms']:.3f} mm RMS, "
@@ -300,6 +316,7 @@ def _paper_halves(result: Any, dataset: Any, groups: np.ndarray
     its parameters held as it held them) on the two halves of the poses (alternate poses);
     None with fewer than 3 poses a half."""
     from ..calibration.solvers import calibrate
+    from ..data.guess import bounds_with
     from .map_sigma import of_paper
 
     labels = np.unique(groups)
@@ -309,9 +326,12 @@ def _paper_halves(result: Any, dataset: Any, groups: np.ndarray
 
     def refit(k: int) -> PointModel | None:
         half = dataset.subset(halves[k])
+        # the bounds widened to hold the calibration judged (modern LM solves the rotation on
+        # SO(3): near the ZYZ gimbal lock its Euler angles may leave Table 2's)
+        bounds, _ = bounds_with(result.params, result.bounds)
         try:
             r = calibrate(half, method="lm", initial=result.params, fixed=result.fixed,
-                          bounds=result.bounds, threads=1)
+                          bounds=bounds, threads=1)
         except ValueError:
             return None
         return of_paper(r, half)
