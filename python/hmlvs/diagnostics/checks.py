@@ -229,6 +229,19 @@ def board_spread(result: Any, views: Sequence[Any], board: BoardSpec
     return out
 
 
+def pose_error_mm(result: Any, views: Sequence[Any], board: Any) -> float:
+    """The robot's pose error as it reaches measured points (mm RMS, 3D): the RMS distance
+    at the board's centre between each view's own board pose carried to the base and the
+    calibration's one board (:func:`board_spread`). A view's robot pose error moves its
+    board estimate there as it moves the points it measures at that range (the stripe
+    crosses the board); the views' own pose error (from their corners, a few hundredths of
+    a mm on renders) is counted in, so it errs on the safe side. NaN without views."""
+    spread = board_spread(result, views, BoardSpec.of(board))
+    if not spread:
+        return float("nan")
+    return float(np.sqrt(np.mean([d**2 for d, _ in spread.values()])))
+
+
 def hand_eye_residuals(result: Any, views: Sequence[Any], board: BoardSpec
                        ) -> tuple[float, float, int]:
     """The hand-eye equation A X = X B over every pair of views with corners: A the hand's

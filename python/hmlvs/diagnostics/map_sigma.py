@@ -13,7 +13,10 @@ parameters' tangent coordinates: rotations as rotation vectors):
 
 and summarised as the RMS and the 95th percentile of sqrt(trace Sigma_p). With robot poses
 the points are taken in the flange frame (their distance to the truth does not depend on
-the robot pose); without, in the camera frame.
+the robot pose); without, in the camera frame. A point measured in the base frame also
+carries its robot pose's error: with robot poses the map adds it
+(``PointModel.pose_sigma_mm``, from how far the views' own board poses, carried through
+their robot poses, land from the one board: :func:`hmlvs.diagnostics.checks.pose_error_mm`).
 """
 
 from __future__ import annotations
@@ -41,6 +44,9 @@ class PointModel:
         rows about a smooth curve, pooled (poor views and tails count, as they count in the
         RMS error of measured points)
     chain : whether the points are in the flange frame (robot poses)
+    pose_sigma_mm : the robot's pose error carried to the measured points (mm RMS, 3D),
+        added to the map: a point measured in the base frame carries its robot pose's
+        error besides the calibration's (0: exact poses, or none)
     """
 
     points: Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -49,6 +55,7 @@ class PointModel:
     pixel_sets: list[np.ndarray]
     stripe_sigma_px: float
     chain: bool
+    pose_sigma_mm: float = 0.0
 
     def at(self, pixels: np.ndarray) -> np.ndarray:
         """The calibration's own points of ``pixels`` (no perturbation)."""
@@ -273,11 +280,12 @@ def point_sigmas(model: PointModel, pixels: np.ndarray, stripe_sigma_px: float) 
 
 def predicted_map(model: PointModel) -> tuple[np.ndarray, np.ndarray] | None:
     """The footprint's pixels (k, 2) and their predicted 3D standard deviations (k, mm), with
-    the stripe noise measured from the stripes themselves; None without stripe pixels."""
+    the stripe noise measured from the stripes themselves and the robot's pose error
+    (``model.pose_sigma_mm``); None without stripe pixels."""
     px = footprint(model)
     if len(px) == 0:
         return None
-    s = point_sigmas(model, px, model.stripe_sigma_px)
+    s = np.sqrt(point_sigmas(model, px, model.stripe_sigma_px) ** 2 + model.pose_sigma_mm**2)
     ok = np.isfinite(s)
     return (px[ok], s[ok]) if ok.any() else None
 

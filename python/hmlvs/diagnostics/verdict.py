@@ -35,6 +35,7 @@ from .checks import (
     cross_validation_check,
     joint_checks,
     paper_checks,
+    pose_error_mm,
     stripe_noise_px,
     unknowns_check,
     variety_check,
@@ -177,6 +178,9 @@ def judge_joint(result: Any, views: Sequence[Any], board: Any, *,
     size = tuple(result.sensor.image_size)
     checks = joint_checks(result, views, board)
     model = of_joint(result) if (map_sigma or cross_validate) else None
+    if model is not None and result.mode == "chain":
+        robot = pose_error_mm(result, views, board)
+        model.pose_sigma_mm = robot if math.isfinite(robot) else 0.0
     refit = _joint_halves(result, views, board, options or {}) if cross_validate else None
 
     def mistake() -> str | None:
