@@ -318,7 +318,8 @@ def calibrate(
                                  progress=solve_progress(as_json or quiet))
         from ..diagnostics.verdict import judge_paper, require_check
 
-        verdict = require_check(judge_paper(result, ds), require)
+        verdict = require_check(judge_paper(result, ds, views=[
+            r.view for r in image_reports if r.view is not None]), require)
         report_path = None
         with outputs(out) as made:
             cal = Calibration.from_result(result, ds, robot=arm)

@@ -22,13 +22,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from .._arrays import robust_sigma
-from ..calibration.joint import (
-    POSE_DISAGREEMENT,
-    _board_plane_points,
-    _inv,
-    _rotation_angle,
-)
-from ..geometry.board import BoardSpec, board_pose_from_corners
+from ..calibration.joint import POSE_DISAGREEMENT, _board_plane_points, _inv
+from ..geometry.board import BoardSpec
 
 #: corners through the robot chain (px RMS): detectors reach 0.02-0.3 px on sharp boards, so a
 #: correct model and correct poses stay well below 1 px; beyond it the poses, the board or the
@@ -200,106 +195,6 @@ def pose_variety_deg(rotations: Sequence[np.ndarray]) -> float:
     return math.degrees(math.sqrt(max(ev[1], 0.0)))
 
 
-def _flip_index(board: BoardSpec, idx: np.ndarray, flipped: bool) -> np.ndarray:
-    return board.rows * board.cols - 1 - idx if flipped else idx
-
-
-def board_spread(result: Any, views: Sequence[Any], board: BoardSpec
-                 ) -> dict[str, tuple[float, float]]:
-    """Per view with corners: how far its own board-in-base estimate (its corners'
-    ``solvePnP`` with the calibrated camera, carried through its robot pose and the hand-eye
-    transform) lies from the calibration's one board pose: (mm at the board's centre,
-    degrees)."""
-    s = result.sensor
-    centre = np.array([(board.rows - 1) * board.square / 2, (board.cols - 1) * board.square / 2,
-                       0.0, 1.0])
-    out = {}
-    for v in views:
-        if v.id not in result.per_view or len(v.corner_index) < 6 or v.base_from_hand is None:
-            continue
-        idx = _flip_index(board, np.asarray(v.corner_index, int), v.id in result.flipped)
-        cb = board_pose_from_corners(board.points(idx), v.corner_pixels, s.camera_matrix,
-                                     s.dist_coeffs)
-        if cb is None:
-            continue
-        bib = np.asarray(v.base_from_hand, float) @ s.hand_from_camera @ cb
-        dt = float(np.linalg.norm((bib @ centre - s.base_from_board @ centre)[:3]))
-        da = math.degrees(_rotation_angle(bib[:3, :3] @ s.base_from_board[:3, :3].T))
-        out[v.id] = (dt, da)
-    return out
-
-
-def pose_error_mm(result: Any, views: Sequence[Any], board: Any) -> float:
-    """The robot's pose error as it reaches measured points (mm RMS, 3D): the RMS distance
-    at the board's centre between each view's own board pose carried to the base and the
-    calibration's one board (:func:`board_spread`). A view's robot pose error moves its
-    board estimate there as it moves the points it measures at that range (the stripe
-    crosses the board); the views' own pose error (from their corners, a few hundredths of
-    a mm on renders) is counted in, so it errs on the safe side. NaN without views."""
-    spread = board_spread(result, views, BoardSpec.of(board))
-    if not spread:
-        return float("nan")
-    return float(np.sqrt(np.mean([d**2 for d, _ in spread.values()])))
-
-
-def hand_eye_residuals(result: Any, views: Sequence[Any], board: BoardSpec
-                       ) -> tuple[float, float, int]:
-    """The hand-eye equation A X = X B over every pair of views with corners: A the hand's
-    motion (robot poses), B the camera's (each view's board pose from its corners,
-    ``solvePnP`` with the calibrated camera), X the calibrated hand_from_camera. The RMS of
-    the residual transform (A X)(X B)^-1: its translation (mm, at the flange) and rotation
-    (degrees), and the number of pairs."""
-    s = result.sensor
-    x = s.hand_from_camera
-    cams, hands = [], []
-    for v in views:
-        if v.id not in result.per_view or len(v.corner_index) < 6 or v.base_from_hand is None:
-            continue
-        idx = _flip_index(board, np.asarray(v.corner_index, int), v.id in result.flipped)
-        cb = board_pose_from_corners(board.points(idx), v.corner_pixels, s.camera_matrix,
-                                     s.dist_coeffs)
-        if cb is not None:
-            cams.append(cb)
-            hands.append(np.asarray(v.base_from_hand, float))
-    dt, da = [], []
-    for i in range(len(cams)):
-        for j in range(i + 1, len(cams)):
-            a = _inv(hands[i]) @ hands[j]
-            b = cams[i] @ _inv(cams[j])
-            e = a @ x @ _inv(x @ b)
-            dt.append(float(np.linalg.norm(e[:3, 3])))
-            da.append(math.degrees(_rotation_angle(e[:3, :3])))
-    if not dt:
-        return float("nan"), float("nan"), 0
-    return (float(np.sqrt(np.mean(np.square(dt)))), float(np.sqrt(np.mean(np.square(da)))),
-            len(dt))
-
-
-def corner_checks(result: Any) -> list[Check]:
-    """The corners' reprojection against the detector's noise, and (robot poses) through
-    the chain against each view's own board pose."""
-    chain = result.mode == "chain"
-    cr = result.corner_rms_px
-    where = "through the robot chain" if chain else "with each view's board pose free"
-    checks = [_check(
-        "corner_rms", cr, CORNER_RMS_LIMIT_PX, "px",
-        "corner detectors locate corners to a few hundredths to a few tenths of a pixel; "
-        "beyond 1 px the poses, the board or the camera model do not fit the images",
-        f"the board corners lie {cr:.2f} px RMS from their detections {where}, more than "
-        f"the {CORNER_RMS_LIMIT_PX:g} px a correct calibration leaves")]
-    free = getattr(result, "free_rms_px", None)
-    if chain and free is not None and math.isfinite(free):
-        ratio = cr / max(free, 0.05)
-        checks.append(_check(
-            "chain_vs_free_corner_rms", ratio, POSE_DISAGREEMENT, "",
-            "with correct robot poses the chain fits the corners about as well as Zhang's "
-            "calibration with every view's board pose free (renders: within 10 %)",
-            f"the robot chain fits the corners {ratio:.1f} times worse than each view's own "
-            f"board pose ({cr:.2f} against {free:.2f} px): the robot poses disagree with the "
-            "images"))
-    return checks
-
-
 def laser_check(result: Any, used: Sequence[Any], laser_sets: Sequence[np.ndarray]
                 ) -> list[Check]:
     """The laser residuals against the stripe's own noise carried to mm (none when the
@@ -319,51 +214,6 @@ def laser_check(result: Any, used: Sequence[Any], laser_sets: Sequence[np.ndarra
         f"steps), and never asks less than {LASER_FLOOR_MM:g} mm",
         f"the stripe points lie {lr:.3f} mm RMS from the laser plane, more than the "
         f"{limit:.3f} mm the stripe's own noise explains")]
-
-
-def chain_checks(result: Any, used: Sequence[Any], board: BoardSpec) -> list[Check]:
-    """The robot chain's consistency: the spread of the views' board-in-base estimates, the
-    hand-eye equation A X = X B over pairs of views, and the views left out."""
-    checks = []
-    spread = board_spread(result, used, board)
-    if spread:
-        dt = np.array([a for a, _ in spread.values()])
-        da = np.array([b for _, b in spread.values()])
-        rt, ra = float(np.sqrt(np.mean(dt**2))), float(np.sqrt(np.mean(da**2)))
-        worst = sorted(spread, key=lambda k: -spread[k][0])[:3]
-        checks.append(_check(
-            "board_spread_mm", rt, BOARD_SPREAD_MM, "mm",
-            "each view's board pose carried to the base must land on the one board: a "
-            "robot's absolute accuracy (0.1-1 mm) plus one view's pose error",
-            f"the views put the board {rt:.2f} mm RMS apart in the robot base (most: "
-            f"{', '.join(worst)}): the board moved or the poses do not match the images"))
-        checks.append(_check(
-            "board_spread_deg", ra, BOARD_SPREAD_DEG, "deg",
-            "as board_spread_mm, for the board's orientation (a robot's orientation "
-            "accuracy is a few hundredths of a degree)",
-            f"the views turn the board {ra:.2f} degrees RMS apart in the robot base"))
-    ht, ha, pairs = hand_eye_residuals(result, used, board)
-    if pairs:
-        checks.append(_check(
-            "hand_eye_axxb_mm", ht, HAND_EYE_MM, "mm",
-            "the hand's motion between two views and the camera's (from their corners) must "
-            "agree through the hand-eye transform (A X = X B); each pair's residual carries "
-            "two views' pose errors: sqrt(2) times board_spread_mm's limit",
-            f"the hand-eye equation A X = X B leaves {ht:.2f} mm RMS over {pairs} pairs of "
-            "views: the robot's motions do not match the camera's"))
-        checks.append(_check(
-            "hand_eye_axxb_deg", ha, HAND_EYE_DEG, "deg",
-            "as hand_eye_axxb_mm, for the rotation: sqrt(2) times board_spread_deg's limit",
-            f"the hand-eye equation A X = X B leaves {ha:.2f} degrees RMS over {pairs} "
-            "pairs of views"))
-    n_rej = len(result.rejected)
-    checks.append(_check(
-        "views_rejected", n_rej, 0, "views",
-        "a view is rejected when its board's orientation fits its robot pose under neither "
-        "corner numbering: its image and its pose disagree",
-        f"{n_rej} view(s) were left out because their images disagree with their robot "
-        f"poses ({', '.join(result.rejected)})"))
-    return checks
 
 
 def coverage_checks(corner_sets: Sequence[np.ndarray] | None,
@@ -423,16 +273,18 @@ def cross_validation_check(cv: dict[str, float]) -> Check:
 def joint_checks(result: Any, views: Sequence[Any], board: Any) -> list[Check]:
     """The checks of a general-model calibration (:class:`JointCalibration`) on the views it
     was given (rejected ones included, to count them)."""
+    from .chain import chain_checks, chain_of_joint, corner_checks
+
     board = BoardSpec.of(board)
-    chain = result.mode == "chain"
     used = [v for v in views if v.id in result.per_view]
     laser_sets = [result.residuals[v.id]["laser_pixels"] for v in used
                   if v.id in result.residuals]
     corner_sets = [result.residuals[v.id]["corner_pixels"] for v in used
                    if v.id in result.residuals]
-    checks = corner_checks(result) + laser_check(result, used, laser_sets)
-    if chain:
-        checks += chain_checks(result, used, board)
+    chain = chain_of_joint(result, views, board)
+    checks = (chain_checks(chain) if chain is not None else
+              corner_checks(result.corner_rms_px, None, False))
+    checks += laser_check(result, used, laser_sets)
     checks += coverage_checks(corner_sets, laser_sets, tuple(result.sensor.image_size))
     rots = [cb[:3, :3] for cb in (_camera_from_board(result, v) for v in used)
             if cb is not None]

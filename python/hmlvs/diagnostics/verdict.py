@@ -25,6 +25,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..geometry.board import BoardSpec
+from .chain import chain_checks, chain_of_joint, chain_of_paper, pose_error_mm
 from .checks import (
     CROSS_VALIDATION_LIMIT,
     Check,
@@ -35,7 +36,6 @@ from .checks import (
     cross_validation_check,
     joint_checks,
     paper_checks,
-    pose_error_mm,
     stripe_noise_px,
     unknowns_check,
     variety_check,
@@ -178,8 +178,9 @@ def judge_joint(result: Any, views: Sequence[Any], board: Any, *,
     size = tuple(result.sensor.image_size)
     checks = joint_checks(result, views, board)
     model = of_joint(result) if (map_sigma or cross_validate) else None
-    if model is not None and result.mode == "chain":
-        robot = pose_error_mm(result, views, board)
+    chain = chain_of_joint(result, views, board)
+    if model is not None and chain is not None:
+        robot = pose_error_mm(chain)
         model.pose_sigma_mm = robot if math.isfinite(robot) else 0.0
     refit = _joint_halves(result, views, board, options or {}) if cross_validate else None
 
@@ -274,17 +275,19 @@ def require_check(verdict: Verdict, require_mm: float | None) -> Verdict:
 
 # -- the paper model ------------------------------------------------------------------------
 
-def judge_paper(result: Any, dataset: Any = None, *, map_sigma: bool = True,
-                cross_validate: bool = True, image_size: tuple[int, int] | None = None
-                ) -> Verdict:
+def judge_paper(result: Any, dataset: Any = None, *, views: Sequence[Any] | None = None,
+                map_sigma: bool = True, mistakes: bool = True, cross_validate: bool = True,
+                image_size: tuple[int, int] | None = None) -> Verdict:
     """The verdict on a paper-model calibration (:class:`hmlvs.CalibrationResult`) and the
     data set it was fitted to: the paper model's own checks (the solve's end, the fit
     against the sensor class's accuracy, held-out points against the fit) and, with the
     data set, the checks both models share (the stripe's coverage of the image when its size
     is known, the variety of the poses, the unknowns determined, the cross-validation of the
-    two halves of the poses) and the predicted 3D uncertainty. The data set carries no
-    board corners: the corner and chain checks and the mistake finder are the general
-    model's."""
+    two halves of the poses) and the predicted 3D uncertainty. With the ``views`` of a
+    session from images (:attr:`ImageReport.view`) and the board the data set records
+    (``meta["board"]``, with its pose in the base), the corner and robot-chain checks too,
+    the robot's pose error in the uncertainty and, when a check fails, the likely mistake
+    (:func:`find_mistake`)."""
     from .map_sigma import of_paper, pose_groups
 
     checks = paper_checks(result)
@@ -295,6 +298,14 @@ def judge_paper(result: Any, dataset: Any = None, *, map_sigma: bool = True,
         return verdict_from_checks(checks)
     model = of_paper(result, dataset) if (map_sigma or cross_validate) else None
     size = image_size or _image_size(dataset)
+    board, board_pose = _board_of(dataset)
+    chain = (chain_of_paper(result, views, board, board_pose, size)
+             if views and board is not None else None)
+    if chain is not None:
+        checks = checks[:1] + chain_checks(chain) + checks[1:]
+        if model is not None:
+            robot = pose_error_mm(chain)
+            model.pose_sigma_mm = robot if math.isfinite(robot) else 0.0
     if model is not None and size is not None:
         checks += coverage_checks(None, model.pixel_sets, size)
     groups = pose_groups(dataset)
@@ -302,10 +313,26 @@ def judge_paper(result: Any, dataset: Any = None, *, map_sigma: bool = True,
     firsts = [int(np.nonzero(groups == g)[0][0]) for g in np.unique(groups)]
     checks.append(variety_check([poses[i][:3, :3].T for i in firsts]))
     refit = _paper_halves(result, dataset, groups) if cross_validate else None
-    v = _finish(checks, model, refit, lambda: None, size)
+
+    def mistake() -> str | None:
+        if not (mistakes and chain is not None and size is not None):
+            return None
+        return find_mistake(chain.views, chain.board, size).sentence
+
+    v = _finish(checks, model, refit, mistake, size)
     if not map_sigma:
         v.map_sigma_mm, v.map_points = None, None
     return v
+
+
+def _board_of(dataset: Any) -> tuple[BoardSpec | None, np.ndarray | None]:
+    """The board a data set from images records (``meta["board"]``): its spec and its pose
+    in the base, or (None, None)."""
+    b = (getattr(dataset, "meta", None) or {}).get("board")
+    if not isinstance(b, dict) or "base_from_board" not in b:
+        return None, None
+    return (BoardSpec(int(b["rows"]), int(b["cols"]), float(b["square"])),
+            np.asarray(b["base_from_board"], float))
 
 
 def _image_size(dataset: Any) -> tuple[int, int] | None:
