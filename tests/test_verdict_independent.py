@@ -73,6 +73,44 @@ def session(tmp_path_factory):
     return folder, truth
 
 
+def _held_out_errors(cal: Path, folder: Path, truth: dict, views: range | tuple,
+                     params: dict, reported: list | None = None) -> np.ndarray:
+    """The 3D errors (mm) of the held-out ``views``' stripes measured with the calibration
+    file ``cal`` (``hmlvs.Measurer``, as ``hmlvs measure`` does) at their poses (as the
+    robot reported them: ``reported``, default the true ones), against the renderer's true
+    stripe point of the same image column."""
+    import hmlvs
+
+    measurer = hmlvs.Measurer(cal)
+    errors = []
+    for i in views:
+        on, off = (cv2.imread(str(folder / f"p{i:03d}_{k}.png"), cv2.IMREAD_UNCHANGED)
+                   for k in ("on", "off"))
+        pose = truth["poses"][i]
+        profile = measurer.points(on, pose if reported is None else reported[i], off=off)
+        u = np.nonzero(profile.measured & np.isfinite(truth["centres"][i]))[0]
+        true = R.board_hits(params, pose, u.astype(float), truth["centres"][i][u])[0]
+        errors.append(np.linalg.norm(profile.points[u] - true, axis=1))
+    return np.concatenate(errors)
+
+
+def _within_3x(verdict: dict, errors: np.ndarray) -> None:
+    """The verdict's predicted map uncertainty (RMS) within 3 times either way of the RMS of
+    the measured ``errors``."""
+    predicted = verdict["map_sigma_mm"]["rms"]
+    measured = float(np.sqrt(np.mean(errors**2)))
+    assert errors.size > 500
+    assert 1 / 3 < predicted / measured < 3, (predicted, measured)
+
+
+def _verdict_then_map(report: Path, then: str) -> None:
+    """A trusted calibration's report reads the verdict first, then the uncertainty map,
+    then ``then``."""
+    html = report.read_text()
+    assert html.index("Verdict: this calibration can be trusted") < html.index(
+        "Predicted 3D uncertainty over the image") < html.index(then)
+
+
 @pytest.mark.scene
 def test_correct_session_exits_0_trustworthy_uncertainty_within_3x_of_held_out_error(
         session, tmp_path, capsys):
@@ -81,7 +119,6 @@ def test_correct_session_exits_0_trustworthy_uncertainty_within_3x_of_held_out_e
     with the calibration file (``hmlvs.Measurer``, as ``hmlvs measure`` does) at their true
     poses, against the renderer's true stripe point of the same image column. The report
     reads the verdict first, in words, then the uncertainty map."""
-    import hmlvs
 
     folder, truth = session
     cal, report = tmp_path / "cal.yaml", tmp_path / "report.html"
@@ -94,24 +131,9 @@ def test_correct_session_exits_0_trustworthy_uncertainty_within_3x_of_held_out_e
     assert all(c["ok"] for c in checks.values())
     assert {"hand_eye_axxb_mm", "hand_eye_axxb_deg", "cross_validation",
             "board_spread_mm"} <= set(checks)
-    predicted = v["map_sigma_mm"]["rms"]
-    measurer = hmlvs.Measurer(cal)
-    errors = []
-    for i in range(CALIBRATION_VIEWS, CALIBRATION_VIEWS + EXTRA_VIEWS):
-        on, off = (cv2.imread(str(folder / f"p{i:03d}_{k}.png"), cv2.IMREAD_UNCHANGED)
-                   for k in ("on", "off"))
-        pose = truth["poses"][i]
-        profile = measurer.points(on, pose, off=off)
-        u = np.nonzero(profile.measured & np.isfinite(truth["centres"][i]))[0]
-        true = R.board_hits(PARAMS, pose, u.astype(float), truth["centres"][i][u])[0]
-        errors.append(np.linalg.norm(profile.points[u] - true, axis=1))
-    e = np.concatenate(errors)
-    measured = float(np.sqrt(np.mean(e**2)))
-    assert e.size > 500
-    assert 1 / 3 < predicted / measured < 3, (predicted, measured)
-    html = report.read_text()
-    assert html.index("Verdict: this calibration can be trusted") < html.index(
-        "Predicted 3D uncertainty over the image") < html.index("Camera (OpenCV")
+    _within_3x(v, _held_out_errors(cal, folder, truth, range(
+        CALIBRATION_VIEWS, CALIBRATION_VIEWS + EXTRA_VIEWS), PARAMS))
+    _verdict_then_map(report, "Camera (OpenCV")
 
 
 def _robot_error(rng: np.random.Generator, m: np.ndarray, mm: float, deg: float) -> np.ndarray:
@@ -131,7 +153,6 @@ def test_a_robots_pose_error_is_in_the_predicted_uncertainty(session, tmp_path, 
     RMS against 0.64 mm; the calibration's own part alone 0.08 mm (8 times too little).
     The verdict calls it untrustworthy (the chain fits the corners 8 times worse than free
     board poses): not asserted here."""
-    import hmlvs
 
     folder, truth = session
     rng = np.random.default_rng(7)
@@ -146,17 +167,9 @@ def test_a_robots_pose_error_is_in_the_predicted_uncertainty(session, tmp_path, 
     code, out, err = run_cli(["calibrate", str(m), "--out", str(cal), "--json"], capsys)
     assert code in (0, 3), err
     predicted = json.loads(out)["verdict"]["map_sigma_mm"]["rms"]
-    measurer = hmlvs.Measurer(cal)
-    errors = []
-    for i in range(CALIBRATION_VIEWS, CALIBRATION_VIEWS + EXTRA_VIEWS):
-        on, off = (cv2.imread(str(folder / f"p{i:03d}_{k}.png"), cv2.IMREAD_UNCHANGED)
-                   for k in ("on", "off"))
-        profile = measurer.points(on, poses[i], off=off)
-        u = np.nonzero(profile.measured & np.isfinite(truth["centres"][i]))[0]
-        true = R.board_hits(PARAMS, truth["poses"][i], u.astype(float),
-                            truth["centres"][i][u])[0]
-        errors.append(np.linalg.norm(profile.points[u] - true, axis=1))
-    measured = float(np.sqrt(np.mean(np.concatenate(errors) ** 2)))
+    e = _held_out_errors(cal, folder, truth, range(CALIBRATION_VIEWS, CALIBRATION_VIEWS +
+                                                   EXTRA_VIEWS), PARAMS, reported=poses)
+    measured = float(np.sqrt(np.mean(e**2)))
     assert measured > 0.3  # the robot's error dominates (the exact poses': 0.195 mm)
     assert 1 / 3 < predicted / measured < 3, (predicted, measured)
 
@@ -312,7 +325,6 @@ def test_paper_model_verdict_and_uncertainty_within_3x_of_held_out_error(
     points), checked as the general model's is: against the held-out views' stripes
     measured with the calibration file at their true poses, against the renderer's truth.
     The report reads the verdict, then the uncertainty map, then the parameters."""
-    import hmlvs
 
     folder, truth = paper_session
     cal, report = tmp_path / "cal.yaml", tmp_path / "report.html"
@@ -331,21 +343,5 @@ def test_paper_model_verdict_and_uncertainty_within_3x_of_held_out_error(
                  "board_spread_deg", "hand_eye_axxb_mm", "hand_eye_axxb_deg"):
         assert checks[name]["ok"], checks[name]
     assert checks["corner_rms"]["value"] < 0.1
-    predicted = v["map_sigma_mm"]["rms"]
-    measurer = hmlvs.Measurer(cal)
-    errors = []
-    for i in (7, 8):
-        on, off = (cv2.imread(str(folder / f"p{i:03d}_{k}.png"), cv2.IMREAD_UNCHANGED)
-                   for k in ("on", "off"))
-        pose = truth["poses"][i]
-        profile = measurer.points(on, pose, off=off)
-        u = np.nonzero(profile.measured & np.isfinite(truth["centres"][i]))[0]
-        true = R.board_hits(R.TRUE, pose, u.astype(float), truth["centres"][i][u])[0]
-        errors.append(np.linalg.norm(profile.points[u] - true, axis=1))
-    e = np.concatenate(errors)
-    measured = float(np.sqrt(np.mean(e**2)))
-    assert e.size > 500
-    assert 1 / 3 < predicted / measured < 3, (predicted, measured)
-    html = report.read_text()
-    assert html.index("Verdict: this calibration can be trusted") < html.index(
-        "Predicted 3D uncertainty over the image") < html.index("Parameters")
+    _within_3x(v, _held_out_errors(cal, folder, truth, (7, 8), R.TRUE))
+    _verdict_then_map(report, "Parameters")
