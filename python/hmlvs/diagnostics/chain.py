@@ -17,8 +17,9 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..calibration.joint import POSE_DISAGREEMENT, _inv, _rotation_angle
+from ..calibration.joint import POSE_DISAGREEMENT
 from ..geometry.board import BoardSpec, board_pose_from_corners
+from ..geometry.transforms import invert_transform, rotation_angle
 from .checks import (
     BOARD_SPREAD_DEG,
     BOARD_SPREAD_MM,
@@ -133,7 +134,7 @@ def board_spread(chain: Chain) -> dict[str, tuple[float, float]]:
             continue
         bib = np.asarray(v.base_from_hand, float) @ chain.hand_from_camera @ cb
         dt = float(np.linalg.norm((bib @ centre - bfb @ centre)[:3]))
-        da = math.degrees(_rotation_angle(bib[:3, :3] @ bfb[:3, :3].T))
+        da = math.degrees(rotation_angle(bib[:3, :3] @ bfb[:3, :3].T))
         out[v.id] = (dt, da)
     return out
 
@@ -167,11 +168,11 @@ def hand_eye_residuals(chain: Chain) -> tuple[float, float, int]:
     dt, da = [], []
     for i in range(len(cams)):
         for j in range(i + 1, len(cams)):
-            a = _inv(hands[i]) @ hands[j]
-            b = cams[i] @ _inv(cams[j])
-            e = a @ x @ _inv(x @ b)
+            a = invert_transform(hands[i]) @ hands[j]
+            b = cams[i] @ invert_transform(cams[j])
+            e = a @ x @ invert_transform(x @ b)
             dt.append(float(np.linalg.norm(e[:3, 3])))
-            da.append(math.degrees(_rotation_angle(e[:3, :3])))
+            da.append(math.degrees(rotation_angle(e[:3, :3])))
     if not dt:
         return float("nan"), float("nan"), 0
     return (float(np.sqrt(np.mean(np.square(dt)))), float(np.sqrt(np.mean(np.square(da)))),

@@ -22,8 +22,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from .._arrays import robust_sigma
-from ..calibration.joint import POSE_DISAGREEMENT, _board_plane_points, _inv
+from ..calibration.joint import POSE_DISAGREEMENT, _board_plane_points
 from ..geometry.board import BoardSpec
+from ..geometry.transforms import invert_transform, rotation_to_vector
 
 #: corners through the robot chain (px RMS): detectors reach 0.02-0.3 px on sharp boards, so a
 #: correct model and correct poses stay well below 1 px; beyond it the poses, the board or the
@@ -111,8 +112,8 @@ def _check(name: str, value: float, limit: float, unit: str, why: str, problem: 
 def _camera_from_board(result: Any, view: Any) -> np.ndarray | None:
     s = result.sensor
     if result.mode == "chain":
-        return _inv(s.hand_from_camera) @ _inv(np.asarray(view.base_from_hand, float)) \
-            @ s.base_from_board
+        hand = np.asarray(view.base_from_hand, float)
+        return invert_transform(s.hand_from_camera) @ invert_transform(hand) @ s.base_from_board
     return result.camera_from_board.get(view.id)
 
 
@@ -178,16 +179,10 @@ def _coverage(pixels: Sequence[np.ndarray], image_size: tuple[int, int]) -> floa
     return float(hit.mean())
 
 
-def _rotation_vector(r: np.ndarray) -> np.ndarray:
-    import cv2
-
-    return cv2.Rodrigues(np.asarray(r, float))[0].ravel()
-
-
 def pose_variety_deg(rotations: Sequence[np.ndarray]) -> float:
     """The RMS relative rotation (degrees) about the second best spanned axis over all pairs
     of views: 0 when every view turns about one axis only."""
-    rv = [_rotation_vector(a @ b.T) for k, a in enumerate(rotations) for b in rotations[k + 1:]]
+    rv = [rotation_to_vector(a @ b.T) for k, a in enumerate(rotations) for b in rotations[k + 1:]]
     if not rv:
         return 0.0
     m = np.asarray(rv).T @ np.asarray(rv) / len(rv)

@@ -27,6 +27,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from ..geometry.transforms import rotation_from_vector, rotation_to_vector
+
 #: stripe pixels sampled over the footprint (enough for a stable 95th percentile)
 SAMPLES = 600
 
@@ -83,12 +85,6 @@ def _householder_tangent(n: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(x) * h[:, :2]
 
 
-def _rodrigues(w: np.ndarray) -> np.ndarray:
-    import cv2
-
-    return cv2.Rodrigues(np.asarray(w, float).reshape(3, 1))[0]
-
-
 _INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 
 
@@ -117,7 +113,7 @@ def _perturbed(sensor: Any, names: Sequence[str], delta: np.ndarray) -> Any:
         elif name == "plane_d":
             plane[3] += d
     if rot.any():
-        hfc[:3, :3] = _rodrigues(rot) @ hfc[:3, :3]
+        hfc[:3, :3] = rotation_from_vector(rot) @ hfc[:3, :3]
     if nt.any():
         n = plane[:3] + _householder_tangent(plane[:3]) @ nt
         plane[:3] = n / np.linalg.norm(n)
@@ -159,7 +155,7 @@ def of_joint(result: Any) -> PointModel:
 _EULER = ("omega", "phi", "varphi")
 
 
-def _euler_to_rotation_vector(q: np.ndarray, which: Sequence[str]) -> np.ndarray:
+def _euler_torotation_to_vector(q: np.ndarray, which: Sequence[str]) -> np.ndarray:
     """(3, len(which)) d(rotation vector)/d(Euler angles ``which``) of hand_from_camera's
     rotation at the parameters ``q``, the rotation vector applied on the left (hand frame):
     R(q + d) = exp([B d]x) R(q). Central differences of 1e-6 rad."""
@@ -171,16 +167,10 @@ def _euler_to_rotation_vector(q: np.ndarray, which: Sequence[str]) -> np.ndarray
     for col, n in enumerate(which):
         d = np.zeros(len(q))
         d[NAMES.index(n)] = 1e-6
-        plus = _rotation_vector(hand_from_camera(q + d)[:3, :3] @ r0.T)
-        minus = _rotation_vector(hand_from_camera(q - d)[:3, :3] @ r0.T)
+        plus = rotation_to_vector(hand_from_camera(q + d)[:3, :3] @ r0.T)
+        minus = rotation_to_vector(hand_from_camera(q - d)[:3, :3] @ r0.T)
         out[:, col] = (plus - minus) / 2e-6
     return out
-
-
-def _rotation_vector(r: np.ndarray) -> np.ndarray:
-    import cv2
-
-    return cv2.Rodrigues(np.asarray(r, float))[0].ravel()
 
 
 def of_paper(result: Any, dataset: Any) -> PointModel | None:
@@ -206,7 +196,7 @@ def of_paper(result: Any, dataset: Any) -> PointModel | None:
     for row, n in enumerate(plain):
         t[row, free.index(n)] = 1.0
     if euler:
-        t[len(plain):, [free.index(n) for n in euler]] = _euler_to_rotation_vector(q, euler)
+        t[len(plain):, [free.index(n) for n in euler]] = _euler_torotation_to_vector(q, euler)
     cov = t @ np.asarray(unc.covariance, float) @ t.T
     names = plain + (["hand_rx", "hand_ry", "hand_rz"] if euler else [])
     idx = [NAMES.index(n) for n in plain]
@@ -217,7 +207,7 @@ def of_paper(result: Any, dataset: Any) -> PointModel | None:
         qq[idx] += delta[:len(plain)]
         pts, ok = points_in_camera(qq, px, on_invalid="mask")
         h = hand_from_camera(qq)
-        rot = h[:3, :3] if not euler else _rodrigues(delta[len(plain):]) @ hfc[:3, :3]
+        rot = h[:3, :3] if not euler else rotation_from_vector(delta[len(plain):]) @ hfc[:3, :3]
         return np.where(ok[:, None], pts @ rot.T + h[:3, 3], np.nan)
 
     sets = _pixels_per_pose(dataset)

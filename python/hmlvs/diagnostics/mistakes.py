@@ -17,14 +17,13 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from .. import _core
-from ..calibration.joint import _inv, consistent_numbering, initial_intrinsics
+from ..calibration.joint import consistent_numbering, initial_intrinsics
 from ..geometry.board import BoardSpec
+from ..geometry.transforms import invert_transform, rotation_to_quaternion
 from .checks import CORNER_RMS_LIMIT_PX, POSE_DISAGREEMENT
 
 
 def _quat_xyzw(r: np.ndarray) -> np.ndarray:
-    from ..data.poses import rotation_to_quaternion
-
     return rotation_to_quaternion(r, "xyzw")
 
 
@@ -44,7 +43,7 @@ def _reorder(m: np.ndarray, order: tuple[int, int, int, int]) -> np.ndarray:
 #: the pose hypotheses: name -> the base_from_hand the given pose would be under it
 _POSE_HYPOTHESES: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "as given": lambda m: m,
-    "inverted": _inv,
+    "inverted": invert_transform,
     # written x y z w but read as w x y z: the read (x', y', z', w') = (y, z, w, x)
     "xyzw read as wxyz": lambda m: _reorder(m, (3, 0, 1, 2)),
     # written w x y z but read as x y z w: the read (x', y', z', w') = (w, x, y, z)
@@ -109,12 +108,12 @@ def _chain_rms(obs: _Obs, bfh: list[np.ndarray], flips: list[bool | None], scale
         bfb = _core._mean_transform([bfh[i] @ x @ cams[i] for i in fit_on])
     except ValueError:
         return ChainFit(float("inf"), scale=scale)
-    x_inv = _inv(x)
+    x_inv = invert_transform(x)
     per_view, sq = {}, []
     n = b.rows * b.cols
     for i in evaluate:
         v = obs.views[i]
-        cb = x_inv @ _inv(bfh[i]) @ bfb
+        cb = x_inv @ invert_transform(bfh[i]) @ bfb
         idx0 = np.asarray(v.corner_index, int)
         best = None
         options = [flips[i]] if flips[i] is not None else [False, True]
