@@ -88,6 +88,7 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
     the verdict is not trustworthy (the file is still written, marked so)."""
     from ..calibration.joint import calibrate_joint
     from ..data.calibration_file import Calibration
+    from ..diagnostics.mistakes import explaining
     from ..diagnostics.verdict import judge_joint, require_check
     from ..image.views import views_from_images
 
@@ -117,14 +118,10 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
             pick = set(rng.choice(len(views), n_test, replace=False).tolist())
             test_views = [v for i, v in enumerate(views) if i in pick]
             views = [v for i, v in enumerate(views) if i not in pick]
-        try:
+        with explaining(views, board, size):  # a failure led by the likely mistake
             result = calibrate_joint(views, board, size, distortion=terms,
                                      base_from_board=board_pose, test=test_views or None,
                                      camera=camera)
-        except ValueError as e:  # with the likely mistake named when one explains it
-            from ..diagnostics.mistakes import explain_failure
-
-            raise ValueError(explain_failure(str(e), views, board, size)) from None
         verdict = require_check(judge_joint(
             result, views, board, options={"distortion": terms, "base_from_board": board_pose,
                                            "camera": camera}), require)

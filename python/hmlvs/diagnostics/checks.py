@@ -22,7 +22,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from .._arrays import robust_sigma
-from ..calibration.joint import POSE_DISAGREEMENT, _board_plane_points
+from ..calibration.joint import POSE_DISAGREEMENT
+from ..calibration.joint_setup import board_plane_points
 from ..geometry.board import BoardSpec
 from ..geometry.transforms import invert_transform, rotation_to_vector
 
@@ -156,8 +157,8 @@ def _laser_sensitivity(result: Any, views: Sequence[Any]) -> np.ndarray:
         cb = _camera_from_board(result, v)
         if cb is None:
             continue
-        p0, _ = _board_plane_points(intr, cb, px)
-        p1, _ = _board_plane_points(intr, cb, px + [0.0, 1.0])
+        p0, _ = board_plane_points(intr, cb, px)
+        p1, _ = board_plane_points(intr, cb, px + [0.0, 1.0])
         d = np.abs((p1 - p0) @ plane[:3])
         out.append(d[np.isfinite(d)])
     return np.concatenate(out) if out else np.empty(0)

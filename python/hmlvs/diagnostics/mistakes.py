@@ -10,9 +10,10 @@ action. It needs the views' corners and robot poses, whatever the sensor model.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 import math
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -336,3 +337,13 @@ def explain_failure(error: str, views: Sequence[Any], board: Any,
     if sentence is None or not sentence.startswith("likely mistake"):
         return error  # "no usual mistake" adds nothing to the error's own account
     return f"{sentence}\n(the calibration failed: {error})"
+
+
+@contextmanager
+def explaining(views: Sequence[Any], board: Any, image_size: tuple[int, int]) -> Iterator[None]:
+    """A calibration from ``views`` inside: a ``ValueError`` it raises comes out led by the
+    likely mistake when one explains the views (:func:`explain_failure`)."""
+    try:
+        yield
+    except ValueError as e:
+        raise ValueError(explain_failure(str(e), views, board, image_size)) from None
