@@ -122,7 +122,8 @@ def albedos(xy: np.ndarray, board: dict = BOARD, laser_albedo: dict | None = Non
             footprint: tuple[np.ndarray, np.ndarray] | None = None
             ) -> tuple[np.ndarray, np.ndarray]:
     """(ambient, laser) albedo at board coordinates: squares from -1 to rows (cols) square
-    widths, a half-square white margin, the table beyond; the laser's from ``laser_albedo``
+    widths, a white margin (``board["margin"]`` squares wide, default half a square), the
+    table beyond; the laser's from ``laser_albedo``
     (default :data:`LASER_ALBEDO`).
 
     ``footprint``: the two edge vectors (..., 2) (board mm) of the parallelogram each point
@@ -155,7 +156,8 @@ def albedos(xy: np.ndarray, board: dict = BOARD, laser_albedo: dict | None = Non
 
     rows, cols = board["rows"], board["cols"]
     squares = inside(x, wx, -1.0, rows) * inside(y, wy, -1.0, cols)
-    paper = inside(x, wx, -1.5, rows + 0.5) * inside(y, wy, -1.5, cols + 0.5)
+    m = float(board.get("margin", 0.5))
+    paper = inside(x, wx, -1.0 - m, rows + m) * inside(y, wy, -1.0 - m, cols + m)
     dark = squares * 0.5 * (1.0 + wave(x, wx, rows) * wave(y, wy, cols))
 
     def mix(level: dict) -> np.ndarray:
@@ -186,13 +188,56 @@ def true_centres(p: dict, pose: np.ndarray, size: tuple[int, int] = SIZE) -> np.
     return np.where(ok, 0.5 * (lo + hi), np.nan)
 
 
-def random_pose(rng: np.random.Generator, p: dict = TRUE, board: dict = BOARD,
-                max_tilt: float = np.radians(15)) -> np.ndarray:
-    """A base_from_hand pose: camera looking down at a random yaw, tilted up to ``max_tilt``
-    about a random horizontal axis, 230-400 mm above the board, placed so that the stripe's
-    middle lands on a random point of the board's inner area and crosses it for at least
-    250 columns."""
+def project(p: dict, pose: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """(..., 2) pixels of base points ``pts`` (..., 3): docs/model.md steps 1-4 forward (the
+    division model inverted by fixed-point iteration, 20 steps: converged to 1e-12 px at
+    this distortion)."""
+    bc = pose @ hand_from_camera(p)
+    pc = (np.asarray(pts, float) - bc[:3, 3]) @ bc[:3, :3]
+    xu, yu = p["f"] * pc[..., 0] / pc[..., 2], p["f"] * pc[..., 1] / pc[..., 2]
+    s = np.ones_like(xu)
+    for _ in range(20):  # Xu = Xd / (1 + k rd^2), so Xd = Xu (1 + k rd^2)
+        s = 1.0 + p["k"] * ((xu * s) ** 2 + (yu * s) ** 2)
+    return np.stack([xu * s / p["Su"] + p["Cu"], yu * s / p["Sv"] + p["Cv"]], axis=-1)
+
+
+def board_corners(board: dict = BOARD) -> np.ndarray:
+    """(rows * cols, 3) the inner corners in the base, row by row (docs/file-formats.md)."""
+    r, c = np.meshgrid(np.arange(board["rows"]), np.arange(board["cols"]), indexing="ij")
     sq = board["square"]
+    return (np.asarray(board["origin"], float) + (r.ravel() * sq)[:, None] *
+            np.asarray(board["row_direction"], float) + (c.ravel() * sq)[:, None] *
+            np.asarray(board["col_direction"], float))
+
+
+def _whole_board_seen(p: dict, pose: np.ndarray, board: dict, size: tuple[int, int],
+                      margin: float) -> bool:
+    """Whether the board's squares (one square beyond the inner corners) and half a square
+    of its white margin lie inside the image, ``margin`` px from its border."""
+    sq = board["square"]
+    r, c = np.meshgrid([-1.5, board["rows"] + 0.5], [-1.5, board["cols"] + 0.5], indexing="ij")
+    outer = (np.asarray(board["origin"], float) + (r.ravel() * sq)[:, None] *
+             np.asarray(board["row_direction"], float) + (c.ravel() * sq)[:, None] *
+             np.asarray(board["col_direction"], float))
+    bc = pose @ hand_from_camera(p)
+    if not ((outer - bc[:3, 3]) @ bc[:3, 2] > 0).all():
+        return False
+    px = project(p, pose, outer)
+    return bool((px > margin).all() and (px[:, 0] < size[0] - 1 - margin).all() and
+                (px[:, 1] < size[1] - 1 - margin).all())
+
+
+def random_pose(rng: np.random.Generator, p: dict = TRUE, board: dict = BOARD,
+                max_tilt: float = np.radians(15), size: tuple[int, int] = SIZE,
+                heights: tuple[float, float] = (230.0, 400.0), min_columns: int = 250,
+                whole_board: bool = False) -> np.ndarray:
+    """A base_from_hand pose: camera looking down at a random yaw, tilted up to ``max_tilt``
+    about a random horizontal axis, ``heights`` (mm) above the board, placed so that the
+    stripe's middle lands on a random point of the board's inner area and crosses it for at
+    least ``min_columns`` columns; ``whole_board``: drawn again until the board's squares
+    lie wholly inside the image (a margin of 4 px)."""
+    sq = board["square"]
+    w, h = size
     while True:
         yaw = rng.uniform(-np.pi, np.pi)
         r0 = np.column_stack([[np.cos(yaw), np.sin(yaw), 0], [np.sin(yaw), -np.cos(yaw), 0],
@@ -200,38 +245,41 @@ def random_pose(rng: np.random.Generator, p: dict = TRUE, board: dict = BOARD,
         a = rng.uniform(0, 2 * np.pi)
         r = _axis_angle([np.cos(a), np.sin(a), 0], rng.uniform(0, max_tilt)) @ r0
         bc = np.eye(4)
-        bc[:3, :3], bc[:3, 3] = r, [0.0, 0.0, rng.uniform(230, 400)]
+        bc[:3, :3], bc[:3, 3] = r, [0.0, 0.0, rng.uniform(*heights)]
         pose = bc @ np.linalg.inv(hand_from_camera(p))
-        v = true_centres(p, pose)
-        if not np.isfinite(v[320]) or not 30 < v[320] < SIZE[1] - 30:
+        v = true_centres(p, pose, size)
+        mid_u = w // 2
+        if not np.isfinite(v[mid_u]) or not 30 < v[mid_u] < h - 30:
             continue
-        mid = board_hits(p, pose, np.array(320.0), np.array(v[320]))[0]
+        mid = board_hits(p, pose, np.array(float(mid_u)), np.array(v[mid_u]))[0]
         target = np.asarray(board["origin"]) + rng.uniform(0.5, board["rows"] - 1.5) * sq * \
             np.asarray(board["row_direction"]) + rng.uniform(0.5, board["cols"] - 1.5) * sq * \
             np.asarray(board["col_direction"])
         pose[:2, 3] += (target - mid)[:2]
-        u = np.arange(SIZE[0], dtype=float)
-        v = true_centres(p, pose)
+        u = np.arange(w, dtype=float)
+        v = true_centres(p, pose, size)
         xy = board_coords(board_hits(p, pose, u, v)[0], board)
         inner = (xy[:, 0] > 0) & (xy[:, 0] < (board["rows"] - 1) * sq) & \
             (xy[:, 1] > 0) & (xy[:, 1] < (board["cols"] - 1) * sq) & np.isfinite(v) & \
-            (v > 10) & (v < SIZE[1] - 11)
-        if inner.sum() >= 250:
+            (v > 10) & (v < h - 11)
+        if inner.sum() >= min_columns and (not whole_board or
+                                           _whole_board_seen(p, pose, board, size, 4.0)):
             return pose
 
 
 def render_view(p: dict, pose: np.ndarray, rng: np.random.Generator, *, ss: int = 4,
                 ambient: float = 150.0, laser: float = 110.0, sheet_sigma: float = 0.45,
                 blur: float = 0.5, speckle: float = 0.1, noise: float = 1.0,
-                board: dict = BOARD, laser_albedo: dict | None = None
-                ) -> tuple[np.ndarray, np.ndarray]:
+                board: dict = BOARD, laser_albedo: dict | None = None,
+                size: tuple[int, int] = SIZE) -> tuple[np.ndarray, np.ndarray]:
     """(laser-on, laser-off) 8-bit images of one pose. Pixels are integrated over their area
     with ``ss`` x ``ss`` samples wherever the albedo changes within the pixel's neighbourhood
     and wherever the laser sheet can reach (elsewhere the scene is constant over a pixel).
     ``laser_albedo``: the print's albedo at the laser's wavelength (keys dark, light, table;
     default :data:`LASER_ALBEDO`); one value for all three removes the albedo steps from the
-    stripe while the board stays visible to the camera."""
-    w, h = SIZE
+    stripe while the board stays visible to the camera. ``size``: the image's (width,
+    height)."""
+    w, h = size
     off = (np.arange(ss) + 0.5) / ss - 0.5
     sub_u, sub_v = np.meshgrid(off, off)
 
@@ -256,7 +304,7 @@ def render_view(p: dict, pose: np.ndarray, rng: np.random.Generator, *, ss: int 
     kernel = np.ones((3, 3), np.uint8)
     a8 = np.rint(amb_img * 100).astype(np.uint8)
     mixed = cv2.dilate(a8, kernel) != cv2.erode(a8, kernel)
-    rows = true_centres(p, pose)
+    rows = true_centres(p, pose, size)
     band = np.zeros((h, w), bool)
     if np.isfinite(rows).any():
         lo, hi = np.nanmin(rows), np.nanmax(rows)
@@ -285,33 +333,46 @@ def render_view(p: dict, pose: np.ndarray, rng: np.random.Generator, *, ss: int 
 
 
 def render_session(folder: str | Path, seed: int = 0, views: int = 16, held_out: int = 4,
-                   noise_seed: int | None = None, **options) -> dict:
+                   noise_seed: int | None = None, params: dict | None = None,
+                   board: dict | None = None, size: tuple[int, int] = SIZE,
+                   pose_options: dict | None = None, board_pose: bool = True,
+                   **options) -> dict:
     """Render ``views`` image pairs into ``folder`` (manifest.json, p000_on.png, ...) and
     draw ``held_out`` further poses for testing (no images). Returns the truth: ``params``,
     ``poses`` (views + held_out, 4, 4), ``centres`` (views + held_out, width) and ``ids``;
     also saved as ``truth.npz`` in ``folder``. ``noise_seed``: the images' noise and speckle
     drawn from their own stream, so that the same scene (``seed``: the poses) can be taken
-    again with other noise; None: one stream for both, as it always was."""
+    again with other noise; None: one stream for both, as it always was.
+
+    Another scene: ``params`` (the sensor, default :data:`TRUE`), ``board`` (default
+    :data:`BOARD`), ``size`` (the images' width and height), ``pose_options`` (for
+    :func:`random_pose`, e.g. ``whole_board=True``); ``board_pose=False`` leaves the board's
+    pose out of the manifest (rows, cols and square only: a board whose place nobody
+    measured)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+    p = TRUE if params is None else params
+    b = BOARD if board is None else board
     rng = np.random.default_rng(seed)
-    poses = np.array([random_pose(rng) for _ in range(views + held_out)])
-    centres = np.array([true_centres(TRUE, q) for q in poses])
+    poses = np.array([random_pose(rng, p, b, size=size, **(pose_options or {}))
+                      for _ in range(views + held_out)])
+    centres = np.array([true_centres(p, q, size) for q in poses])
     if noise_seed is not None:
         rng = np.random.default_rng([seed, 104729, int(noise_seed)])
     entries = []
     for i in range(views):
-        on, off = render_view(TRUE, poses[i], rng, **options)
+        on, off = render_view(p, poses[i], rng, board=b, size=size, **options)
         pid = f"p{i:03d}"
         cv2.imwrite(str(folder / f"{pid}_on.png"), on)
         cv2.imwrite(str(folder / f"{pid}_off.png"), off)
         entries.append({"id": pid, "on": f"{pid}_on.png", "off": f"{pid}_off.png",
                         "pose": poses[i].tolist()})
-    manifest = {"format": "hmlvs-images", "version": 1, "image_size": list(SIZE),
-                "board": BOARD, "poses": entries}
+    placed = b if board_pose else {k: b[k] for k in ("rows", "cols", "square")}
+    manifest = {"format": "hmlvs-images", "version": 1, "image_size": list(size),
+                "board": placed, "poses": entries}
     (folder / "manifest.json").write_text(json.dumps(manifest, indent=1))
     ids = [f"p{i:03d}" for i in range(views)] + [f"h{i:03d}" for i in range(held_out)]
-    truth = {"params": np.array([TRUE[n] for n in ORDER]), "poses": poses,
+    truth = {"params": np.array([p[n] for n in ORDER]), "poses": poses,
              "centres": centres, "ids": np.array(ids), "views": views}
     np.savez(folder / "truth.npz", **truth)
     return truth

@@ -88,6 +88,7 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
     the verdict is not trustworthy (the file is still written, marked so)."""
     from ..calibration.joint import calibrate_joint
     from ..data.calibration_file import Calibration
+    from ..diagnostics.mistakes import explaining
     from ..diagnostics.verdict import judge_joint, require_check
     from ..image.views import views_from_images
 
@@ -117,9 +118,10 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
             pick = set(rng.choice(len(views), n_test, replace=False).tolist())
             test_views = [v for i, v in enumerate(views) if i in pick]
             views = [v for i, v in enumerate(views) if i not in pick]
-        result = calibrate_joint(views, board, size, distortion=terms,
-                                 base_from_board=board_pose, test=test_views or None,
-                                 camera=camera)
+        with explaining(views, board, size):  # a failure led by the likely mistake
+            result = calibrate_joint(views, board, size, distortion=terms,
+                                     base_from_board=board_pose, test=test_views or None,
+                                     camera=camera)
         verdict = require_check(judge_joint(
             result, views, board, options={"distortion": terms, "base_from_board": board_pose,
                                            "camera": camera}), require)
@@ -257,9 +259,6 @@ def calibrate(
         check_suffix("--report", report, (".html", ".htm"), "an HTML report")
         check_suffix("--save-data", save_data, (".npz", ".json"), "a data set")
         chosen = _resolve_model(model, data)
-        if chosen == "paper" and require is not None:
-            raise ValueError("--require judges the predicted 3D uncertainty, which only the "
-                             "opencv model computes so far; use --model opencv")
         if chosen == "opencv":
             _paper_only_options(method=method != "pso+lm", fixed=bool(fixed), free=bool(free),
                                 runs=runs != 1,
@@ -314,9 +313,10 @@ def calibrate(
                                  iterations=iterations, loss=loss, loss_scale=loss_scale,
                                  seed=seed, threads=threads,
                                  progress=solve_progress(as_json or quiet))
-        from ..diagnostics.verdict import judge_paper
+        from ..diagnostics.verdict import judge_paper, require_check
 
-        verdict = judge_paper(result)
+        verdict = require_check(judge_paper(result, ds, views=[
+            r.view for r in image_reports if r.view is not None]), require)
         report_path = None
         with outputs(out) as made:
             cal = Calibration.from_result(result, ds, robot=arm)

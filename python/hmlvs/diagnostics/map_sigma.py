@@ -1,27 +1,67 @@
-"""The predicted 3D uncertainty (mm) of the points a general-model calibration measures.
+"""The predicted 3D uncertainty (mm) of the points a calibration measures, for either model.
 
-The joint solve's covariance (intrinsics, distortion, laser plane, hand-eye transform; the
+A calibration maps a stripe pixel to a 3D point through its parameters; :class:`PointModel`
+is that mapping with the parameters' covariance, written once for both models
+(:func:`of_joint` for the general model's joint solve, :func:`of_paper` for the paper's 14
+parameters). The covariance (intrinsics, distortion, laser plane, hand-eye transform; the
 board's pose does not enter a measurement) and the stripe's own pixel noise are carried to
 the 3D points of the stripe pixels the calibration saw (the laser line's image footprint
 over the working range of the session) by numerical Jacobians (central differences in the
-solve's own tangent coordinates):
+parameters' tangent coordinates: rotations as rotation vectors):
 
     Sigma_p = J_theta Cov J_theta^T + sigma_v^2 J_v J_v^T
 
 and summarised as the RMS and the 95th percentile of sqrt(trace Sigma_p). With robot poses
 the points are taken in the flange frame (their distance to the truth does not depend on
-the robot pose); without, in the camera frame.
+the robot pose); without, in the camera frame. A point measured in the base frame also
+carries its robot pose's error: with robot poses the map adds it
+(``PointModel.pose_sigma_mm``, from how far the views' own board poses, carried through
+their robot poses, land from the one board: :func:`hmlvs.diagnostics.checks.pose_error_mm`).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 import math
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from ..geometry.transforms import rotation_from_vector, rotation_to_vector
+
 #: stripe pixels sampled over the footprint (enough for a stable 95th percentile)
 SAMPLES = 600
+
+
+@dataclass
+class PointModel:
+    """A calibration as a mapping of stripe pixels to 3D points with its uncertainty.
+
+    points : (delta, pixels (k, 2)) -> (k, 3) points (mm; the flange frame when ``chain``,
+        else the camera frame) with the parameters moved by ``delta`` (tangent coordinates,
+        the order of ``names``); NaN rows where a ray misses the laser plane
+    names, covariance : the parameters that enter a measurement and their covariance
+    pixel_sets : the stripe pixels the calibration used, one array per view
+    stripe_sigma_px : the stripe's own noise across the stripe (px): the RMS of each view's
+        rows about a smooth curve, pooled (poor views and tails count, as they count in the
+        RMS error of measured points)
+    chain : whether the points are in the flange frame (robot poses)
+    pose_sigma_mm : the robot's pose error carried to the measured points (mm RMS, 3D),
+        added to the map: a point measured in the base frame carries its robot pose's
+        error besides the calibration's (0: exact poses, or none)
+    """
+
+    points: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    names: list[str]
+    covariance: np.ndarray
+    pixel_sets: list[np.ndarray]
+    stripe_sigma_px: float
+    chain: bool
+    pose_sigma_mm: float = 0.0
+
+    def at(self, pixels: np.ndarray) -> np.ndarray:
+        """The calibration's own points of ``pixels`` (no perturbation)."""
+        return self.points(np.zeros(len(self.names)), pixels)
 
 
 def _householder_tangent(n: np.ndarray) -> np.ndarray:
@@ -43,12 +83,6 @@ def _householder_tangent(n: np.ndarray) -> np.ndarray:
         v[:2] /= vp
     h = np.eye(3) - beta * np.outer(v, v)
     return 0.5 * np.linalg.norm(x) * h[:, :2]
-
-
-def _rodrigues(w: np.ndarray) -> np.ndarray:
-    import cv2
-
-    return cv2.Rodrigues(np.asarray(w, float).reshape(3, 1))[0]
 
 
 _INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
@@ -79,7 +113,7 @@ def _perturbed(sensor: Any, names: Sequence[str], delta: np.ndarray) -> Any:
         elif name == "plane_d":
             plane[3] += d
     if rot.any():
-        hfc[:3, :3] = _rodrigues(rot) @ hfc[:3, :3]
+        hfc[:3, :3] = rotation_from_vector(rot) @ hfc[:3, :3]
     if nt.any():
         n = plane[:3] + _householder_tangent(plane[:3]) @ nt
         plane[:3] = n / np.linalg.norm(n)
@@ -96,56 +130,152 @@ def _points(sensor: Any, px: np.ndarray, chain: bool) -> np.ndarray:
     return pts
 
 
-def footprint(result: Any, samples: int = SAMPLES, seed: int = 0) -> np.ndarray:
+def of_joint(result: Any) -> PointModel:
+    """The point model of a general-model calibration (``calibrate_joint``'s result): the
+    intrinsics, distortion, laser plane and (chain mode) hand-eye unknowns of its solve."""
+    from .checks import stripe_noise_px
+
+    chain = result.mode == "chain"
+    names = list(result.names)
+    keep = [k for k, n in enumerate(names) if n in _INTRINSICS or n.startswith("plane_")
+            or (chain and n.startswith("hand_"))]
+    sub = [names[k] for k in keep]
+    sensor = result.sensor
+
+    def points(delta: np.ndarray, px: np.ndarray) -> np.ndarray:
+        moved = _perturbed(sensor, sub, delta) if np.any(delta) else sensor
+        return _points(moved, px, chain)
+
+    sets = [r["laser_pixels"] for r in result.residuals.values() if len(r["laser_pixels"])]
+    sig = stripe_noise_px(sets, robust=False)
+    return PointModel(points, sub, np.asarray(result.covariance, float)[np.ix_(keep, keep)],
+                      sets, sig if math.isfinite(sig) else 0.0, chain)
+
+
+_EULER = ("omega", "phi", "varphi")
+
+
+def _euler_torotation_to_vector(q: np.ndarray, which: Sequence[str]) -> np.ndarray:
+    """(3, len(which)) d(rotation vector)/d(Euler angles ``which``) of hand_from_camera's
+    rotation at the parameters ``q``, the rotation vector applied on the left (hand frame):
+    R(q + d) = exp([B d]x) R(q). Central differences of 1e-6 rad."""
+    from ..models.paper import hand_from_camera
+    from ..models.params import NAMES
+
+    r0 = hand_from_camera(q)[:3, :3]
+    out = np.zeros((3, len(which)))
+    for col, n in enumerate(which):
+        d = np.zeros(len(q))
+        d[NAMES.index(n)] = 1e-6
+        plus = rotation_to_vector(hand_from_camera(q + d)[:3, :3] @ r0.T)
+        minus = rotation_to_vector(hand_from_camera(q - d)[:3, :3] @ r0.T)
+        out[:, col] = (plus - minus) / 2e-6
+    return out
+
+
+def of_paper(result: Any, dataset: Any) -> PointModel | None:
+    """The point model of a paper-model calibration (:class:`CalibrationResult` and the
+    data set it was fitted to): its free parameters' covariance
+    (:attr:`CalibrationResult.uncertainty`) with the Euler angles turned into a rotation
+    vector of hand_from_camera (well defined at the ZYZ gimbal lock, where omega and varphi
+    are not one by one); the stripe noise from the points' pixels per pose, else the
+    uncertainty analysis' pixel noise. Points in the flange frame. None without an
+    uncertainty analysis."""
+    from ..models.paper import hand_from_camera, points_in_camera
+    from ..models.params import NAMES
+    from .checks import stripe_noise_px
+
+    unc = getattr(result, "uncertainty", None)
+    if unc is None:
+        return None
+    q = result.params.to_array().astype(float)
+    free = list(unc.free)
+    euler = [n for n in free if n in _EULER]
+    plain = [n for n in free if n not in _EULER]
+    t = np.zeros((len(plain) + (3 if euler else 0), len(free)))
+    for row, n in enumerate(plain):
+        t[row, free.index(n)] = 1.0
+    if euler:
+        t[len(plain):, [free.index(n) for n in euler]] = _euler_torotation_to_vector(q, euler)
+    cov = t @ np.asarray(unc.covariance, float) @ t.T
+    names = plain + (["hand_rx", "hand_ry", "hand_rz"] if euler else [])
+    idx = [NAMES.index(n) for n in plain]
+    hfc = hand_from_camera(q)
+
+    def points(delta: np.ndarray, px: np.ndarray) -> np.ndarray:
+        qq = q.copy()
+        qq[idx] += delta[:len(plain)]
+        pts, ok = points_in_camera(qq, px, on_invalid="mask")
+        h = hand_from_camera(qq)
+        rot = h[:3, :3] if not euler else rotation_from_vector(delta[len(plain):]) @ hfc[:3, :3]
+        return np.where(ok[:, None], pts @ rot.T + h[:3, 3], np.nan)
+
+    sets = _pixels_per_pose(dataset)
+    sig = stripe_noise_px(sets, robust=False)
+    if not math.isfinite(sig):
+        sig = float(unc.pixel_noise or 0.0)
+    return PointModel(points, names, (cov + cov.T) / 2, sets, sig, True)
+
+
+def _pixels_per_pose(dataset: Any) -> list[np.ndarray]:
+    """The data set's stripe pixels, one array per robot pose (in the order of their
+    columns along the stripe)."""
+    px = np.asarray(dataset.pixels, float)
+    groups = pose_groups(dataset)
+    out = []
+    for g in np.unique(groups):
+        sel = px[groups == g]
+        out.append(sel[np.argsort(sel[:, 0], kind="stable")])
+    return out
+
+
+def pose_groups(dataset: Any) -> np.ndarray:
+    """(m,) a label per point of ``dataset``: its pose (``pose_index``, else equal poses)."""
+    if getattr(dataset, "pose_index", None) is not None:
+        return np.asarray(dataset.pose_index)
+    flat = np.round(np.asarray(dataset.poses, float).reshape(len(dataset), -1), 9)
+    return np.unique(flat, axis=0, return_inverse=True)[1].ravel()
+
+
+def footprint(model: PointModel, samples: int = SAMPLES, seed: int = 0) -> np.ndarray:
     """Stripe pixels of the calibration's views (those its solve used), at most ``samples``
     of them drawn evenly: the laser line's image footprint over the session's working
     range."""
-    sets = [r["laser_pixels"] for r in result.residuals.values() if len(r["laser_pixels"])]
+    sets = [s for s in model.pixel_sets if len(s)]
     px = np.concatenate(sets) if sets else np.empty((0, 2))
     if len(px) > samples:
         px = px[np.random.default_rng(seed).choice(len(px), samples, replace=False)]
     return np.ascontiguousarray(px, float)
 
 
-def point_sigmas(result: Any, pixels: np.ndarray, stripe_sigma_px: float) -> np.ndarray:
+def point_sigmas(model: PointModel, pixels: np.ndarray, stripe_sigma_px: float) -> np.ndarray:
     """Predicted 3D standard deviation (mm, sqrt of the covariance's trace) of the points of
-    ``pixels`` measured with ``result``'s sensor."""
-    sensor = result.sensor
-    chain = result.mode == "chain"
-    names = list(result.names)
-    cov = np.asarray(result.covariance, float)
-    relevant = [k for k, n in enumerate(names) if n in _INTRINSICS or n.startswith("hand_")
-                and chain or n.startswith("plane_")]
+    ``pixels`` measured with the calibration ``model``, with ``stripe_sigma_px`` of noise
+    across the stripe (0: the parameters' uncertainty alone)."""
+    cov = model.covariance
     std = np.sqrt(np.clip(np.diag(cov), 0, None))
-    jac = np.zeros((len(pixels), 3, len(relevant)))
-    for col, k in enumerate(relevant):
+    jac = np.zeros((len(pixels), 3, len(model.names)))
+    for k in range(len(model.names)):
         h = max(std[k], 1e-9) * 1e-2
-        d = np.zeros(len(names))
+        d = np.zeros(len(model.names))
         d[k] = h
-        plus = _points(_perturbed(sensor, names, d), pixels, chain)
-        minus = _points(_perturbed(sensor, names, -d), pixels, chain)
-        jac[:, :, col] = (plus - minus) / (2 * h)
-    c = cov[np.ix_(relevant, relevant)]
-    var = np.einsum("nij,jk,nik->n", jac, c, jac)
+        jac[:, :, k] = (model.points(d, pixels) - model.points(-d, pixels)) / (2 * h)
+    var = np.einsum("nij,jk,nik->n", jac, cov, jac)
     if stripe_sigma_px > 0:
         dv = np.array([0.0, 0.5])
-        jv = (_points(sensor, pixels + dv, chain) - _points(sensor, pixels - dv, chain))
+        jv = model.at(pixels + dv) - model.at(pixels - dv)
         var = var + stripe_sigma_px**2 * np.sum(jv**2, axis=1)
     return np.sqrt(np.clip(var, 0, None))
 
 
-def predicted_map(result: Any) -> tuple[np.ndarray, np.ndarray] | None:
-    """The footprint's pixels (k, 2) and their predicted 3D standard deviations (k, mm), the
-    stripe noise measured from the stripes themselves
-    (:func:`hmlvs.diagnostics.verdict.stripe_noise_px`); None without stripe pixels."""
-    from .verdict import stripe_noise_px
-
-    px = footprint(result)
+def predicted_map(model: PointModel) -> tuple[np.ndarray, np.ndarray] | None:
+    """The footprint's pixels (k, 2) and their predicted 3D standard deviations (k, mm), with
+    the stripe noise measured from the stripes themselves and the robot's pose error
+    (``model.pose_sigma_mm``); None without stripe pixels."""
+    px = footprint(model)
     if len(px) == 0:
         return None
-    sets = [r["laser_pixels"] for r in result.residuals.values()]
-    sig = stripe_noise_px(sets)
-    s = point_sigmas(result, px, sig if math.isfinite(sig) else 0.0)
+    s = np.sqrt(point_sigmas(model, px, model.stripe_sigma_px) ** 2 + model.pose_sigma_mm**2)
     ok = np.isfinite(s)
     return (px[ok], s[ok]) if ok.any() else None
 
@@ -155,8 +285,10 @@ def summary(sigmas: np.ndarray) -> dict[str, float]:
     return {"rms": float(np.sqrt(np.mean(sigmas**2))), "p95": float(np.percentile(sigmas, 95))}
 
 
-def map_sigma_mm(result: Any, views: Sequence[Any] | None = None) -> dict[str, float] | None:
+def map_sigma_mm(result: Any, dataset: Any = None) -> dict[str, float] | None:
     """{"rms", "p95"}: the predicted 3D uncertainty (mm) over the laser line's image
-    footprint (:func:`predicted_map`); None without stripe pixels."""
-    m = predicted_map(result)
+    footprint (:func:`predicted_map`) of a general-model calibration, or of a paper-model
+    one with the ``dataset`` it was fitted to; None without stripe pixels."""
+    model = of_joint(result) if dataset is None else of_paper(result, dataset)
+    m = None if model is None else predicted_map(model)
     return None if m is None else summary(m[1])

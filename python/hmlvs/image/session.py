@@ -9,6 +9,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from .. import _core
+from ..data.views import ViewData
 from .colour import board_gray, colour_stripe, is_colour
 from .corners import BoardNotFoundError, find_corners
 from .points import Mode, calibration_points, fit_division_distortion
@@ -49,6 +50,9 @@ class ImageReport:
     blur_var : the camera blur variance (px^2) the stripe was corrected with at albedo steps
         (:func:`stripe_from_pair` ``blur_var``, fitted to the session unless given); None
         for a rejected pair
+    view : the pair's numbered corners, stripe pixels and robot pose
+        (:class:`hmlvs.data.views.ViewData`) when it was used (for the verdict's corner and
+        chain checks); None otherwise
     """
 
     id: str
@@ -62,6 +66,7 @@ class ImageReport:
     points: int = 0
     rejected: dict[str, str] = field(default_factory=dict)
     blur_var: float | None = None
+    view: Any = field(default=None, repr=False, compare=False)
 
     def __str__(self) -> str:
         if not self.ok:
@@ -338,7 +343,9 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
             continue
         reports.append(ImageReport(pid, index, str(on_name), str(off_name), True, "",
                                    info["stripe"], info["corners"], len(cp), info["rejected"],
-                                   blur_var))
+                                   blur_var, ViewData(pid, np.asarray(corners.pixels, float),
+                                                      np.asarray(corners.index, int),
+                                                      pair.stripe.pixels, pose)))
         px_all.append(cp.pixels)
         pt_all.append(cp.points)
         ids_all += [f"{pid}:{k}" for k in cp.ids]
@@ -355,6 +362,7 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                  quality={k: np.concatenate([q[k] for q in quality_all])
                           for k in quality_all[0]},
                  meta={"source": "images", "mode": mode, "normalize": normalize,
+                       **_board_meta(board),
                        "smooth_along": stripe_options["smooth_along"],
                        **({"albedo_step": stripe_options["albedo_step"]}
                           if stripe_options.get("albedo_step") is not None else {}),
@@ -369,6 +377,17 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                            "centre_px": [float(x) for x in distortion[0]],
                            "k_per_px2": float(distortion[1])}})})
     return ds, reports
+
+
+def _board_meta(board: Any) -> dict[str, Any]:
+    """The data set's record of the board its reference points lie on (rows, cols, square,
+    its pose in the base), for the verdict's chain checks."""
+    try:
+        pose = np.asarray(board.base_from_board(), float)
+    except (AttributeError, ValueError):
+        return {}
+    return {"board": {"rows": int(board.rows), "cols": int(board.cols),
+                      "square": float(board.square), "base_from_board": pose.tolist()}}
 
 
 def _placed(board: Any, base_from_board: np.ndarray) -> Any:

@@ -183,17 +183,20 @@ def _uncertainty_map(verdict: Any) -> str:
 
 
 def verdict_html(verdict: Any) -> str:
-    """The verdict, first in a report: whether to trust the calibration, why, the predicted
-    3D uncertainty and every check with its limit and the reason for that limit."""
+    """The verdict, first in a report, in words a technician reads: whether to trust the
+    calibration, what that means for measuring, why (the likely mistake first); then the
+    predicted 3D uncertainty and its map over the image; then every check with its limit
+    and the reason for that limit."""
     if verdict is None:
         return ""
+    advice = f"<p>{html.escape(verdict.advice())}</p>"
     if verdict.trustworthy:
         head = ('<p class="verdict ok"><b>Verdict: this calibration can be trusted.</b> '
-                'Every check passed.</p>')
+                f'Every check passed.</p>{advice}')
     else:
         items = "".join(f"<li>{html.escape(r)}</li>" for r in verdict.reasons)
         head = ('<p class="verdict warn"><b>Verdict: this calibration is NOT to be trusted.'
-                f'</b></p><ul class="warn">{items}</ul>')
+                f'</b></p>{advice}<p>Why:</p><ul class="warn">{items}</ul>')
     ms = verdict.map_sigma_mm
     unc = ("" if ms is None else
            f"<p>Predicted 3D uncertainty of measured points over the laser line's image "
@@ -208,8 +211,8 @@ def verdict_html(verdict: Any) -> str:
         f" {c.limit:.4g} {html.escape(c.unit)}</td><td>{html.escape(c.why)}</td></tr>"
         for c in verdict.checks)
     unc += _uncertainty_map(verdict)
-    return (f"<h2>Verdict</h2>{head}{unc}<table><tr><th></th><th>check</th><th>value</th>"
-            f"<th>limit</th><th>why this limit</th></tr>{rows}</table>")
+    return (f"<h2>Verdict</h2>{head}{unc}<h3>The checks</h3><table><tr><th></th><th>check</th>"
+            f"<th>value</th><th>limit</th><th>why this limit</th></tr>{rows}</table>")
 
 
 def write_joint_report(result: Any, path: str | os.PathLike, image_reports: Any = None,

@@ -1,0 +1,320 @@
+"""The named checks of a calibration's verdict, each with its value, its limit and why that
+limit (:class:`Check`).
+
+The limits are physical, not tuned to a scene: corner detectors locate corners to a few
+hundredths to a few tenths of a pixel; a laser fit is judged against the stripe's own
+measured noise carried to millimetres; a robot's absolute accuracy is a fraction of a
+millimetre. Each limit's reason is written beside it and travels with the check.
+
+The checks that do not depend on the sensor model (coverage, pose variety, the
+cross-validation of two halves, the unknowns determined) are written once and take what
+either model's calibration gives them; the corner and chain checks need the views' corners
+(the general model's joint calibration); the fit checks of the paper model its calibration
+points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from typing import Any, Sequence
+
+import numpy as np
+
+from .._arrays import robust_sigma
+from ..calibration.joint import POSE_DISAGREEMENT
+from ..calibration.joint_setup import board_plane_points
+from ..geometry.board import BoardSpec
+from ..geometry.transforms import invert_transform, rotation_to_vector
+
+#: corners through the robot chain (px RMS): detectors reach 0.02-0.3 px on sharp boards, so a
+#: correct model and correct poses stay well below 1 px; beyond it the poses, the board or the
+#: model do not fit the images
+CORNER_RMS_LIMIT_PX = 1.0
+#: the laser residual RMS may exceed the stripe's own noise carried to mm by this factor (the
+#: laser residuals also carry the board-pose error and the stripe's bias at albedo steps)
+LASER_NOISE_FACTOR = 3.0
+#: floor of the laser limit (mm): below it the stripe noise estimate itself is unreliable
+LASER_FLOOR_MM = 0.02
+#: per-view board-in-base estimates (through the chain, each from its own corners) may
+#: scatter by this RMS: a robot's absolute accuracy (0.1-1 mm for industrial arms) plus the
+#: board pose from one view's corners; the board must not move
+BOARD_SPREAD_MM = 2.0
+BOARD_SPREAD_DEG = 0.5
+#: the image is cut into this many cells (columns, rows) to measure coverage
+COVERAGE_GRID = (8, 6)
+#: fraction of the cells with a corner: outside the corners' area the distortion is
+#: extrapolated (a quarter of the image is the least that keeps the distortion terms bound)
+CORNER_COVERAGE_MIN = 0.25
+#: fraction of the cells crossed by the stripe: outside them measurements rest on the
+#: extrapolated plane and distortion
+STRIPE_COVERAGE_MIN = 0.10
+#: the camera's rotations must vary about at least two axes (hand-eye needs two
+#: non-parallel rotation axes, Tsai and Lenz); the RMS rotation about the second best
+#: spanned axis, degrees
+POSE_VARIETY_MIN_DEG = 5.0
+#: the hand-eye equation A X = X B for every pair of views (A: the hand's motion, B: the
+#: camera's, from its corners): its residual combines two views' board-pose errors, so
+#: sqrt(2) times the board spread's limits (at the flange, mm; its rotation, degrees)
+HAND_EYE_MM = BOARD_SPREAD_MM * math.sqrt(2)
+HAND_EYE_DEG = BOARD_SPREAD_DEG * math.sqrt(2)
+#: the two halves' maps may differ by this many times their combined predicted uncertainty
+CROSS_VALIDATION_LIMIT = 4.0
+#: the paper model's fit (mm RMS of ||E_i||, the calibration points' 3D error): laser
+#: triangulation sensors of this class measure to 0.1-0.3 mm at their working range (the
+#: paper's own fit: about 0.2 mm); a fit beyond 1 mm means the data or the model are wrong
+PAPER_FIT_LIMIT_MM = 1.0
+#: held-out points may lie this many times farther than the fitted ones (noise alone: about
+#: 1.1 for the paper's data sizes); beyond it the calibration does not generalise
+HELD_OUT_RATIO = 2.0
+
+__all__ = ["POSE_DISAGREEMENT"]
+
+@dataclass(frozen=True)
+class Check:
+    """One named check: its value, its limit, whether it passed and why that limit."""
+
+    name: str
+    value: float
+    limit: float
+    ok: bool
+    why: str
+    unit: str = ""
+    #: the sentence a technician reads when the check fails
+    problem: str = ""
+    #: "max" (value must stay at or below the limit) or "min" (at or above)
+    kind: str = "max"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "value": _num(self.value), "limit": _num(self.limit),
+                "ok": bool(self.ok), "unit": self.unit, "kind": self.kind, "why": self.why}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "Check":
+        return cls(name=str(d["name"]), value=_float(d.get("value")),
+                   limit=_float(d.get("limit")), ok=bool(d["ok"]), why=str(d.get("why", "")),
+                   unit=str(d.get("unit", "")), kind=str(d.get("kind", "max")))
+
+
+def _num(x: float) -> float | None:
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
+def _float(x: Any) -> float:
+    return float("nan") if x is None else float(x)
+
+
+def _check(name: str, value: float, limit: float, unit: str, why: str, problem: str,
+           kind: str = "max") -> Check:
+    ok = bool(value <= limit) if kind == "max" else bool(value >= limit)
+    return Check(name, float(value), float(limit), ok, why, unit, problem, kind)
+
+
+def _camera_from_board(result: Any, view: Any) -> np.ndarray | None:
+    s = result.sensor
+    if result.mode == "chain":
+        hand = np.asarray(view.base_from_hand, float)
+        return invert_transform(s.hand_from_camera) @ invert_transform(hand) @ s.base_from_board
+    return result.camera_from_board.get(view.id)
+
+
+def stripe_noise_px(pixel_sets: Sequence[np.ndarray], degree: int = 5,
+                    robust: bool = True) -> float:
+    """The stripe's own noise (px, in the row direction): per view, the scatter of its rows
+    about a smooth curve (a polynomial of ``degree`` in the column: a straight laser line on
+    a flat board, bent by the lens distortion), pooled over the views. It holds the
+    detector's noise and its local biases (speckle, albedo steps), not the calibration's.
+    ``robust``: the robust scatter (the bulk of the stripe, as the calibration's outlier
+    rule sees it); else the RMS, tails and poor views included (what an RMS of measured
+    points feels: on independent renders a view's RMS about its curve is within 10 % of
+    its stripe's true error, 0.02-0.23 px, where the robust scatter says 0.02-0.09)."""
+    res = []
+    for px in pixel_sets:
+        px = np.asarray(px, float).reshape(-1, 2)
+        if len(px) < 3 * (degree + 1):
+            continue
+        u, v = px[:, 0], px[:, 1]
+        x = (u - u.mean()) / max(float(np.ptp(u)), 1.0)
+        coef = np.polyfit(x, v, degree)
+        res.append(v - np.polyval(coef, x))
+    r = np.concatenate(res) if res else np.empty(0)
+    if r.size < 10:
+        return float("nan")
+    return robust_sigma(r) if robust else float(np.sqrt(np.mean(r**2)))
+
+
+def _laser_sensitivity(result: Any, views: Sequence[Any]) -> np.ndarray:
+    """Per used stripe pixel, the change (mm) of its distance from the laser plane when it
+    moves by one pixel along the image rows: the stripe noise's effect on a laser residual."""
+    s = result.sensor
+    intr = s.intrinsics_vector()
+    plane = np.asarray(s.laser_plane, float)
+    out = []
+    for v in views:
+        px = result.residuals.get(v.id, {}).get("laser_pixels")
+        if px is None or len(px) == 0:
+            continue
+        cb = _camera_from_board(result, v)
+        if cb is None:
+            continue
+        p0, _ = board_plane_points(intr, cb, px)
+        p1, _ = board_plane_points(intr, cb, px + [0.0, 1.0])
+        d = np.abs((p1 - p0) @ plane[:3])
+        out.append(d[np.isfinite(d)])
+    return np.concatenate(out) if out else np.empty(0)
+
+
+def _coverage(pixels: Sequence[np.ndarray], image_size: tuple[int, int]) -> float:
+    """Fraction of the image's :data:`COVERAGE_GRID` cells holding at least one pixel."""
+    gx, gy = COVERAGE_GRID
+    w, h = image_size
+    hit = np.zeros((gy, gx), bool)
+    for px in pixels:
+        px = np.asarray(px, float).reshape(-1, 2)
+        px = px[np.isfinite(px).all(axis=1)]
+        if len(px) == 0:
+            continue
+        i = np.clip((px[:, 0] / w * gx).astype(int), 0, gx - 1)
+        j = np.clip((px[:, 1] / h * gy).astype(int), 0, gy - 1)
+        hit[j, i] = True
+    return float(hit.mean())
+
+
+def pose_variety_deg(rotations: Sequence[np.ndarray]) -> float:
+    """The RMS relative rotation (degrees) about the second best spanned axis over all pairs
+    of views: 0 when every view turns about one axis only."""
+    rv = [rotation_to_vector(a @ b.T) for k, a in enumerate(rotations) for b in rotations[k + 1:]]
+    if not rv:
+        return 0.0
+    m = np.asarray(rv).T @ np.asarray(rv) / len(rv)
+    ev = np.sort(np.linalg.eigvalsh(m))[::-1]
+    return math.degrees(math.sqrt(max(ev[1], 0.0)))
+
+
+def laser_check(result: Any, used: Sequence[Any], laser_sets: Sequence[np.ndarray]
+                ) -> list[Check]:
+    """The laser residuals against the stripe's own noise carried to mm (none when the
+    noise cannot be measured)."""
+    sigma_px = stripe_noise_px(laser_sets)
+    sens = _laser_sensitivity(result, used)
+    if not (sens.size and math.isfinite(sigma_px)):
+        return []
+    expected = sigma_px * float(np.sqrt(np.mean(sens**2)))
+    limit = max(LASER_NOISE_FACTOR * expected, LASER_FLOOR_MM)
+    lr = result.laser_rms_mm
+    return [_check(
+        "laser_rms", lr, limit, "mm",
+        f"the stripe's own noise ({sigma_px:.3f} px, its rows' scatter about a smooth "
+        f"curve) carried to mm is {expected:.4f} mm; a correct calibration leaves at most "
+        f"{LASER_NOISE_FACTOR:g} times that (board-pose error, stripe bias at albedo "
+        f"steps), and never asks less than {LASER_FLOOR_MM:g} mm",
+        f"the stripe points lie {lr:.3f} mm RMS from the laser plane, more than the "
+        f"{limit:.3f} mm the stripe's own noise explains")]
+
+
+def coverage_checks(corner_sets: Sequence[np.ndarray] | None,
+                    stripe_sets: Sequence[np.ndarray], size: tuple[int, int]) -> list[Check]:
+    """Where in the image the corners (when the calibration used any) and the stripe were
+    seen."""
+    checks = []
+    if corner_sets is not None:
+        cc = _coverage(corner_sets, size)
+        checks.append(_check(
+            "corner_coverage", cc, CORNER_COVERAGE_MIN, "of the image",
+            "outside the area the corners cover the lens distortion is extrapolated",
+            f"the board corners cover only {cc:.0%} of the image: place the board in the "
+            "corners and at the edges of the image too", kind="min"))
+    sc = _coverage(stripe_sets, size)
+    checks.append(_check(
+        "stripe_coverage", sc, STRIPE_COVERAGE_MIN, "of the image",
+        "measurements outside the stripe's calibrated area rest on extrapolation",
+        f"the stripe covers only {sc:.0%} of the image: vary the distance to the board",
+        kind="min"))
+    return checks
+
+
+def variety_check(rotations: Sequence[np.ndarray]) -> Check:
+    """How varied the camera's orientations are (``rotations``: camera_from_board, or
+    hand_from_base: the same relative rotations up to one rotation of them all)."""
+    pv = pose_variety_deg(rotations)
+    return _check(
+        "pose_variety", pv, POSE_VARIETY_MIN_DEG, "deg",
+        "the camera must turn about at least two different axes between views, by several "
+        "degrees, to separate focal length from distance and to fix the hand-eye rotation",
+        f"the views turn the camera by only {pv:.1f} degrees about a second axis: tilt the "
+        "board view in another direction too", kind="min")
+
+
+def unknowns_check(determined: int, total: int) -> Check:
+    return _check(
+        "unknowns_determined", float(determined), float(total), "unknowns",
+        "every estimated quantity must be fixed by the data",
+        f"the data determine only {determined} of the {total} unknowns: add views with the "
+        "board at other angles", kind="min")
+
+
+def cross_validation_check(cv: dict[str, float]) -> Check:
+    """The two halves' maps' difference against their combined predicted uncertainty."""
+    ratio = cv["rms"] / max(cv["predicted_rms"], 1e-9)
+    return _check(
+        "cross_validation", ratio, CROSS_VALIDATION_LIMIT, "",
+        "two calibrations on the two halves of the views map the same stripe pixels about "
+        "their combined predicted uncertainty apart (renders: 0.8-2.2 times); beyond "
+        f"{CROSS_VALIDATION_LIMIT:g} times the halves disagree",
+        f"calibrated on two halves of the views, the maps differ by {cv['rms']:.3f} mm RMS, "
+        f"{ratio:.1f} times their predicted uncertainty: the views disagree with one another "
+        "(or the uncertainty is understated)")
+
+
+def joint_checks(result: Any, views: Sequence[Any], board: Any) -> list[Check]:
+    """The checks of a general-model calibration (:class:`JointCalibration`) on the views it
+    was given (rejected ones included, to count them)."""
+    from .chain import chain_checks, chain_of_joint, corner_checks
+
+    board = BoardSpec.of(board)
+    used = [v for v in views if v.id in result.per_view]
+    laser_sets = [result.residuals[v.id]["laser_pixels"] for v in used
+                  if v.id in result.residuals]
+    corner_sets = [result.residuals[v.id]["corner_pixels"] for v in used
+                   if v.id in result.residuals]
+    chain = chain_of_joint(result, views, board)
+    checks = (chain_checks(chain) if chain is not None else
+              corner_checks(result.corner_rms_px, None, False))
+    checks += laser_check(result, used, laser_sets)
+    checks += coverage_checks(corner_sets, laser_sets, tuple(result.sensor.image_size))
+    rots = [cb[:3, :3] for cb in (_camera_from_board(result, v) for v in used)
+            if cb is not None]
+    checks.append(variety_check(rots))
+    checks.append(unknowns_check(result.rank, result.num_unknowns))
+    return checks
+
+
+def paper_checks(result: Any) -> list[Check]:
+    """The paper model's own checks: the solve's end, the fit against the sensor class's
+    accuracy and held-out points against the fit."""
+    checks = []
+    bad = str(result.termination) in ("failed", "cancelled")
+    checks.append(_check(
+        "solve_finished", 0.0 if bad else 1.0, 1.0, "",
+        "a solve that failed or was cancelled leaves parameters nobody checked",
+        f"the solve ended {result.termination}: its parameters are not a calibration",
+        kind="min"))
+    fr = float(result.fit_rms)
+    checks.append(_check(
+        "fit_rms", fr, PAPER_FIT_LIMIT_MM, "mm",
+        "laser triangulation sensors of this class measure to 0.1-0.3 mm (the paper: about "
+        "0.2 mm); beyond 1 mm the data or the model are wrong",
+        f"the calibration points lie {fr:.3f} mm RMS from their reference positions, more "
+        f"than the {PAPER_FIT_LIMIT_MM:g} mm a correct calibration leaves"))
+    if result.test_rms is not None and math.isfinite(result.test_rms):
+        # the fit's RMS floored at 0.01 mm, far below any real sensor's noise: noise-free
+        # simulations fit to 1e-13 mm and would make any ratio meaningless
+        ratio = float(result.test_rms) / max(fr, 0.01)
+        checks.append(_check(
+            "held_out_vs_fit", ratio, HELD_OUT_RATIO, "",
+            "held-out points lie about as far as the fitted ones when the calibration "
+            "generalises (noise alone: about 1.1)",
+            f"held-out points lie {ratio:.1f} times farther than the fitted ones "
+            f"({result.test_rms:.3f} against {fr:.3f} mm): the calibration does not "
+            "generalise (too few poses, or data that disagree)"))
+    return checks
