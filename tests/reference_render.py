@@ -96,6 +96,6 @@ def board_exposures(rays: np.ndarray, bfc: np.ndarray, board: Any, o: Any,
 
 def board_exposures_of_plane(rays: np.ndarray, bfc: np.ndarray, board: Any, o: Any,
                              plane: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`board_exposures` called as ``hmlvs.sim.render._board_exposures`` is: the laser
+    """:func:`board_exposures` called as ``hmlvs.sim.render.board_exposures`` is: the laser
     plane as (a, b, c, d), ``a x + b y + c z + d`` the signed distance (mm)."""
     return board_exposures(rays, bfc, board, o, lambda cam: cam @ plane[:3] + plane[3])

@@ -161,7 +161,7 @@ def test_json_error_output_is_valid_json(tmp_path, capsys):
 def test_simulate_with_images_is_all_or_nothing(tmp_path, capsys, monkeypatch):
     import hmlvs.data.manifest as manifest
 
-    real = manifest._write_png
+    real = manifest.write_png
     calls = {"n": 0}
 
     def fail_on_third(path, image):
@@ -170,12 +170,12 @@ def test_simulate_with_images_is_all_or_nothing(tmp_path, capsys, monkeypatch):
             raise OSError(28, "No space left on device", str(path))
         real(path, image)
 
-    monkeypatch.setattr(manifest, "_write_png", fail_on_third)
+    monkeypatch.setattr(manifest, "write_png", fail_on_third)
     code, _, err = _run(["simulate", str(tmp_path / "s.npz"), "--poses", "4", "--images",
                          str(tmp_path / "imgs")], capsys)
     assert code == 2 and "the disk is full" in err
     assert list(tmp_path.iterdir()) == []  # no data set, no image folder, no temporary folder
-    monkeypatch.setattr(manifest, "_write_png", real)
+    monkeypatch.setattr(manifest, "write_png", real)
     code, _, _ = _run(["simulate", str(tmp_path / "s.npz"), "--poses", "4", "--images",
                        str(tmp_path / "imgs")], capsys)
     assert code == 0
@@ -302,7 +302,7 @@ def test_simulate_with_images_interrupted_leaves_nothing(tmp_path, capsys, monke
     """Ctrl-C while the images are rendered: exit 130, neither the data set nor the images."""
     import hmlvs.data.manifest as manifest
 
-    real = manifest._write_png
+    real = manifest.write_png
     calls = {"n": 0}
 
     def interrupt_on_third(path, image):
@@ -311,7 +311,7 @@ def test_simulate_with_images_interrupted_leaves_nothing(tmp_path, capsys, monke
             raise KeyboardInterrupt
         real(path, image)
 
-    monkeypatch.setattr(manifest, "_write_png", interrupt_on_third)
+    monkeypatch.setattr(manifest, "write_png", interrupt_on_third)
     code, out, _ = _run(["simulate", str(tmp_path / "s.npz"), "--poses", "4", "--images",
                          str(tmp_path / "imgs")], capsys)
     assert code == 130 and calls["n"] == 3

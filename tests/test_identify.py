@@ -1,7 +1,7 @@
 """Parameter identification: accuracy, determinism, the paper's finding, robustness, bad input."""
 
 import hmlvs
-from hmlvs.calibration.solvers import _fitness_data
+from hmlvs.calibration.solvers import fitness_data
 import numpy as np
 import pytest
 
@@ -124,7 +124,7 @@ def test_progress_callback_error_propagates():
 def test_fitness_kernel_matches_model():
     sim = hmlvs.simulate(seed=9, pixel_noise=0.3)
     q = hmlvs.initial_candidates(sim.truth, 0.05, 1, seed=0)[0]
-    d = _fitness_data(sim.fit)
+    d = fitness_data(sim.fit)
     f = hmlvs.objective(q, sim.fit.pixels, sim.fit.poses, sim.fit.points)
     assert d.evaluate(q) == pytest.approx(f, rel=1e-12)
 
@@ -192,7 +192,7 @@ def test_lm_runs_interrupt_propagates():
 
 def test_per_run_details():
     sim = hmlvs.simulate(seed=3)
-    d = _fitness_data(sim.fit)
+    d = fitness_data(sim.fit)
     kw = {"initial": sim.truth, "spread": 0.2, "runs": 20, "fixed": (), "seed": 4}
     paper = hmlvs.calibrate(sim, method="lm-paper", **kw)
     modern = hmlvs.calibrate(sim, method="lm", use_bounds=False, **kw)

@@ -17,7 +17,7 @@ pytestmark = pytest.mark.scene  # simulated sessions or rendered images
 
 
 def assert_same_exposures(rays, bfc, board, o, plane):
-    got = R._board_exposures(rays, bfc, board, o, plane)
+    got = R.board_exposures(rays, bfc, board, o, plane)
     ref = numpy_exposures(rays, bfc, board, o, plane)
     for name, a, b in zip(("ambient", "laser", "distance"), got, ref):
         assert a.shape == b.shape, name
@@ -60,7 +60,7 @@ def test_the_general_sensor_is_shaded_as_by_numpy():
 def test_rendered_frames_are_the_frames_numpy_rendered(monkeypatch):
     options = R.RenderOptions(noise=1.0, speckle=0.1, vignetting=0.2, glare=True)
     native = R.render_session(seed=2, num_poses=2, options=options)
-    monkeypatch.setattr(R, "_board_exposures", numpy_exposures)
+    monkeypatch.setattr(R, "board_exposures", numpy_exposures)
     ref = R.render_session(seed=2, num_poses=2, options=options)
     differ, pixels = 0, 0
     for a, b in zip([*native.on, *native.off], [*ref.on, *ref.off]):

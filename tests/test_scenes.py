@@ -13,7 +13,7 @@ from hmlvs.measurement.measure import read_ply
 from hmlvs.paper import scenarios as scenes
 from hmlvs.sim.render import RenderOptions
 from hmlvs.sim.scene import Box, Cylinder, Hole, Scene, Table
-from hmlvs.sim.sessions import _ik_look_at
+from hmlvs.sim.sessions import ik_look_at
 import numpy as np
 import pytest
 
@@ -33,7 +33,7 @@ def calibration():
 
 def look_down_pose(params, target, standoff=270.0, cam_x=(1.0, 0.0, 0.0)):
     robot = hmlvs.Robot.scorbot_er7()
-    j = _ik_look_at(robot, hmlvs.hand_from_camera(params),
+    j = ik_look_at(robot, hmlvs.hand_from_camera(params),
                     np.asarray(target, float) + [0, 0, standoff], np.array([0, 0, -1.0]),
                     [scenes.HOME], cam_x=np.asarray(cam_x))
     return robot.poses(j)[0]

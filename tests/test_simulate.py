@@ -71,7 +71,7 @@ _SESSIONS_SCRIPT = """
 import sys
 import numpy as np
 import hmlvs
-from hmlvs.sim.sessions import _ik_look_at
+from hmlvs.sim.sessions import ik_look_at
 out = []
 for seed in range(3):
     s = hmlvs.simulate.session(num_poses=6, seed=seed, pixel_noise=0.1)
@@ -80,7 +80,7 @@ robot = hmlvs.Robot.scorbot_er7()
 hfc = hmlvs.hand_from_camera(hmlvs.Parameters.nominal())
 home = np.array([0.0, -0.8, 1.2, 0.0, 0.0])
 for x, y in [(650.0, 0.0), (700.0, 60.0), (600.0, -80.0)]:
-    j = _ik_look_at(robot, hfc, np.array([x, y, 300.0]), np.array([0.0, 0.0, -1.0]), [home],
+    j = ik_look_at(robot, hfc, np.array([x, y, 300.0]), np.array([0.0, 0.0, -1.0]), [home],
                     cam_x=np.array([0.0, 1.0, 0.0]))
     out.append(np.full(5, np.nan) if j is None else j)
 np.save(sys.argv[1], np.concatenate(out))

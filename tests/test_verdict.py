@@ -16,7 +16,7 @@ from hmlvs.data.calibration_file import Calibration
 from hmlvs.data.poses import rotation_to_quaternion
 from hmlvs.data.views import ViewData
 from hmlvs.diagnostics.map_sigma import map_sigma_mm
-from hmlvs.diagnostics.verdict import Verdict, _reorder, judge_joint, require_check
+from hmlvs.diagnostics.verdict import Verdict, judge_joint, reorder_quaternions, require_check
 from hmlvs.image.views import views_from_images
 from hmlvs.sim.general import general_session, render_general_session
 import numpy as np
@@ -143,7 +143,7 @@ MISTAKES = {
     # name: (board square, pose edit, phrase of the first reason)
     "square 25": (25.0, None, "the robot motion implies squares of 20.0 mm, not 25"),
     "inverted": (None, lambda i, m: _inv(m), "they are hand_from_base, not base_from_hand"),
-    "quaternion": (None, lambda i, m: _reorder(m, (1, 2, 3, 0)),
+    "quaternion": (None, lambda i, m: reorder_quaternions(m, (1, 2, 3, 0)),
                    "quaternions are written xyzw, not wxyz"),
     "metres": (None, lambda i, m: np.vstack([np.c_[m[:3, :3], m[:3, 3] / 1000], [0, 0, 0, 1]]),
                "the robot positions are metres read as millimetres: set the poses' unit to m"),

@@ -69,7 +69,7 @@ def _test_rms(test_errors: np.ndarray | None, notes: list[str]) -> float | None:
     return _rms(test_errors)
 
 
-def _fitness_data(ds: Dataset) -> Any:
+def fitness_data(ds: Dataset) -> Any:
     return _core._FitnessData(ds.pixels, ds.poses.reshape(-1, 16), ds.points)
 
 
@@ -197,8 +197,8 @@ def evaluate(params: Any, dataset: Dataset, test: Dataset | None = None,
     """A :class:`CalibrationResult` for given parameters (no solve): RMS and per-point errors
     on ``dataset`` (and ``test``), e.g. to report on a calibration file."""
     q = _as_vector(params, "params")
-    fit_errors = np.array(_fitness_data(dataset).point_errors(q))
-    test_errors = None if test is None else np.array(_fitness_data(test).point_errors(q))
+    fit_errors = np.array(fitness_data(dataset).point_errors(q))
+    test_errors = None if test is None else np.array(fitness_data(test).point_errors(q))
     notes: list[str] = []
     test_rms = _test_rms(test_errors, notes)
     return CalibrationResult(
@@ -364,7 +364,7 @@ def _problem(dataset: Any, test: Any, bounds: Any, initial: Any, fixed: Iterable
     others = [n for n in fixed if n != "Su"]
     if others:
         notes.append("held fixed at their initial values: " + ", ".join(others))
-    return _Problem(dataset=dataset, test=test, data=_fitness_data(dataset), bounds=bounds,
+    return _Problem(dataset=dataset, test=test, data=fitness_data(dataset), bounds=bounds,
                     fixed=fixed, fixed_mask=fixed_mask, q0=q0, search=search,
                     init_box=init_box, spread=spread, runs=runs, seed=seed,
                     # more threads than cores only slow the solve down
@@ -483,7 +483,7 @@ def _result(pr: _Problem, out: _Solved, method: str, seconds: float) -> Calibrat
     fit_errors = np.array(pr.data.point_errors(q))
     test_errors = None
     if pr.test is not None:
-        test_errors = np.array(_fitness_data(pr.test).point_errors(q))
+        test_errors = np.array(fitness_data(pr.test).point_errors(q))
     test_rms = _test_rms(test_errors, pr.notes)
     return CalibrationResult(
         params=Parameters.from_array(q), method=method, fixed=pr.fixed,

@@ -189,9 +189,9 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
     else:  # the entries' own poses: the pose files' units check
         given = [e["pose"] for e in out if "pose" in e]
         if given:
-            from .poses import _check_plausible
+            from .poses import check_plausible
 
-            _check_plausible(path, np.array(given), fmt.unit,
+            check_plausible(path, np.array(given), fmt.unit,
                              "name it as the manifest's pose_format: {{unit: {u}}}")
     return out, doc, path.parent
 
@@ -265,7 +265,7 @@ def read_stripe_list(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return arr[:, :2].copy(), inten
 
 
-def _write_png(path: Path, image: np.ndarray) -> None:
+def write_png(path: Path, image: np.ndarray) -> None:
     import cv2
     ok, buf = cv2.imencode(".png", image)
     if not ok:
@@ -290,8 +290,8 @@ def write_image_manifest(out_dir: str | os.PathLike, ids: list[str], on: list[np
                 write(fh)
         for i, pid in enumerate(ids):
             names = {"on": f"{pid}_on.png", "off": f"{pid}_off.png"}
-            _write_png(tmp / names["on"], on[i])
-            _write_png(tmp / names["off"], off[i])
+            write_png(tmp / names["on"], on[i])
+            write_png(tmp / names["off"], off[i])
             entries.append({"id": pid, **names,
                             "joints": np.asarray(joints[i], float).tolist()})
         doc = {"format": FORMAT, "version": VERSION,

@@ -459,7 +459,7 @@ _NO_UNIT = ("{path}: the length unit of the positions is not named: pass unit='m
             "(pose_format: {{unit: m}} in a manifest)")
 
 
-def _check_plausible(path: Any, poses: np.ndarray, unit: str, how: str = "name unit {u!r}"
+def check_plausible(path: Any, poses: np.ndarray, unit: str, how: str = "name unit {u!r}"
                      ) -> None:
     """A hand a few mm from the base in every pose was given in metres, and one kilometres
     away in millimetres: refuse both rather than calibrate with a wrong unit. ``how`` says how
@@ -521,7 +521,7 @@ def read_poses(path: str | os.PathLike, *, rotation: str | None = None,
             if pid in seen:
                 raise ValueError(f"{path}: pose {i} repeats the id {pid!r} of pose {seen[pid]}")
             seen[pid] = i
-    _check_plausible(path, poses, unit_used)
+    check_plausible(path, poses, unit_used)
     return ids, poses
 
 

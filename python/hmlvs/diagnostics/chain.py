@@ -27,7 +27,12 @@ from .checks import (
     HAND_EYE_DEG,
     HAND_EYE_MM,
     Check,
-    _check,
+    camera_from_board_of,
+    coverage_checks,
+    laser_check,
+    make_check,
+    unknowns_check,
+    variety_check,
 )
 
 
@@ -184,7 +189,7 @@ def corner_checks(corner_rms: float, free_rms: float | None, through_chain: bool
     """The corners' reprojection against the detector's noise, and (through the robot
     chain) against each view's own board pose."""
     where = "through the robot chain" if through_chain else "with each view's board pose free"
-    checks = [_check(
+    checks = [make_check(
         "corner_rms", corner_rms, CORNER_RMS_LIMIT_PX, "px",
         "corner detectors locate corners to a few hundredths to a few tenths of a pixel; "
         "beyond 1 px the poses, the board or the camera model do not fit the images",
@@ -192,7 +197,7 @@ def corner_checks(corner_rms: float, free_rms: float | None, through_chain: bool
         f"than the {CORNER_RMS_LIMIT_PX:g} px a correct calibration leaves")]
     if through_chain and free_rms is not None and math.isfinite(free_rms):
         ratio = corner_rms / max(free_rms, 0.05)
-        checks.append(_check(
+        checks.append(make_check(
             "chain_vs_free_corner_rms", ratio, POSE_DISAGREEMENT, "",
             "with correct robot poses the chain fits the corners about as well as Zhang's "
             "calibration with every view's board pose free (renders: within 10 %)",
@@ -213,20 +218,20 @@ def chain_checks(chain: Chain) -> list[Check]:
         da = np.array([b for _, b in spread.values()])
         rt, ra = float(np.sqrt(np.mean(dt**2))), float(np.sqrt(np.mean(da**2)))
         worst = sorted(spread, key=lambda k: -spread[k][0])[:3]
-        checks.append(_check(
+        checks.append(make_check(
             "board_spread_mm", rt, BOARD_SPREAD_MM, "mm",
             "each view's board pose carried to the base must land on the one board: a "
             "robot's absolute accuracy (0.1-1 mm) plus one view's pose error",
             f"the views put the board {rt:.2f} mm RMS apart in the robot base (most: "
             f"{', '.join(worst)}): the board moved or the poses do not match the images"))
-        checks.append(_check(
+        checks.append(make_check(
             "board_spread_deg", ra, BOARD_SPREAD_DEG, "deg",
             "as board_spread_mm, for the board's orientation (a robot's orientation "
             "accuracy is a few hundredths of a degree)",
             f"the views turn the board {ra:.2f} degrees RMS apart in the robot base"))
     checks += _hand_eye_checks(chain)
     n_rej = len(chain.rejected)
-    checks.append(_check(
+    checks.append(make_check(
         "views_rejected", n_rej, 0, "views",
         "a view is rejected when its board's orientation fits its robot pose under neither "
         "corner numbering: its image and its pose disagree",
@@ -239,14 +244,35 @@ def _hand_eye_checks(chain: Chain) -> list[Check]:
     ht, ha, pairs = hand_eye_residuals(chain)
     if not pairs:
         return []
-    return [_check(
+    return [make_check(
         "hand_eye_axxb_mm", ht, HAND_EYE_MM, "mm",
         "the hand's motion between two views and the camera's (from their corners) must "
         "agree through the hand-eye transform (A X = X B); each pair's residual carries "
         "two views' pose errors: sqrt(2) times board_spread_mm's limit",
         f"the hand-eye equation A X = X B leaves {ht:.2f} mm RMS over {pairs} pairs of "
-        "views: the robot's motions do not match the camera's"), _check(
+        "views: the robot's motions do not match the camera's"), make_check(
         "hand_eye_axxb_deg", ha, HAND_EYE_DEG, "deg",
         "as hand_eye_axxb_mm, for the rotation: sqrt(2) times board_spread_deg's limit",
         f"the hand-eye equation A X = X B leaves {ha:.2f} degrees RMS over {pairs} "
         "pairs of views")]
+
+
+def joint_checks(result: Any, views: Sequence[Any], board: Any) -> list[Check]:
+    """The checks of a general-model calibration (:class:`JointCalibration`) on the views it
+    was given (rejected ones included, to count them)."""
+    board = BoardSpec.of(board)
+    used = [v for v in views if v.id in result.per_view]
+    laser_sets = [result.residuals[v.id]["laser_pixels"] for v in used
+                  if v.id in result.residuals]
+    corner_sets = [result.residuals[v.id]["corner_pixels"] for v in used
+                   if v.id in result.residuals]
+    chain = chain_of_joint(result, views, board)
+    checks = (chain_checks(chain) if chain is not None else
+              corner_checks(result.corner_rms_px, None, False))
+    checks += laser_check(result, used, laser_sets)
+    checks += coverage_checks(corner_sets, laser_sets, tuple(result.sensor.image_size))
+    rots = [cb[:3, :3] for cb in (camera_from_board_of(result, v) for v in used)
+            if cb is not None]
+    checks.append(variety_check(rots))
+    checks.append(unknowns_check(result.rank, result.num_unknowns))
+    return checks

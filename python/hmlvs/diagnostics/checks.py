@@ -24,7 +24,6 @@ import numpy as np
 from .._arrays import robust_sigma
 from ..calibration.joint import POSE_DISAGREEMENT
 from ..calibration.joint_setup import board_plane_points
-from ..geometry.board import BoardSpec
 from ..geometry.transforms import invert_transform, rotation_to_vector
 
 #: corners through the robot chain (px RMS): detectors reach 0.02-0.3 px on sharp boards, so a
@@ -86,31 +85,32 @@ class Check:
     kind: str = "max"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "value": _num(self.value), "limit": _num(self.limit),
+        return {"name": self.name, "value": finite_or_none(self.value),
+                "limit": finite_or_none(self.limit),
                 "ok": bool(self.ok), "unit": self.unit, "kind": self.kind, "why": self.why}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Check":
-        return cls(name=str(d["name"]), value=_float(d.get("value")),
-                   limit=_float(d.get("limit")), ok=bool(d["ok"]), why=str(d.get("why", "")),
+        return cls(name=str(d["name"]), value=as_float(d.get("value")),
+                   limit=as_float(d.get("limit")), ok=bool(d["ok"]), why=str(d.get("why", "")),
                    unit=str(d.get("unit", "")), kind=str(d.get("kind", "max")))
 
 
-def _num(x: float) -> float | None:
+def finite_or_none(x: float) -> float | None:
     return float(x) if x is not None and math.isfinite(x) else None
 
 
-def _float(x: Any) -> float:
+def as_float(x: Any) -> float:
     return float("nan") if x is None else float(x)
 
 
-def _check(name: str, value: float, limit: float, unit: str, why: str, problem: str,
+def make_check(name: str, value: float, limit: float, unit: str, why: str, problem: str,
            kind: str = "max") -> Check:
     ok = bool(value <= limit) if kind == "max" else bool(value >= limit)
     return Check(name, float(value), float(limit), ok, why, unit, problem, kind)
 
 
-def _camera_from_board(result: Any, view: Any) -> np.ndarray | None:
+def camera_from_board_of(result: Any, view: Any) -> np.ndarray | None:
     s = result.sensor
     if result.mode == "chain":
         hand = np.asarray(view.base_from_hand, float)
@@ -154,7 +154,7 @@ def _laser_sensitivity(result: Any, views: Sequence[Any]) -> np.ndarray:
         px = result.residuals.get(v.id, {}).get("laser_pixels")
         if px is None or len(px) == 0:
             continue
-        cb = _camera_from_board(result, v)
+        cb = camera_from_board_of(result, v)
         if cb is None:
             continue
         p0, _ = board_plane_points(intr, cb, px)
@@ -202,7 +202,7 @@ def laser_check(result: Any, used: Sequence[Any], laser_sets: Sequence[np.ndarra
     expected = sigma_px * float(np.sqrt(np.mean(sens**2)))
     limit = max(LASER_NOISE_FACTOR * expected, LASER_FLOOR_MM)
     lr = result.laser_rms_mm
-    return [_check(
+    return [make_check(
         "laser_rms", lr, limit, "mm",
         f"the stripe's own noise ({sigma_px:.3f} px, its rows' scatter about a smooth "
         f"curve) carried to mm is {expected:.4f} mm; a correct calibration leaves at most "
@@ -219,13 +219,13 @@ def coverage_checks(corner_sets: Sequence[np.ndarray] | None,
     checks = []
     if corner_sets is not None:
         cc = _coverage(corner_sets, size)
-        checks.append(_check(
+        checks.append(make_check(
             "corner_coverage", cc, CORNER_COVERAGE_MIN, "of the image",
             "outside the area the corners cover the lens distortion is extrapolated",
             f"the board corners cover only {cc:.0%} of the image: place the board in the "
             "corners and at the edges of the image too", kind="min"))
     sc = _coverage(stripe_sets, size)
-    checks.append(_check(
+    checks.append(make_check(
         "stripe_coverage", sc, STRIPE_COVERAGE_MIN, "of the image",
         "measurements outside the stripe's calibrated area rest on extrapolation",
         f"the stripe covers only {sc:.0%} of the image: vary the distance to the board",
@@ -237,7 +237,7 @@ def variety_check(rotations: Sequence[np.ndarray]) -> Check:
     """How varied the camera's orientations are (``rotations``: camera_from_board, or
     hand_from_base: the same relative rotations up to one rotation of them all)."""
     pv = pose_variety_deg(rotations)
-    return _check(
+    return make_check(
         "pose_variety", pv, POSE_VARIETY_MIN_DEG, "deg",
         "the camera must turn about at least two different axes between views, by several "
         "degrees, to separate focal length from distance and to fix the hand-eye rotation",
@@ -246,7 +246,7 @@ def variety_check(rotations: Sequence[np.ndarray]) -> Check:
 
 
 def unknowns_check(determined: int, total: int) -> Check:
-    return _check(
+    return make_check(
         "unknowns_determined", float(determined), float(total), "unknowns",
         "every estimated quantity must be fixed by the data",
         f"the data determine only {determined} of the {total} unknowns: add views with the "
@@ -256,7 +256,7 @@ def unknowns_check(determined: int, total: int) -> Check:
 def cross_validation_check(cv: dict[str, float]) -> Check:
     """The two halves' maps' difference against their combined predicted uncertainty."""
     ratio = cv["rms"] / max(cv["predicted_rms"], 1e-9)
-    return _check(
+    return make_check(
         "cross_validation", ratio, CROSS_VALIDATION_LIMIT, "",
         "two calibrations on the two halves of the views map the same stripe pixels about "
         "their combined predicted uncertainty apart (renders: 0.8-2.2 times); beyond "
@@ -266,41 +266,18 @@ def cross_validation_check(cv: dict[str, float]) -> Check:
         "(or the uncertainty is understated)")
 
 
-def joint_checks(result: Any, views: Sequence[Any], board: Any) -> list[Check]:
-    """The checks of a general-model calibration (:class:`JointCalibration`) on the views it
-    was given (rejected ones included, to count them)."""
-    from .chain import chain_checks, chain_of_joint, corner_checks
-
-    board = BoardSpec.of(board)
-    used = [v for v in views if v.id in result.per_view]
-    laser_sets = [result.residuals[v.id]["laser_pixels"] for v in used
-                  if v.id in result.residuals]
-    corner_sets = [result.residuals[v.id]["corner_pixels"] for v in used
-                   if v.id in result.residuals]
-    chain = chain_of_joint(result, views, board)
-    checks = (chain_checks(chain) if chain is not None else
-              corner_checks(result.corner_rms_px, None, False))
-    checks += laser_check(result, used, laser_sets)
-    checks += coverage_checks(corner_sets, laser_sets, tuple(result.sensor.image_size))
-    rots = [cb[:3, :3] for cb in (_camera_from_board(result, v) for v in used)
-            if cb is not None]
-    checks.append(variety_check(rots))
-    checks.append(unknowns_check(result.rank, result.num_unknowns))
-    return checks
-
-
 def paper_checks(result: Any) -> list[Check]:
     """The paper model's own checks: the solve's end, the fit against the sensor class's
     accuracy and held-out points against the fit."""
     checks = []
     bad = str(result.termination) in ("failed", "cancelled")
-    checks.append(_check(
+    checks.append(make_check(
         "solve_finished", 0.0 if bad else 1.0, 1.0, "",
         "a solve that failed or was cancelled leaves parameters nobody checked",
         f"the solve ended {result.termination}: its parameters are not a calibration",
         kind="min"))
     fr = float(result.fit_rms)
-    checks.append(_check(
+    checks.append(make_check(
         "fit_rms", fr, PAPER_FIT_LIMIT_MM, "mm",
         "laser triangulation sensors of this class measure to 0.1-0.3 mm (the paper: about "
         "0.2 mm); beyond 1 mm the data or the model are wrong",
@@ -310,7 +287,7 @@ def paper_checks(result: Any) -> list[Check]:
         # the fit's RMS floored at 0.01 mm, far below any real sensor's noise: noise-free
         # simulations fit to 1e-13 mm and would make any ratio meaningless
         ratio = float(result.test_rms) / max(fr, 0.01)
-        checks.append(_check(
+        checks.append(make_check(
             "held_out_vs_fit", ratio, HELD_OUT_RATIO, "",
             "held-out points lie about as far as the fitted ones when the calibration "
             "generalises (noise alone: about 1.1)",

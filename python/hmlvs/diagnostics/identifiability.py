@@ -75,7 +75,7 @@ SAME_POSE_MM = 10.0
 COLLINEAR_PIXELS = 1.0
 
 ROTATION_NAMES = ("rot_x", "rot_y", "rot_z")
-_EULER = (param_index("omega"), param_index("phi"), param_index("varphi"))
+EULER_INDEX = (param_index("omega"), param_index("phi"), param_index("varphi"))
 _ROTATION_DESCRIPTION = {"rot_x": "rotation of the camera about its x axis",
                          "rot_y": "rotation of the camera about its y axis",
                          "rot_z": "rotation of the camera about its z axis"}
@@ -257,7 +257,7 @@ def euler_rate_map(params: Any) -> np.ndarray:
     """
     q = params.to_array() if isinstance(params, Parameters) else np.asarray(params, float)
     r = hand_from_camera(q)[:3, :3]
-    c, s = math.cos(q[_EULER[2]]), math.sin(q[_EULER[2]])
+    c, s = math.cos(q[EULER_INDEX[2]]), math.sin(q[EULER_INDEX[2]])
     return np.column_stack([r[2, :], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
@@ -287,7 +287,7 @@ def _column_scales(bounds: Bounds | None) -> np.ndarray:
     return np.where(width > 0, width, TABLE2_UPPER - TABLE2_LOWER)
 
 
-def _check_inputs(dataset: Any, params: Any) -> tuple[Dataset, np.ndarray]:
+def check_inputs(dataset: Any, params: Any) -> tuple[Dataset, np.ndarray]:
     if hasattr(dataset, "fit") and not isinstance(dataset, Dataset):
         dataset = dataset.fit
     if not isinstance(dataset, Dataset):
@@ -306,7 +306,7 @@ def _check_inputs(dataset: Any, params: Any) -> tuple[Dataset, np.ndarray]:
 
 
 @dataclass
-class _Analysis:
+class Analysis:
     """Jacobians and SVD at one parameter vector, shared by the report and the uncertainty."""
 
     dataset: Dataset
@@ -357,26 +357,26 @@ class _Analysis:
         return self.vt[keep].T
 
 
-def _analyse(dataset: Dataset, q: np.ndarray, fixed: Iterable[str] | str,
+def analyse(dataset: Dataset, q: np.ndarray, fixed: Iterable[str] | str,
              bounds: Bounds | None = None, null_tol: float = NULL_TOL,
-             weak_tol: float = WEAK_TOL) -> _Analysis:
+             weak_tol: float = WEAK_TOL) -> Analysis:
     if not 0 < null_tol < weak_tol < 1:
         raise ValueError(f"need 0 < null_tol < weak_tol < 1, got null_tol={null_tol}, "
                          f"weak_tol={weak_tol}")
     fixed_names, mask = _fixed_mask(fixed)
     free_idx = np.nonzero(~mask)[0]
     e, j = residual_jacobian(q, dataset.pixels, dataset.poses, dataset.points)
-    rotation_free = not mask[list(_EULER)].any()
+    rotation_free = not mask[list(EULER_INDEX)].any()
     jd = j.copy()
     coords = list(NAMES)
     euler_scales = _column_scales(bounds)
     scales = euler_scales.copy()
     if rotation_free:
-        jd[:, :, list(_EULER)] = rotation_jacobian(q, dataset)
-        for k, i in enumerate(_EULER):
+        jd[:, :, list(EULER_INDEX)] = rotation_jacobian(q, dataset)
+        for k, i in enumerate(EULER_INDEX):
             coords[i] = ROTATION_NAMES[k]
         # A rotation-vector component gets the Euler angles' mean range (pi/8 for Table 2).
-        scales[list(_EULER)] = float(np.mean(euler_scales[list(_EULER)]))
+        scales[list(EULER_INDEX)] = float(np.mean(euler_scales[list(EULER_INDEX)]))
     p = free_idx.size
     a = jd[:, :, free_idx].reshape(-1, p) * scales[free_idx]
     _, sv, vt = np.linalg.svd(a, full_matrices=False)
@@ -387,7 +387,7 @@ def _analyse(dataset: Dataset, q: np.ndarray, fixed: Iterable[str] | str,
         esv = np.concatenate([esv, np.zeros(p - esv.size)])
         vt = np.linalg.svd(a)[2]
         evt = np.linalg.svd(ae)[2]
-    return _Analysis(dataset, q, fixed_names, mask, free_idx, e, j, jd, rotation_free,
+    return Analysis(dataset, q, fixed_names, mask, free_idx, e, j, jd, rotation_free,
                      tuple(coords), scales, euler_scales, euler_rate_map(q), sv, vt, esv, evt,
                      null_tol, weak_tol)
 
@@ -425,7 +425,7 @@ def camera_y_tangent(params: Any) -> np.ndarray:
 def gimbal_tangent() -> np.ndarray:
     """(omega +1, varphi -1) in the paper's parameters: no rotation at all when phi = 0."""
     t = np.zeros(NUM_PARAMS)
-    t[_EULER[0]], t[_EULER[2]] = 1.0, -1.0
+    t[EULER_INDEX[0]], t[EULER_INDEX[2]] = 1.0, -1.0
     return t
 
 
@@ -481,7 +481,7 @@ def _make_direction(kind: str, name: str, x: np.ndarray, a: np.ndarray, smax: fl
                      in_flat=in_flat, description=description, recommendation=recommendation)
 
 
-def _known_directions(an: _Analysis) -> list[Direction]:
+def _known_directions(an: Analysis) -> list[Direction]:
     """docs/model.md's degeneracies, each with its status at this point and these fixed ones."""
     a = an.scaled
     smax = float(an.sv[0])
@@ -535,13 +535,13 @@ def _known_directions(an: _Analysis) -> list[Direction]:
                                    float(ev[0]), NAMES, an.euler_scales, an.free_idx,
                                    an.euler_vt[weak].T,
                                    an.null_tol, an.weak_tol, _KNOWN_DESCRIPTIONS["gimbal_lock"]
-                                   + f" (phi = {an.q[_EULER[1]]:.3g} rad)",
+                                   + f" (phi = {an.q[EULER_INDEX[1]]:.3g} rad)",
                                    _KNOWN_RECOMMENDATIONS["gimbal_lock"],
                                    parametrization_only=True))
     return out
 
 
-def _unnamed_directions(an: _Analysis, known: list[Direction]) -> list[Direction]:
+def _unnamed_directions(an: Analysis, known: list[Direction]) -> list[Direction]:
     """Flat directions of the data Jacobian that the known ones do not explain."""
     flat = an.flat_basis()
     d = flat.shape[1]
@@ -643,7 +643,7 @@ def data_warnings(dataset: Dataset, num_free: int) -> list[str]:
     return out
 
 
-def _suggest_fixed(an: _Analysis) -> list[str]:
+def _suggest_fixed(an: Analysis) -> list[str]:
     """A small set of parameters whose fixing removes every null and weak data direction.
 
     Fixing parameter j restricts the flat subspace to x_j = 0, removing one dimension when
@@ -694,7 +694,7 @@ def _recommendations(directions: list[Direction], warnings_: list[str],
     return recs
 
 
-def _report(an: _Analysis) -> IdentifiabilityReport:
+def report_of(an: Analysis) -> IdentifiabilityReport:
     known = _known_directions(an)
     unnamed = _unnamed_directions(an, known)
     flat = [d for d in known if d.status in ("null", "weak")] + unnamed
@@ -741,5 +741,5 @@ def identifiability(dataset: Dataset | Any, params: Parameters | Any,
     >>> [d.kind for d in rep.directions if d.kind != "unnamed"]  # doctest: +SKIP
     ['scale_gauge', 'camera_y_shift', 'gimbal_lock']
     """
-    dataset, q = _check_inputs(dataset, params)
-    return _report(_analyse(dataset, q, fixed, bounds, null_tol, weak_tol))
+    dataset, q = check_inputs(dataset, params)
+    return report_of(analyse(dataset, q, fixed, bounds, null_tol, weak_tol))

@@ -34,7 +34,7 @@ def _rot_xyzw(q: np.ndarray) -> np.ndarray:
     return rotation_from_quaternion(q / np.linalg.norm(q), "xyzw")
 
 
-def _reorder(m: np.ndarray, order: tuple[int, int, int, int]) -> np.ndarray:
+def reorder_quaternions(m: np.ndarray, order: tuple[int, int, int, int]) -> np.ndarray:
     q = _quat_xyzw(m[:3, :3])
     out = m.copy()
     out[:3, :3] = _rot_xyzw(q[list(order)])
@@ -46,9 +46,9 @@ _POSE_HYPOTHESES: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "as given": lambda m: m,
     "inverted": invert_transform,
     # written x y z w but read as w x y z: the read (x', y', z', w') = (y, z, w, x)
-    "xyzw read as wxyz": lambda m: _reorder(m, (3, 0, 1, 2)),
+    "xyzw read as wxyz": lambda m: reorder_quaternions(m, (3, 0, 1, 2)),
     # written w x y z but read as x y z w: the read (x', y', z', w') = (w, x, y, z)
-    "wxyz read as xyzw": lambda m: _reorder(m, (1, 2, 3, 0)),
+    "wxyz read as xyzw": lambda m: reorder_quaternions(m, (1, 2, 3, 0)),
 }
 
 

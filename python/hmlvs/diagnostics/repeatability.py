@@ -20,7 +20,7 @@ import numpy as np
 from ..calibration.solvers import CalibrationResult, calibrate
 from ..data.dataset import Dataset, fit_and_test
 from ..models.params import NAMES
-from .identifiability import _EULER, GIMBAL_PHI, HmlvsDataWarning
+from .identifiability import EULER_INDEX, GIMBAL_PHI, HmlvsDataWarning
 
 
 @dataclass(frozen=True)
@@ -115,7 +115,7 @@ class RepeatabilityReport:
 def _combinations(q: np.ndarray, near_gimbal: bool) -> dict[str, float]:
     out = {"f/Su": q[0] / q[1], "f/Sv": q[0] / q[2], "k Su^2": q[5] * q[1] ** 2}
     if near_gimbal:
-        out["omega + varphi"] = math.remainder(q[_EULER[0]] + q[_EULER[2]], 2 * math.pi)
+        out["omega + varphi"] = math.remainder(q[EULER_INDEX[0]] + q[EULER_INDEX[2]], 2 * math.pi)
     return out
 
 

@@ -40,14 +40,14 @@ import numpy as np
 
 from ..models.params import NAMES, Bounds, Parameters, param_index
 from .identifiability import (
-    _EULER,
+    EULER_INDEX,
     GIMBAL_PHI,
     NULL_TOL,
     WEAK_TOL,
-    _analyse,
-    _Analysis,
-    _check_inputs,
-    _report,
+    Analysis,
+    analyse,
+    check_inputs,
+    report_of,
 )
 
 _DETERMINED_TOL = 1e-6  # fraction of a gradient inside the null space still "determined"
@@ -182,8 +182,8 @@ def _combination_gradients(q: np.ndarray, near_gimbal: bool
     out.append(("k Su^2", "1/px^2", k * su**2, g, "radial distortion in pixel units"))
     if near_gimbal:
         g = np.zeros(len(NAMES))
-        g[[_EULER[0], _EULER[2]]] = 1.0
-        total = math.remainder(q[_EULER[0]] + q[_EULER[2]], 2 * math.pi)
+        g[[EULER_INDEX[0], EULER_INDEX[2]]] = 1.0
+        total = math.remainder(q[EULER_INDEX[0]] + q[EULER_INDEX[2]], 2 * math.pi)
         out.append(("omega + varphi", "rad", total, g,
                     "the camera's rotation about the hand's z axis when phi is near 0"))
     return out
@@ -206,7 +206,7 @@ def check_noise(pixel_noise: Any, point_noise: Any) -> None:
                          "neither to estimate them from the residuals")
 
 
-def _estimate_noise(an: _Analysis, wp: np.ndarray, rank: int) -> tuple[float, float]:
+def _estimate_noise(an: Analysis, wp: np.ndarray, rank: int) -> tuple[float, float]:
     """Pixel noise (px) and point noise (mm) from the residuals, by the method of moments.
 
     Pixel noise moves a point within the laser plane (W_p,i = G_i G_i^T, rank 2), point noise
@@ -253,7 +253,7 @@ def _estimate_noise(an: _Analysis, wp: np.ndarray, rank: int) -> tuple[float, fl
     return float(np.sqrt(max(sp2, 0.0))), float(np.sqrt(max(st2, 0.0)))
 
 
-def _compute(an: _Analysis, pixel_noise: float | None = None,
+def _compute(an: Analysis, pixel_noise: float | None = None,
              point_noise: float | None = None, flat_names: Iterable[str] = (),
              bounds: Bounds | None = None) -> Uncertainty:
     check_noise(pixel_noise, point_noise)
@@ -286,7 +286,7 @@ def _compute(an: _Analysis, pixel_noise: float | None = None,
     s = an.scales[free_idx]
     # data coordinates -> paper parameters: Euler rates = B^+ delta
     t = np.eye(p)
-    euler_pos = [int(np.nonzero(free_idx == i)[0][0]) for i in _EULER] if an.rotation_free \
+    euler_pos = [int(np.nonzero(free_idx == i)[0][0]) for i in EULER_INDEX] if an.rotation_free \
         else []
     bsv = np.linalg.svd(an.B, compute_uv=False)
     chart_singular = an.rotation_free and bsv[-1] < 1e-9 * bsv[0]
@@ -323,7 +323,7 @@ def _compute(an: _Analysis, pixel_noise: float | None = None,
 
     names = tuple(NAMES[i] for i in free_idx)
     det = {n: determined(np.eye(p)[k]) for k, n in enumerate(names)}
-    phi = q[_EULER[1]]
+    phi = q[EULER_INDEX[1]]
     combos = []
     for name, unit, value, g, desc in _combination_gradients(q, abs(phi) < GIMBAL_PHI):
         gf = g[free_idx]
@@ -398,9 +398,9 @@ def uncertainty(dataset: Any, params: Parameters | Any, fixed: Iterable[str] | s
     -------
     Uncertainty
     """
-    dataset, q = _check_inputs(dataset, params)
-    an = _analyse(dataset, q, fixed, bounds, null_tol, max(WEAK_TOL, 10 * null_tol))
-    flat = [d.name for d in _report(an).directions if d.status == "null"
+    dataset, q = check_inputs(dataset, params)
+    an = analyse(dataset, q, fixed, bounds, null_tol, max(WEAK_TOL, 10 * null_tol))
+    flat = [d.name for d in report_of(an).directions if d.status == "null"
             and not d.parametrization_only]
     return _compute(an, pixel_noise, point_noise, flat, bounds)
 
@@ -414,9 +414,9 @@ def diagnose(dataset: Any, params: Any, fixed: Iterable[str] | str,
     name the data's own problems (too few points, one pose, one image line) and every null
     or weak direction among the free parameters with what to do about it.
     """
-    dataset, q = _check_inputs(dataset, params)
-    an = _analyse(dataset, q, fixed, bounds)
-    rep = _report(an)
+    dataset, q = check_inputs(dataset, params)
+    an = analyse(dataset, q, fixed, bounds)
+    rep = report_of(an)
     flat = [d.name for d in rep.directions if d.status == "null" and not d.parametrization_only]
     unc = _compute(an, pixel_noise, point_noise, flat, bounds)
     if loss is not None:

@@ -25,25 +25,24 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..geometry.board import BoardSpec
-from .chain import chain_checks, chain_of_joint, chain_of_paper, pose_error_mm
+from .chain import chain_checks, chain_of_joint, chain_of_paper, joint_checks, pose_error_mm
 from .checks import (
     CROSS_VALIDATION_LIMIT,
     Check,
-    _check,
-    _float,
-    _num,
+    as_float,
     coverage_checks,
     cross_validation_check,
-    joint_checks,
+    finite_or_none,
+    make_check,
     paper_checks,
     stripe_noise_px,
     unknowns_check,
     variety_check,
 )
 from .map_sigma import PointModel
-from .mistakes import _reorder, find_mistake
+from .mistakes import find_mistake, reorder_quaternions
 
-__all__ = ["CROSS_VALIDATION_LIMIT", "Check", "Verdict", "_reorder", "cross_validation",
+__all__ = ["CROSS_VALIDATION_LIMIT", "Check", "Verdict", "reorder_quaternions", "cross_validation",
            "find_mistake", "judge_joint", "judge_paper", "require_check", "stripe_noise_px",
            "verdict_from_checks"]
 
@@ -71,9 +70,9 @@ class Verdict:
         return {"trustworthy": bool(self.trustworthy), "reasons": list(self.reasons),
                 "checks": [c.to_dict() for c in self.checks],
                 "map_sigma_mm": None if self.map_sigma_mm is None else
-                {k: _num(v) for k, v in self.map_sigma_mm.items()},
+                {k: finite_or_none(v) for k, v in self.map_sigma_mm.items()},
                 "cross_validation_mm": None if self.cross_validation_mm is None else
-                {k: _num(v) for k, v in self.cross_validation_mm.items()},
+                {k: finite_or_none(v) for k, v in self.cross_validation_mm.items()},
                 "likely_mistake": self.likely_mistake}
 
     @classmethod
@@ -83,10 +82,10 @@ class Verdict:
         return cls(trustworthy=bool(d["trustworthy"]), reasons=[str(r) for r in
                                                                   d.get("reasons") or []],
                    checks=[Check.from_dict(c) for c in d.get("checks") or []],
-                   map_sigma_mm=None if ms is None else {k: _float(v) for k, v in ms.items()},
+                   map_sigma_mm=None if ms is None else {k: as_float(v) for k, v in ms.items()},
                    likely_mistake=d.get("likely_mistake"),
                    cross_validation_mm=None if cv is None else
-                   {k: _float(v) for k, v in cv.items()})
+                   {k: as_float(v) for k, v in cv.items()})
 
     def advice(self) -> str:
         """What the verdict means for the person about to measure, in a sentence or two."""
@@ -252,14 +251,14 @@ def require_check(verdict: Verdict, require_mm: float | None) -> Verdict:
     if not (math.isfinite(require_mm) and require_mm > 0):
         raise ValueError(f"--require must be a positive number of mm, got {require_mm}")
     p95 = float("inf") if verdict.map_sigma_mm is None else verdict.map_sigma_mm["p95"]
-    checks = [*verdict.checks, _check(
+    checks = [*verdict.checks, make_check(
         "map_sigma_p95", p95, require_mm, "mm",
         "the user's demand (--require) on the predicted 95th-percentile 3D uncertainty",
         f"the predicted 3D uncertainty reaches {p95:.3f} mm at the 95th percentile, more "
         f"than the {require_mm:g} mm required")]
     if verdict.cross_validation_mm is not None:
         cv95 = verdict.cross_validation_mm["p95"]
-        checks.append(_check(
+        checks.append(make_check(
             "cross_validation_p95", cv95, require_mm, "mm",
             "the user's demand (--require) on the 95th percentile of the difference between "
             "the two halves' maps",

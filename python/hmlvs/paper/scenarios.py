@@ -379,7 +379,7 @@ def cylinder_scan(calibration: Any = None, truth: Any = None, *, seed: int = 0,
     from ..measurement.measure import measure_images
     from ..models.paper import points_in_base
     from ..models.params import Parameters
-    from ..sim.sessions import _ik_look_at
+    from ..sim.sessions import ik_look_at
 
     start = time.perf_counter()
     truth = default_truth() if truth is None else truth
@@ -414,7 +414,7 @@ def cylinder_scan(calibration: Any = None, truth: Any = None, *, seed: int = 0,
     prev = HOME
     for s in s_values:
         pos = top + s * axis + np.array([0.0, 0.0, standoff])
-        j = _ik_look_at(robot, hfc, pos, np.array([0.0, 0.0, -1.0]), [prev, HOME], cam_x=cam_x)
+        j = ik_look_at(robot, hfc, pos, np.array([0.0, 0.0, -1.0]), [prev, HOME], cam_x=cam_x)
         if j is None:
             raise ValueError(f"the scan position {np.round(pos, 1).tolist()} mm (camera "
                              f"{standoff:.0f} mm above the cylinder) is out of the robot's "
@@ -713,7 +713,7 @@ def _place_on_corner(robot: Any, q_true: np.ndarray, hfc_plan: np.ndarray, scene
     that neither side face is in view: the top face's stripe segment simply ends at the
     corner."""
     from ..models.paper import pixels_from_points
-    from ..sim.sessions import _ik_look_at, _snap
+    from ..sim.sessions import ik_look_at, snap_to_pose_grid
 
     w, h = image_size
     up = np.array([0.0, 0.0, 1.0])
@@ -728,13 +728,13 @@ def _place_on_corner(robot: Any, q_true: np.ndarray, hfc_plan: np.ndarray, scene
         view = -(np.cos(tilt) * up + np.sin(tilt) * radial)
         pos = corner - standoff * view - hide * (faces[0] + faces[1]) + rng.normal(
             0.0, approach_mm, 3)
-        j = _ik_look_at(robot, hfc_plan, pos, view, [home], cam_x=stripe_dir)
+        j = ik_look_at(robot, hfc_plan, pos, view, [home], cam_x=stripe_dir)
         if j is None:
             continue
         reached += 1
         snapped = None
         for free in ([3], [0], [2]):
-            snapped = _snap(robot, q_true, j, corner[None], free=free)
+            snapped = snap_to_pose_grid(robot, q_true, j, corner[None], free=free)
             if snapped is not None:
                 break
         if snapped is None:

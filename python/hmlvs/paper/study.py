@@ -33,7 +33,7 @@ import zlib
 import numpy as np
 
 from .._io import atomic_folder, atomic_write
-from ..calibration.solvers import _fitness_data, calibrate
+from ..calibration.solvers import calibrate, fitness_data
 from ..models.params import NUM_PARAMS, Bounds
 
 PAPER_S: tuple[float, ...] = (1e-4, 1e-3, 1e-2, 0.1, 0.2)
@@ -481,7 +481,7 @@ def study(s_values: Sequence[float] = PAPER_S, runs_lm: Optional[int] = None,
                              quick=bool(quick), seed=seed, threads=n_threads,
                              fit_points=len(sim.fit), test_points=len(sim.test))
     truth = sim.truth
-    fit_data, test_data = _fitness_data(sim.fit), _fitness_data(sim.test)
+    fit_data, test_data = fitness_data(sim.fit), fitness_data(sim.test)
 
     def errors(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if not np.all(np.isfinite(q)):

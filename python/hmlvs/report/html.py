@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import base64
 import datetime
 import html
-import io
 import math
 import os
 from pathlib import Path
@@ -18,19 +16,11 @@ from ..data.dataset import Dataset
 from ..geometry.transforms import rotation_to_vector
 from ..models.paper import points_in_base
 from ..models.params import DESCRIPTIONS, NAMES, TABLE2_LOWER, TABLE2_UPPER, UNITS, Parameters
+from .page import figures_html, page, png, verdict_html
 
 # The paper's Table 2: nominal values, PSO bounds and its best-fit parameters.
 PAPER_TABLE2_BEST = [7.70, 0.0074, 0.0075, 323.8, 238.3, 4.8e-4, 137.3, 0.47, -1.8e-3, -0.05,
                      -6.8e-3, 63.2, -2.3, -46.2]
-
-
-def _png(fig: Any) -> str:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
-    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
 
 
 def _figures(result: Any, ds: Dataset, test: Dataset | None) -> dict[str, str]:
@@ -48,7 +38,7 @@ def _figures(result: Any, ds: Dataset, test: Dataset | None) -> dict[str, str]:
     ax.set_ylabel("points")
     ax.set_title("Residual histogram")
     ax.legend()
-    figs["hist"] = _png(fig)
+    figs["hist"] = png(fig)
 
     fig, ax = plt.subplots(figsize=(7, 3.4))
     ax.plot(np.arange(result.fit_errors.size), result.fit_errors, "o", ms=3, label="fit")
@@ -59,7 +49,7 @@ def _figures(result: Any, ds: Dataset, test: Dataset | None) -> dict[str, str]:
     ax.set_ylabel("||E_i|| (mm)")
     ax.set_title("Per-point distance errors")
     ax.legend()
-    figs["points"] = _png(fig)
+    figs["points"] = png(fig)
 
     hist = getattr(result, "extra", {}).get("pso_histories") or (
         [result.history] if result.history.size else [])
@@ -72,7 +62,7 @@ def _figures(result: Any, ds: Dataset, test: Dataset | None) -> dict[str, str]:
         ax.set_title("PSO convergence (paper Fig. 11)")
         if len(hist) <= 8:
             ax.legend(fontsize=7)
-        figs["convergence"] = _png(fig)
+        figs["convergence"] = png(fig)
 
     fig = plt.figure(figsize=(6, 5))
     ax = fig.add_subplot(projection="3d")
@@ -88,7 +78,7 @@ def _figures(result: Any, ds: Dataset, test: Dataset | None) -> dict[str, str]:
     ax.set_zlabel("z (mm)")
     ax.set_title("Reference against measured points (base frame)")
     ax.legend(fontsize=7)
-    figs["cloud"] = _png(fig)
+    figs["cloud"] = png(fig)
     return figs
 
 
@@ -148,31 +138,6 @@ def _views(image_reports: Any) -> str:
             + "".join(rows) + "</table>")
 
 
-_STYLE = """
-body { font-family: sans-serif; margin: 2em; color: #222; max-width: 1100px; }
-table { border-collapse: collapse; margin: 1em 0; }
-td, th { border: 1px solid #bbb; padding: 3px 8px; text-align: right; font-size: 13px; }
-td:nth-child(3) { text-align: left; }
-th { background: #eee; }
-.summary td { text-align: left; }
-li.warn { color: #a40; font-weight: bold; }
-figure { display: inline-block; margin: 0.5em; vertical-align: top; }
-img { max-width: 520px; border: 1px solid #ddd; }
-"""
-
-
-def _page(title: str, body: str) -> str:
-    """A whole self-contained HTML page around ``body``."""
-    return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
-            f"<title>{html.escape(title)}</title>\n<style>{_STYLE}</style></head><body>\n"
-            f"{body}</body></html>\n")
-
-
-def _figures_html(figs: dict[str, str], captions: dict[str, str]) -> str:
-    return "".join(f'<figure><img alt="{captions[k]}" src="{v}"><figcaption>{captions[k]}'
-                   f"</figcaption></figure>" for k, v in figs.items())
-
-
 def render_report(result: Any, ds: Dataset, test: Dataset | None = None,
                   truth: Parameters | None = None, title: str = "hmlvs calibration report",
                   std: dict[str, float | None] | None = None, image_reports: Any = None,
@@ -223,12 +188,10 @@ def render_report(result: Any, ds: Dataset, test: Dataset | None = None,
     captions = {"hist": "Residual histogram", "points": "Per-point distance errors",
                 "convergence": "PSO convergence (paper Fig. 11)",
                 "cloud": "Reference against measured points"}
-    img = _figures_html(figs, captions)
+    img = figures_html(figs, captions)
     now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     stopped = getattr(result, "termination_message", "") or str(result.termination)
-    from .joint import verdict_html
-
-    return _page(title, f"""<h1>{html.escape(title)}</h1>
+    return page(title, f"""<h1>{html.escape(title)}</h1>
 {verdict_html(verdict)}
 <table class="summary">
 <tr><td>method</td><td>{html.escape(result.method)}: {html.escape(stopped)}</td></tr>

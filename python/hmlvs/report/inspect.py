@@ -114,7 +114,7 @@ def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = Non
     """
 
     from .._io import atomic_folder
-    from ..data.manifest import _write_png, read_manifest
+    from ..data.manifest import read_manifest, write_png
     from ..image.views import views_from_images
 
     used, spec, _, _, reports = views_from_images(source, robot=robot, board=board,
@@ -143,7 +143,7 @@ def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = Non
                 continue
             name = _unique(_safe(rep.id), taken)
             view.image = out / name
-            _write_png(tmp / name, picture)
+            write_png(tmp / name, picture)
     return result
 
 

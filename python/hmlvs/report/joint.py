@@ -15,7 +15,7 @@ import numpy as np
 
 from .._io import atomic_write
 from ..geometry.transforms import rotation_to_vector
-from .html import _figures_html, _page, _png
+from .page import figures_html, page, png, verdict_html  # noqa: F401 (verdict_html re-exported)
 
 
 def _figures(result: Any) -> dict[str, str]:
@@ -41,7 +41,7 @@ def _figures(result: Any) -> dict[str, str]:
     ax.set_aspect("equal")
     ax.set_xlabel("u (px)")
     ax.set_ylabel("v (px)")
-    figs["quiver"] = _png(fig)
+    figs["quiver"] = png(fig)
 
     fig, ax = plt.subplots(figsize=(7, 3.4))
     # views with corners only: a laser-only view has no reprojection error
@@ -51,7 +51,7 @@ def _figures(result: Any) -> dict[str, str]:
     ax.set_xticks(np.arange(len(ids)), ids, rotation=90, fontsize=7)
     ax.set_ylabel("corner RMS (px)")
     ax.set_title("Reprojection error per view")
-    figs["per_view"] = _png(fig)
+    figs["per_view"] = png(fig)
 
     fig, ax = plt.subplots(figsize=(6, 3.4))
     lr = np.concatenate([r["laser_residuals"] for r in res.values()]) if res else np.empty(0)
@@ -61,7 +61,7 @@ def _figures(result: Any) -> dict[str, str]:
     ax.set_xlabel("stripe point distance from the laser plane (mm)")
     ax.set_ylabel("stripe pixels")
     ax.set_title("Laser residuals")
-    figs["laser"] = _png(fig)
+    figs["laser"] = png(fig)
     return figs
 
 
@@ -114,7 +114,7 @@ def render_joint_report(result: Any, image_reports: Any = None, verdict: Any = N
     now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     how = "robot poses (hand-eye and board pose estimated)" if chain else \
         "no robot poses (camera and laser plane only)"
-    return _page(title, f"""<h1>{html.escape(title)}</h1>
+    return page(title, f"""<h1>{html.escape(title)}</h1>
 {verdict_html(verdict)}
 <table class="summary">
 <tr><td>model, mode</td><td>opencv, {html.escape(how)}</td></tr>
@@ -141,78 +141,8 @@ def render_joint_report(result: Any, image_reports: Any = None, verdict: Any = N
 <table class="views"><tr><th>view</th><th>status</th><th>corners</th><th>corner RMS (px)</th>
 <th>stripe pixels</th><th>laser RMS (mm)</th><th>why</th></tr>{"".join(view_rows)}</table>
 <h2>Figures</h2>
-{_figures_html(figs, captions)}
+{figures_html(figs, captions)}
 """)
-
-
-#: the uncertainty map's cells over the image (columns, rows)
-_MAP_GRID = (8, 6)
-
-
-def _uncertainty_map(verdict: Any) -> str:
-    """The predicted 3D uncertainty over the image, as a table of cells: the 95th
-    percentile (mm) of the stripe pixels' predicted standard deviations in each cell,
-    shaded by it; "-" where the calibration saw no stripe (measurements there rest on
-    extrapolation)."""
-    pts = getattr(verdict, "map_points", None)
-    size = getattr(verdict, "image_size", None)
-    if pts is None or len(pts) == 0 or size is None:
-        return ""
-    gx, gy = _MAP_GRID
-    w, h = size
-    i = np.clip((pts[:, 0] / w * gx).astype(int), 0, gx - 1)
-    j = np.clip((pts[:, 1] / h * gy).astype(int), 0, gy - 1)
-    top = float(np.percentile(pts[:, 2], 95)) or 1.0
-    rows = []
-    for r in range(gy):
-        cells = []
-        for c in range(gx):
-            sel = pts[(i == c) & (j == r), 2]
-            if sel.size == 0:
-                cells.append('<td style="background:#eee">-</td>')
-                continue
-            q = float(np.percentile(sel, 95))
-            x = min(q / top, 1.0)
-            colour = f"rgb({int(255 * x)},{int(200 * (1 - x) + 55)},80)"
-            cells.append(f'<td style="background:{colour}">{q:.3f}</td>')
-        rows.append("<tr>" + "".join(cells) + "</tr>")
-    return ("<p>Predicted 3D uncertainty over the image (95th percentile in mm of the "
-            "stripe points seen in each part of the image; '-': no stripe seen there, "
-            f"measurements there rest on extrapolation):</p><table class=\"map\">"
-            f"{''.join(rows)}</table>")
-
-
-def verdict_html(verdict: Any) -> str:
-    """The verdict, first in a report, in words a technician reads: whether to trust the
-    calibration, what that means for measuring, why (the likely mistake first); then the
-    predicted 3D uncertainty and its map over the image; then every check with its limit
-    and the reason for that limit."""
-    if verdict is None:
-        return ""
-    advice = f"<p>{html.escape(verdict.advice())}</p>"
-    if verdict.trustworthy:
-        head = ('<p class="verdict ok"><b>Verdict: this calibration can be trusted.</b> '
-                f'Every check passed.</p>{advice}')
-    else:
-        items = "".join(f"<li>{html.escape(r)}</li>" for r in verdict.reasons)
-        head = ('<p class="verdict warn"><b>Verdict: this calibration is NOT to be trusted.'
-                f'</b></p>{advice}<p>Why:</p><ul class="warn">{items}</ul>')
-    ms = verdict.map_sigma_mm
-    unc = ("" if ms is None else
-           f"<p>Predicted 3D uncertainty of measured points over the laser line's image "
-           f"footprint: {ms['rms']:.3f} mm RMS, {ms['p95']:.3f} mm at the 95th percentile.</p>")
-    cv = getattr(verdict, "cross_validation_mm", None)
-    if cv is not None:
-        unc += (f"<p>Calibrated on two halves of the views, the maps differ by "
-                f"{cv['rms']:.3f} mm RMS, {cv['p95']:.3f} mm at the 95th percentile.</p>")
-    rows = "".join(
-        f"<tr><td>{'ok' if c.ok else '<b>FAIL</b>'}</td><td>{html.escape(c.name)}</td>"
-        f"<td>{c.value:.4g} {html.escape(c.unit)}</td><td>{'&le;' if c.kind == 'max' else '&ge;'}"
-        f" {c.limit:.4g} {html.escape(c.unit)}</td><td>{html.escape(c.why)}</td></tr>"
-        for c in verdict.checks)
-    unc += _uncertainty_map(verdict)
-    return (f"<h2>Verdict</h2>{head}{unc}<h3>The checks</h3><table><tr><th></th><th>check</th>"
-            f"<th>value</th><th>limit</th><th>why this limit</th></tr>{rows}</table>")
 
 
 def write_joint_report(result: Any, path: str | os.PathLike, image_reports: Any = None,

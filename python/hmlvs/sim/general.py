@@ -28,10 +28,10 @@ from typing import Any
 import numpy as np
 
 from .._io import atomic_folder, atomic_write
-from ..data.manifest import FORMAT, NAME, VERSION, _write_png
+from ..data.manifest import FORMAT, NAME, VERSION, write_png
 from ..geometry.board import Checkerboard
 from ..models.opencv import OpenCvSensor
-from .render import RenderOptions, _board_exposures, _finish_frames
+from .render import RenderOptions, board_exposures, finish_frames
 
 #: reprojection accuracy (px) demanded of the undistorted pixel rays
 RAY_TOLERANCE = 1e-3
@@ -495,9 +495,9 @@ def render_general_view(session: GeneralSession, i: int, options: RenderOptions 
     rng = np.random.default_rng([session.seed, i]) if rng is None else rng
     sensor = session.sensor
     rays = pixel_rays(sensor, o.supersample)
-    ambient, laser, _ = _board_exposures(rays, session.board_from_camera[i], session.board, o,
+    ambient, laser, _ = board_exposures(rays, session.board_from_camera[i], session.board, o,
                                          sensor.laser_plane)
-    return _finish_frames(ambient, laser, o, rng)
+    return finish_frames(ambient, laser, o, rng)
 
 
 def render_general_session(session: GeneralSession, out_dir: str | os.PathLike | None = None,
@@ -546,8 +546,8 @@ def _write_general_files(out: Path, session: GeneralSession, ids: list[str],
     entries = []
     for i, pid in enumerate(ids):
         names = {"on": f"{pid}_on.png", "off": f"{pid}_off.png"}
-        _write_png(out / names["on"], on[i])
-        _write_png(out / names["off"], off[i])
+        write_png(out / names["on"], on[i])
+        write_png(out / names["off"], off[i])
         entries.append({"id": pid, **names, "pose": session.base_from_hand[i].tolist()})
     doc = {"format": FORMAT, "version": VERSION, "image_size": list(session.sensor.image_size),
            "board": {"rows": b.rows, "cols": b.cols, "square": b.square},

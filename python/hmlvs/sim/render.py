@@ -33,7 +33,7 @@ from .._arrays import as_params
 from ..data.manifest import write_image_manifest
 from ..geometry.board import Checkerboard
 from ..models.paper import hand_from_camera, rays_in_camera
-from .scene import _TINY, Scene, Table
+from .scene import TINY, Scene, Table
 
 if TYPE_CHECKING:  # pragma: no cover
     from .sessions import Session
@@ -234,7 +234,7 @@ def _true_stripe_rows(q: np.ndarray, pose: np.ndarray, board: Checkerboard,
     return out
 
 
-def _board_exposures(rays: np.ndarray, bfc: np.ndarray, board: Checkerboard, o: RenderOptions,
+def board_exposures(rays: np.ndarray, bfc: np.ndarray, board: Checkerboard, o: RenderOptions,
                      plane: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Ambient and laser exposure (h, w) of the board plane, and the laser-plane distance
     (mm) at the pixel centres (NaN where a ray misses the plane).
@@ -296,14 +296,14 @@ def render_pose(params: Any, pose: np.ndarray, board: Checkerboard | None = None
         raise ValueError(f"image_size must be at least 8 x 8 pixels, got {image_size}")
     rays = _sample_rays(q, (w, h), o.supersample)
     bfc = _board_from_camera(q, pose, board)
-    ambient, laser, d_centres = _board_exposures(rays, bfc, board, o, _laser_plane(q))
+    ambient, laser, d_centres = board_exposures(rays, bfc, board, o, _laser_plane(q))
     stripe_v = _true_stripe_rows(q, pose, board, (w, h), d_centres)
     ambient = _add_glare(ambient, stripe_v, o)
-    on, off = _finish_frames(ambient, laser, o, rng)
+    on, off = finish_frames(ambient, laser, o, rng)
     return RenderedPose(on, off, stripe_v)
 
 
-def _finish_frames(ambient: np.ndarray, laser: np.ndarray, o: RenderOptions,
+def finish_frames(ambient: np.ndarray, laser: np.ndarray, o: RenderOptions,
                    rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Exposure (h, w) of the ambient light and of the laser -> the 8-bit laser-on and
     laser-off frames: laser speckle, optics blur, independent sensor noise per frame,
@@ -487,7 +487,7 @@ def render_scene(params: Any, pose: np.ndarray, scene: Scene,
             dv = ray_dv[r0 * s:r1 * s].reshape(-1, 3)[sel]
             nc = nrm[sel] @ rot
             ndr = np.einsum("ij,ij->i", nc, rr)
-            ndr = np.where(np.abs(ndr) > _TINY, ndr, _TINY)
+            ndr = np.where(np.abs(ndr) > TINY, ndr, TINY)
             ts = tt[sel, None]
             return (ts * (du - rr * (np.einsum("ij,ij->i", nc, du) / ndr)[:, None]),
                     ts * (dv - rr * (np.einsum("ij,ij->i", nc, dv) / ndr)[:, None]))
@@ -533,7 +533,7 @@ def render_scene(params: Any, pose: np.ndarray, scene: Scene,
         laser[r0:r1] = lz.reshape(shape).reshape(rows, s, w, s).mean(axis=(1, 3))
         surface[r0:r1] = which.reshape(shape)[s // 2::s, s // 2::s]
         lit_map[r0:r1] = lit.reshape(shape)[s // 2::s, s // 2::s]
-    on, off = _finish_frames(ambient, laser, o, rng)
+    on, off = finish_frames(ambient, laser, o, rng)
     return RenderedScene(on, off, surface, lit_map)
 
 

@@ -42,7 +42,7 @@ import numpy as np
 
 Axis = Literal["x", "y", "z"]
 
-_TINY = 1e-12
+TINY = 1e-12
 
 
 def _soft_sign(t_px: np.ndarray, width: float) -> np.ndarray:
@@ -75,7 +75,7 @@ def _albedo_ok(a: float, name: str) -> None:
 def _quadratic(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Roots t1 <= t2 of a t^2 + b t + c (a >= 0); NaN where there are none or a ~ 0."""
     disc = b * b - 4 * a * c
-    ok = (disc >= 0) & (a > _TINY)
+    ok = (disc >= 0) & (a > TINY)
     sq = np.sqrt(np.where(ok, disc, 0.0))
     a2 = np.where(ok, 2 * a, 1.0)
     t1 = np.where(ok, (-b - sq) / a2, np.nan)
@@ -132,7 +132,7 @@ class Table:
         def soft_sign(c: np.ndarray, g: np.ndarray) -> np.ndarray:
             k = np.floor(c / sq)
             f = c / sq - k
-            dist = sq * np.minimum(f, 1.0 - f) / np.maximum(g, _TINY)
+            dist = sq * np.minimum(f, 1.0 - f) / np.maximum(g, TINY)
             return np.where(k % 2 == 0, 1.0, -1.0) * _soft_sign(dist, width)
 
         s = soft_sign(p[:, 0], gx) * soft_sign(p[:, 1], gy)
@@ -163,7 +163,7 @@ class Box:
         sgn = np.zeros(d.shape[0])
         for i in range(3):  # slabs one axis at a time: reductions over a short axis are slow
             di = d[:, i]
-            di = np.where(np.abs(di) < _TINY, _TINY, di)
+            di = np.where(np.abs(di) < TINY, TINY, di)
             oi = o[..., i]
             t1, t2 = (self.lo[i] - oi) / di, (self.hi[i] - oi) / di
             near, far = np.minimum(t1, t2), np.maximum(t1, t2)
@@ -304,11 +304,11 @@ class Cylinder:
         b = 2 * (ol[:, 0] * dl[:, 0] + ol[:, 1] * dl[:, 1])
         c = ol[:, 0] ** 2 + ol[:, 1] ** 2 - self.radius ** 2
         r1, r2 = _quadratic(a, b, c)
-        par = a <= _TINY  # along the axis: inside the outer radius or not at all
+        par = a <= TINY  # along the axis: inside the outer radius or not at all
         r1 = np.where(par, np.where(c <= 0, -big, np.nan), r1)
         r2 = np.where(par, np.where(c <= 0, big, np.nan), r2)
         half = self.length / 2
-        dz = np.where(np.abs(dl[:, 2]) < _TINY, _TINY, dl[:, 2])
+        dz = np.where(np.abs(dl[:, 2]) < TINY, TINY, dl[:, 2])
         z1, z2 = (-half - ol[:, 2]) / dz, (half - ol[:, 2]) / dz
         zn, zf = np.minimum(z1, z2), np.maximum(z1, z2)
         entry = np.fmax(r1, zn)
@@ -355,7 +355,7 @@ class Cylinder:
         c0 = ol[:, 0] ** 2 + ol[:, 1] ** 2
         for t_ in _quadratic(a, b, c0 - self.radius ** 2):
             add(t_, 0)
-        dz = np.where(np.abs(dl[:, 2]) < _TINY, _TINY, dl[:, 2])
+        dz = np.where(np.abs(dl[:, 2]) < TINY, TINY, dl[:, 2])
         for zc in (-self.length / 2, self.length / 2):
             add((zc - ol[:, 2]) / dz, 1)
         if self.bore > 0:
@@ -403,7 +403,7 @@ class Cylinder:
             if sel.any():
                 a_ = p[sel, 0] * hd[0] + p[sel, 1] * hd[1]
                 q = p[sel] - a_[:, None] * hd - np.array([0.0, 0.0, s])
-                nl[sel] = -q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), _TINY)
+                nl[sel] = -q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), TINY)
             nl[kind == 4 + 2 * k] = hd
         nl[~has] = 0.0
         return t, nl

@@ -223,7 +223,7 @@ def _damped_solve(res, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
     return x, float(np.sqrt(cost))
 
 
-def _ik_look_at(robot: Robot, hfc: np.ndarray, cam_pos: np.ndarray, cam_axis: np.ndarray,
+def ik_look_at(robot: Robot, hfc: np.ndarray, cam_pos: np.ndarray, cam_axis: np.ndarray,
                 seeds: list[np.ndarray], cam_x: np.ndarray | None = None) -> np.ndarray | None:
     """Joint readings putting the camera at ``cam_pos`` looking along ``cam_axis`` (and, if
     given, with its x axis, the stripe's direction, as near ``cam_x`` as the arm allows).
@@ -253,7 +253,7 @@ def _ik_look_at(robot: Robot, hfc: np.ndarray, cam_pos: np.ndarray, cam_axis: np
     return _on_grid(robot, best)
 
 
-def _snap(robot: Robot, q: np.ndarray, joints: np.ndarray, targets: np.ndarray,
+def snap_to_pose_grid(robot: Robot, q: np.ndarray, joints: np.ndarray, targets: np.ndarray,
           free: list[int]) -> np.ndarray | None:
     """Move the ``free`` joints so that every target point lies exactly on the laser plane."""
     def res(x: np.ndarray) -> np.ndarray:
@@ -365,7 +365,7 @@ def session(params: Any = None, *, robot: Robot | None = None,
         view = -(math.cos(tilt) * normal + math.sin(tilt) * (math.cos(az) * e1 +
                                                              math.sin(az) * e2))
         dist = rng.uniform(*standoff)
-        joints = _ik_look_at(robot, hfc, target - dist * view, view, seed_joints)
+        joints = ik_look_at(robot, hfc, target - dist * view, view, seed_joints)
         if joints is None:
             continue
         joints[-1] += rng.uniform(-np.pi, np.pi) if rng.random() < 0.5 else 0.0
@@ -387,9 +387,9 @@ def session(params: Any = None, *, robot: Robot | None = None,
             if line.size < 2:
                 continue
             targets = corners[[line[0], line[-1]]]
-            new = _snap(robot, q, joints, targets, free=[0, dof - 1])
+            new = snap_to_pose_grid(robot, q, joints, targets, free=[0, dof - 1])
         else:
-            new = _snap(robot, q, joints, corners[[nearest]], free=[dof - 1])
+            new = snap_to_pose_grid(robot, q, joints, corners[[nearest]], free=[dof - 1])
         if new is None:
             continue
         pose = robot.poses(new)
