@@ -162,13 +162,7 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
         return
     typer.echo(verdict.text())
     typer.echo(result.summary())
-    if not quiet:
-        show_warnings(warns)
-    typer.echo(f"calibration written to {path}"
-               + ("" if verdict.trustworthy else " (marked not trustworthy)"))
-    if report_path is not None:
-        typer.echo(f"report written to {report_path}")
-    exit_untrusted(verdict)
+    _written(path, report_path, verdict, warns, quiet)
 
 
 @app.command()
@@ -355,6 +349,13 @@ def calibrate(
     typer.echo("determined by the data: " + (", ".join(det) or "none")
                + ("; NOT determined: " + ", ".join(undet)
                   + f" (see {GLOSSARY_URL}#flat-direction)" if undet else ""))
+    _written(path, report_path, verdict, warns, quiet)
+
+
+def _written(path: Path, report_path: Optional[Path], verdict: Any, warns: list,
+             quiet: bool) -> None:
+    """The end of calibrate's text output, either model: warnings, what was written, and
+    exit 3 when the verdict is not trustworthy."""
     if not quiet:
         show_warnings(warns)
     typer.echo(f"calibration written to {path}"
