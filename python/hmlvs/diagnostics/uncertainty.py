@@ -253,6 +253,75 @@ def _estimate_noise(an: Analysis, wp: np.ndarray, rank: int) -> tuple[float, flo
     return float(np.sqrt(max(sp2, 0.0))), float(np.sqrt(max(st2, 0.0)))
 
 
+def _uncertainty_warnings(r: int, p: int, names: tuple[str, ...], det: dict[str, bool],
+                          combos: list[Combination], flat_names: tuple[str, ...],
+                          chart_singular: bool, rotation_free: bool, phi: float,
+                          std_arr: np.ndarray) -> list[str]:
+    """What the covariance cannot say: a rank deficit (which standard deviations are then
+    meaningless, which combinations are determined) and the Euler angles at or near the
+    gimbal lock."""
+    warnings_: list[str] = []
+    if r < p:
+        bad = [n for n in names if not det[n]]
+        good = [c.name for c in combos if c.determined]
+        warnings_.append(
+            f"the covariance is rank-deficient ({r} of {p}): the data do not determine "
+            f"{p - r} direction(s) among the free parameters"
+            + (f" ({'; '.join(flat_names)})" if flat_names else "")
+            + "; the standard deviations of " + ", ".join(bad) + " are those of the "
+            "minimum-norm pseudo-inverse and are not meaningful"
+            + (f"; these combinations are determined: {', '.join(good)}" if good else ""))
+    if chart_singular:
+        warnings_.append(f"phi = {phi:.3g} rad: the ZYZ Euler angles are at the gimbal lock; "
+                         "omega, phi and varphi have no meaningful standard deviations, the "
+                         "rotation (rotation_std) and omega + varphi do")
+    elif rotation_free and "phi" in det and abs(phi) < 3 * std_arr[names.index("phi")]:
+        warnings_.append(f"phi = {phi:.3g} rad is within 3 standard deviations of 0 (std "
+                         f"{std_arr[names.index('phi')]:.2g}): the Euler angles are near the "
+                         "gimbal lock and their errors are far from Gaussian; read omega + "
+                         "varphi and rotation_std")
+    return warnings_
+
+
+def _bound_notes(bounds: Bounds | None, free_idx: np.ndarray, q: np.ndarray) -> list[str]:
+    """A note naming the free parameters that ended at a bound (the covariance ignores it)."""
+    if bounds is None:
+        return []
+    at = [NAMES[i] for i in free_idx if q[i] <= bounds.lower[i] or q[i] >= bounds.upper[i]]
+    if not at:
+        return []
+    euler = [n for n in at if n in ("omega", "phi", "varphi")]
+    return ["at a bound: " + ", ".join(at) + "; the covariance treats them as unconstrained" + (
+        "; Euler angles at a bound near phi = 0 usually mean the ZYZ gimbal lock, not a bad "
+        "fit: read the rotation vector (docs/glossary.md#at-a-bound)" if euler else "")]
+
+
+def _correlation(shape: np.ndarray) -> np.ndarray:
+    """The correlation matrix of a covariance (0 where a variance is 0)."""
+    d = np.sqrt(np.clip(np.diag(shape), 0.0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        corr = shape / np.outer(d, d)
+    corr[~np.isfinite(corr)] = 0.0
+    corr = np.clip(corr, -1.0, 1.0)
+    np.fill_diagonal(corr, 1.0)
+    return corr
+
+
+def _to_paper(an: Analysis, scales: np.ndarray) -> tuple[np.ndarray, list[int], bool]:
+    """The map from the analysis' scaled data coordinates to the paper parameters (Euler
+    rates = B^+ delta where the rotation is free), the Euler angles' positions among the free
+    parameters, and whether the Euler chart is singular there (the gimbal lock)."""
+    p, free_idx = an.p, an.free_idx
+    t = np.eye(p)
+    euler_pos = [int(np.nonzero(free_idx == i)[0][0]) for i in EULER_INDEX] if an.rotation_free \
+        else []
+    bsv = np.linalg.svd(an.B, compute_uv=False)
+    chart_singular = bool(an.rotation_free and bsv[-1] < 1e-9 * bsv[0])
+    if an.rotation_free:
+        t[np.ix_(euler_pos, euler_pos)] = np.linalg.pinv(an.B, rcond=1e-9)
+    return t * scales[None, :], euler_pos, chart_singular
+
+
 def _compute(an: Analysis, pixel_noise: float | None = None,
              point_noise: float | None = None, flat_names: Iterable[str] = (),
              bounds: Bounds | None = None) -> Uncertainty:
@@ -285,24 +354,12 @@ def _compute(an: Analysis, pixel_noise: float | None = None,
     shape_x = cov_x if np.any(meat) else pinv_info
     s = an.scales[free_idx]
     # data coordinates -> paper parameters: Euler rates = B^+ delta
-    t = np.eye(p)
-    euler_pos = [int(np.nonzero(free_idx == i)[0][0]) for i in EULER_INDEX] if an.rotation_free \
-        else []
-    bsv = np.linalg.svd(an.B, compute_uv=False)
-    chart_singular = an.rotation_free and bsv[-1] < 1e-9 * bsv[0]
-    if an.rotation_free:
-        t[np.ix_(euler_pos, euler_pos)] = np.linalg.pinv(an.B, rcond=1e-9)
-    ts = t * s[None, :]  # scaled data coordinates -> paper parameters
+    ts, euler_pos, chart_singular = _to_paper(an, s)
     cov = ts @ cov_x @ ts.T
     cov = (cov + cov.T) / 2
     std_arr = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     shape = ts @ shape_x @ ts.T
-    d = np.sqrt(np.clip(np.diag(shape), 0.0, None))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        corr = shape / np.outer(d, d)
-    corr[~np.isfinite(corr)] = 0.0
-    corr = np.clip(corr, -1.0, 1.0)
-    np.fill_diagonal(corr, 1.0)
+    corr = _correlation(shape)
 
     vnull = vt[r:].T
 
@@ -332,42 +389,12 @@ def _compute(an: Analysis, pixel_noise: float | None = None,
         combos.append(Combination(name, unit, float(value),
                                   float(np.sqrt(max(gf @ cov @ gf, 0.0))), determined(gf),
                                   desc))
-    rot_std = None
-    if an.rotation_free:
-        idx = euler_pos
-        rot_std = np.sqrt(np.clip(np.diag(cov_x)[idx], 0.0, None)) * s[idx]
-    warnings_: list[str] = []
+    rot_std = np.sqrt(np.clip(np.diag(cov_x)[euler_pos], 0.0, None)) * s[euler_pos] \
+        if an.rotation_free else None
     flat_names = tuple(flat_names)
-    if r < p:
-        bad = [n for n in names if not det[n]]
-        good = [c.name for c in combos if c.determined]
-        warnings_.append(
-            f"the covariance is rank-deficient ({r} of {p}): the data do not determine "
-            f"{p - r} direction(s) among the free parameters"
-            + (f" ({'; '.join(flat_names)})" if flat_names else "")
-            + "; the standard deviations of " + ", ".join(bad) + " are those of the "
-            "minimum-norm pseudo-inverse and are not meaningful"
-            + (f"; these combinations are determined: {', '.join(good)}" if good else ""))
-    if chart_singular:
-        warnings_.append(f"phi = {phi:.3g} rad: the ZYZ Euler angles are at the gimbal lock; "
-                         "omega, phi and varphi have no meaningful standard deviations, the "
-                         "rotation (rotation_std) and omega + varphi do")
-    elif an.rotation_free and "phi" in det and abs(phi) < 3 * std_arr[names.index("phi")]:
-        warnings_.append(f"phi = {phi:.3g} rad is within 3 standard deviations of 0 (std "
-                         f"{std_arr[names.index('phi')]:.2g}): the Euler angles are near the "
-                         "gimbal lock and their errors are far from Gaussian; read omega + "
-                         "varphi and rotation_std")
-    notes = []
-    if bounds is not None:
-        at = [NAMES[i] for i in free_idx
-              if q[i] <= bounds.lower[i] or q[i] >= bounds.upper[i]]
-        if at:
-            euler = [n for n in at if n in ("omega", "phi", "varphi")]
-            notes.append("at a bound: " + ", ".join(at) + "; the covariance treats them as "
-                         "unconstrained" + (
-                             "; Euler angles at a bound near phi = 0 usually mean the ZYZ "
-                             "gimbal lock, not a bad fit: read the rotation vector "
-                             "(docs/glossary.md#at-a-bound)" if euler else ""))
+    warnings_ = _uncertainty_warnings(r, p, names, det, combos, flat_names, chart_singular,
+                                      an.rotation_free, phi, std_arr)
+    notes = _bound_notes(bounds, free_idx, q)
     return Uncertainty(
         free=names, covariance=cov, std={n: float(v) for n, v in zip(names, std_arr)},
         correlation=corr, determined=det, combinations=tuple(combos), rotation_std=rot_std,
