@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional
 
@@ -31,6 +32,23 @@ from .common import (
     solve_progress,
     without_warning_lines,
 )
+
+_INITIAL_OPTION = typer.Option(
+    None, help="opencv model: a calibration whose camera and laser plane are held (e.g. a "
+    "bench session's), so that only the hand-eye transform and the board pose are "
+    "calibrated. paper model: initial guess, a calibration file of either model (an opencv "
+    "one is converted) or a YAML/JSON mapping of parameter names to values "
+    "(docs/file-formats.md).")
+
+_MODEL_OPTION = typer.Option(
+    "auto", help="Sensor model: opencv (OpenCV intrinsics and distortion, a 3-DoF laser "
+    "plane, any hand-eye rotation; calibrated from the board's corners and the stripe "
+    "together, no guess needed) or paper (the paper's 14 parameters, from calibration "
+    "points). auto: opencv for images whose manifest gives no board pose, else paper.")
+
+_BOUNDS_OPTION = typer.Option(
+    None, help="paper model: search bounds, a YAML/JSON mapping of parameter names to "
+    "[lower, upper] or {plus_minus: h} around the initial guess; others keep Table 2.")
 
 
 def _resolve_model(model: str, data: Path) -> str:
@@ -88,6 +106,7 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
     the verdict is not trustworthy (the file is still written, marked so)."""
     from ..calibration.joint import calibrate_joint
     from ..data.calibration_file import Calibration
+    from ..data.views import split_views
     from ..diagnostics.mistakes import explaining
     from ..diagnostics.verdict import judge_joint, require_check
     from ..image.views import views_from_images
@@ -107,17 +126,7 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
         if not views:
             raise ValueError("no view has both the whole board and a stripe:\n" + "\n".join(
                 f"  {r.id}: {r.reason}" for r in reports))
-        test_views = []
-        if holdout > 0:
-            if not 0 < holdout < 1:
-                raise ValueError(f"--holdout must be a fraction in (0, 1), got {holdout}")
-            import numpy as np
-
-            rng = np.random.default_rng(seed)
-            n_test = max(1, int(round(holdout * len(views))))
-            pick = set(rng.choice(len(views), n_test, replace=False).tolist())
-            test_views = [v for i, v in enumerate(views) if i in pick]
-            views = [v for i, v in enumerate(views) if i not in pick]
+        views, test_views = split_views(views, holdout, seed)
         with explaining(views, board, size):  # a failure led by the likely mistake
             result = calibrate_joint(views, board, size, distortion=terms,
                                      base_from_board=board_pose, test=test_views or None,
@@ -139,30 +148,36 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
                                                  verdict=verdict)
     warns = gather(caught, result.warnings)
     if as_json:
-        s = result.sensor
-        echo_json({"calibration": str(path), "model": "opencv", "mode": result.mode,
-                    "verdict": verdict.to_dict(),
-                    "report": None if report_path is None else str(report_path),
-                    "camera_matrix": s.camera_matrix.tolist(),
-                    "dist_coeffs": s.dist_coeffs.tolist(), "image_size": list(s.image_size),
-                    "laser_plane": s.laser_plane.tolist(),
-                    "hand_from_camera": s.hand_from_camera.tolist(),
-                    "base_from_board": None if s.base_from_board is None
-                    else s.base_from_board.tolist(),
-                    "std": result.std, "corner_rms_px": result.corner_rms_px,
-                    "laser_rms_mm": result.laser_rms_mm, "test_rms_mm": result.test_rms_mm,
-                    "determined": result.determined, "rank": result.rank,
-                    "unknowns": result.num_unknowns, "dropped": result.dropped,
-                    "flipped": result.flipped, "termination": result.termination,
-                    "iterations": result.iterations, "seconds": result.seconds,
-                    "warnings": warns,
-                    "images": [{"id": r.id, "ok": r.ok, "reason": r.reason,
-                                "corners": r.corners} for r in reports]})
+        echo_json(_opencv_json(result, path, report_path, verdict, warns, reports))
         exit_untrusted(verdict)
         return
     typer.echo(verdict.text())
     typer.echo(result.summary())
     _written(path, report_path, verdict, warns, quiet)
+
+
+def _opencv_json(result: Any, path: Path, report_path: Optional[Path], verdict: Any,
+                 warns: list, reports: list) -> dict[str, Any]:
+    """hmlvs calibrate --model opencv --json: the calibration, its verdict and accounts."""
+    s = result.sensor
+    return {"calibration": str(path), "model": "opencv", "mode": result.mode,
+            "verdict": verdict.to_dict(),
+            "report": None if report_path is None else str(report_path),
+            "camera_matrix": s.camera_matrix.tolist(),
+            "dist_coeffs": s.dist_coeffs.tolist(), "image_size": list(s.image_size),
+            "laser_plane": s.laser_plane.tolist(),
+            "hand_from_camera": s.hand_from_camera.tolist(),
+            "base_from_board": None if s.base_from_board is None
+            else s.base_from_board.tolist(),
+            "std": result.std, "corner_rms_px": result.corner_rms_px,
+            "laser_rms_mm": result.laser_rms_mm, "test_rms_mm": result.test_rms_mm,
+            "determined": result.determined, "rank": result.rank,
+            "unknowns": result.num_unknowns, "dropped": result.dropped,
+            "flipped": result.flipped, "termination": result.termination,
+            "iterations": result.iterations, "seconds": result.seconds,
+            "warnings": warns,
+            "images": [{"id": r.id, "ok": r.ok, "reason": r.reason,
+                        "corners": r.corners} for r in reports]}
 
 
 @app.command()
@@ -193,23 +208,12 @@ def calibrate(
     save_data: Optional[Path] = typer.Option(None, help="Save the data set extracted from "
                                              "images here (.npz or .json)."),
     robot: Optional[Path] = ROBOT_OPTION,
-    model: str = typer.Option(
-        "auto", help="Sensor model: opencv (OpenCV intrinsics and distortion, a 3-DoF laser "
-        "plane, any hand-eye rotation; calibrated from the board's corners and the stripe "
-        "together, no guess needed) or paper (the paper's 14 parameters, from calibration "
-        "points). auto: opencv for images whose manifest gives no board pose, else paper."),
+    model: str = _MODEL_OPTION,
     distortion: str = typer.Option(
         ",".join(DISTORTION_NAMES), help="opencv model: the distortion terms to estimate (the "
         "others stay 0), e.g. k1,k2."),
-    initial: Optional[Path] = typer.Option(
-        None, help="opencv model: a calibration whose camera and laser plane are held (e.g. a "
-        "bench session's), so that only the hand-eye transform and the board pose are "
-        "calibrated. paper model: initial guess, a calibration file of either model (an opencv "
-        "one is converted) or a YAML/JSON mapping of parameter names to values "
-        "(docs/file-formats.md)."),
-    bounds: Optional[Path] = typer.Option(
-        None, help="paper model: search bounds, a YAML/JSON mapping of parameter names to "
-        "[lower, upper] or {plus_minus: h} around the initial guess; others keep Table 2."),
+    initial: Optional[Path] = _INITIAL_OPTION,
+    bounds: Optional[Path] = _BOUNDS_OPTION,
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, no per-image "
                                "lines and no warnings on the terminal (--json collects them)."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary, warnings included."),
@@ -219,9 +223,8 @@ def calibrate(
 ) -> None:
     """Calibrate the sensor from laser on/off images (or, paper model, a calibration data set).
 
-    Every calibration gets a verdict, printed first: trustworthy or not, from named checks.
-    The exit status is 3 when it is not (the calibration file is still written, marked
-    "trustworthy: false" with the reasons).
+    Every calibration gets a verdict, printed first: trustworthy or not, from named checks;
+    exit status 3 when it is not (the file is still written, marked so, with the reasons).
 
     --model opencv (the default for images without a measured board pose) estimates the
     camera, the laser plane, the hand-eye transform and the board's pose from the images and
@@ -232,104 +235,167 @@ def calibrate(
 
     Example: hmlvs calibrate session.npz --holdout 0.3 --out calibration.yaml --report report.html
     """
-    from ..calibration.solvers import calibrate as run_calibration
-    from ..data.calibration_file import Calibration
-    from ..data.dataset import Dataset
-
-    image_reports = []
     with guard(as_json):
-        import math
-
-        if not (math.isfinite(holdout) and 0 <= holdout < 1):
-            raise ValueError(f"--holdout must be a fraction in [0, 1), got {holdout}")
-        if mode not in ("corners", "homography"):
-            raise ValueError(f"--mode must be corners or homography, got {mode!r}")
-        from ..guard import refuse_overwrite
-
-        refuse_overwrite([*inputs_of(data), test, initial, bounds, robot],
-                         [("--out", out), ("--report", report), ("--save-data", save_data)])
-        # every output's kind checked before the first is written
-        check_suffix("--out", out, (".yaml", ".yml", ".json"), "a calibration file")
-        check_suffix("--report", report, (".html", ".htm"), "an HTML report")
-        check_suffix("--save-data", save_data, (".npz", ".json"), "a data set")
-        chosen = _resolve_model(model, data)
+        chosen = _checked(data, out, holdout, mode, test, initial, bounds, robot, report,
+                          save_data, model)
         if chosen == "opencv":
-            _paper_only_options(method=method != "pso+lm", fixed=bool(fixed), free=bool(free),
-                                runs=runs != 1,
-                                iterations=iterations != PsoOptions.iterations,
-                                loss=loss is not None,
-                                loss_scale=loss_scale != LmOptions.loss_scale,
-                                threads=threads is not None, bounds=bounds is not None,
-                                test=test is not None, save_data=save_data is not None,
-                                mode=mode != "corners")
+            _paper_only_options(
+                method=method != "pso+lm", fixed=bool(fixed), free=bool(free), runs=runs != 1,
+                iterations=iterations != PsoOptions.iterations, loss=loss is not None,
+                loss_scale=loss_scale != LmOptions.loss_scale, threads=threads is not None,
+                bounds=bounds is not None, test=test is not None,
+                save_data=save_data is not None, mode=mode != "corners")
     if chosen == "opencv":
         _calibrate_opencv(data, out, holdout, seed, robot, distortion, report, quiet, as_json,
                           initial, require)
         return
-    with guard(as_json), collect_warnings() as caught:
-        fixed_names, why = resolve_fixed(fixed, free)
-        arm = load_robot(robot)
-        guess = bounds_obj = board_pose = None
-        widened: list[str] = []
-        if initial is not None:
+    _calibrate_paper(_PaperRun(data, out, method, test, holdout, fixed, free, runs, iterations,
+                               loss, loss_scale, seed, threads, report, mode, save_data, robot,
+                               initial, bounds, quiet, as_json, require))
+
+
+def _checked(data: Path, out: Path, holdout: float, mode: str, test: Optional[Path],
+             initial: Optional[Path], bounds: Optional[Path], robot: Optional[Path],
+             report: Optional[Path], save_data: Optional[Path], model: str) -> str:
+    """Every option checked before anything is written (ValueError naming the problem); the
+    sensor model to calibrate."""
+    import math
+
+    if not (math.isfinite(holdout) and 0 <= holdout < 1):
+        raise ValueError(f"--holdout must be a fraction in [0, 1), got {holdout}")
+    if mode not in ("corners", "homography"):
+        raise ValueError(f"--mode must be corners or homography, got {mode!r}")
+    from ..guard import refuse_overwrite
+
+    refuse_overwrite([*inputs_of(data), test, initial, bounds, robot],
+                     [("--out", out), ("--report", report), ("--save-data", save_data)])
+    # every output's kind checked before the first is written
+    check_suffix("--out", out, (".yaml", ".yml", ".json"), "a calibration file")
+    check_suffix("--report", report, (".html", ".htm"), "an HTML report")
+    check_suffix("--save-data", save_data, (".npz", ".json"), "a data set")
+    return _resolve_model(model, data)
+
+
+@dataclass
+class _PaperRun:
+    """hmlvs calibrate's options for the paper model."""
+
+    data: Path
+    out: Path
+    method: str
+    test: Optional[Path]
+    holdout: float
+    fixed: list[str]
+    free: list[str]
+    runs: int
+    iterations: int
+    loss: Optional[str]
+    loss_scale: float
+    seed: int
+    threads: Optional[int]
+    report: Optional[Path]
+    mode: str
+    save_data: Optional[Path]
+    robot: Optional[Path]
+    initial: Optional[Path]
+    bounds: Optional[Path]
+    quiet: bool
+    as_json: bool
+    require: Optional[float]
+
+
+def _paper_data(o: _PaperRun, arm: Any, guess: Any, board_pose: Any) -> tuple[Any, Any, list]:
+    """The paper model's data set (from images, numbered with the initial guess, or a file)
+    and its held-out part; the image accounts."""
+    from ..data.dataset import Dataset
+
+    image_reports: list = []
+    if is_manifest(o.data):
+        from ..image.session import dataset_from_images
+
+        # the corners are numbered with the given initial guess, else the nominal values;
+        # a board the manifest does not place sits where an opencv initial guess put it
+        ds, image_reports = dataset_from_images(o.data, mode=o.mode, robot=arm, params=guess,
+                                                base_from_board=board_pose)
+        if not (o.as_json or o.quiet):
+            for r in image_reports:
+                typer.echo(str(r))
+        if o.save_data is not None:
+            ds.save(o.save_data)
+    else:
+        ds = Dataset.load(o.data)
+    test_ds = Dataset.load(o.test) if o.test is not None else None
+    if test_ds is None and o.holdout > 0:
+        ds, test_ds = ds.split(1.0 - o.holdout, seed=o.seed, by_pose=True)
+    return ds, test_ds, image_reports
+
+
+def _paper_bounds(o: _PaperRun, guess: Any) -> tuple[Any, list[str]]:
+    """The search bounds (a file's, or Table 2 widened to hold the initial guess, with a note
+    per widening)."""
+    if o.bounds is not None:
+        from ..data.guess import read_bounds
+        from ..models.params import Parameters
+
+        return read_bounds(o.bounds, guess or Parameters.nominal()), []
+    if guess is not None:
+        from ..data.guess import bounds_with
+
+        return bounds_with(guess)
+    return None, []
+
+
+def _calibrate_paper(o: _PaperRun) -> None:
+    """hmlvs calibrate --model paper: data set (or images) -> calibration -> verdict ->
+    file (and report); exit 3 when the verdict is not trustworthy."""
+    from ..calibration.solvers import calibrate as run_calibration
+    from ..data.calibration_file import Calibration
+    from ..diagnostics.verdict import judge_paper, require_check
+
+    with guard(o.as_json), collect_warnings() as caught:
+        fixed_names, why = resolve_fixed(o.fixed, o.free)
+        arm = load_robot(o.robot)
+        guess = board_pose = None
+        if o.initial is not None:
             from ..data.guess import initial_board_pose, read_initial
 
-            guess = read_initial(initial)
-            board_pose = initial_board_pose(initial)
-        if is_manifest(data):
-            from ..image.session import dataset_from_images
-
-            # the corners are numbered with the given initial guess, else the nominal values;
-            # a board the manifest does not place sits where an opencv initial guess put it
-            ds, image_reports = dataset_from_images(data, mode=mode, robot=arm, params=guess,
-                                                    base_from_board=board_pose)
-            if not (as_json or quiet):
-                for r in image_reports:
-                    typer.echo(str(r))
-            if save_data is not None:
-                ds.save(save_data)
-        else:
-            ds = Dataset.load(data)
-        test_ds = Dataset.load(test) if test is not None else None
-        if test_ds is None and holdout > 0:
-            ds, test_ds = ds.split(1.0 - holdout, seed=seed, by_pose=True)
-        if bounds is not None:
-            from ..data.guess import read_bounds
-            from ..models.params import Parameters
-
-            bounds_obj = read_bounds(bounds, guess or Parameters.nominal())
-        elif guess is not None:
-            from ..data.guess import bounds_with
-
-            bounds_obj, widened = bounds_with(guess)
-        result = run_calibration(ds, method=method, test=test_ds, fixed=fixed_names, runs=runs,
-                                 initial=guess, bounds=bounds_obj,
-                                 iterations=iterations, loss=loss, loss_scale=loss_scale,
-                                 seed=seed, threads=threads,
-                                 progress=solve_progress(as_json or quiet))
-        from ..diagnostics.verdict import judge_paper, require_check
-
+            guess = read_initial(o.initial)
+            board_pose = initial_board_pose(o.initial)
+        ds, test_ds, image_reports = _paper_data(o, arm, guess, board_pose)
+        bounds_obj, widened = _paper_bounds(o, guess)
+        result = run_calibration(ds, method=o.method, test=test_ds, fixed=fixed_names,
+                                 runs=o.runs, initial=guess, bounds=bounds_obj,
+                                 iterations=o.iterations, loss=o.loss, loss_scale=o.loss_scale,
+                                 seed=o.seed, threads=o.threads,
+                                 progress=solve_progress(o.as_json or o.quiet))
         verdict = require_check(judge_paper(result, ds, views=[
-            r.view for r in image_reports if r.view is not None]), require)
+            r.view for r in image_reports if r.view is not None]), o.require)
         report_path = None
-        with outputs(out) as made:
+        with outputs(o.out) as made:
             cal = Calibration.from_result(result, ds, robot=arm)
             cal.verdict = verdict.to_dict()
-            path = cal.save(out)
+            path = cal.save(o.out)
             made.append(path)
-            if report is not None:
+            if o.report is not None:
                 from ..report.html import write_report
 
-                report_path = write_report(result, ds, report, test=test_ds,
+                report_path = write_report(result, ds, o.report, test=test_ds,
                                            image_reports=image_reports, verdict=verdict)
+    _paper_output(o, result, caught, path, report_path, verdict, widened, why, image_reports)
+
+
+def _paper_output(o: _PaperRun, result: Any, caught: list, path: Path,
+                  report_path: Optional[Path], verdict: Any, widened: list[str],
+                  why: list[str], image_reports: list) -> None:
+    """What hmlvs calibrate --model paper prints (text or --json)."""
     summary = result.summary()
     warns = gather(caught, result.warnings, summary)
     det, undet = determined(result)
-    if as_json:
+    if o.as_json:
         echo_json({"calibration": str(path), "report": None if report_path is None
                     else str(report_path), "verdict": verdict.to_dict(),
                     "fit_rms_mm": result.fit_rms,
-                    "test_rms_mm": result.test_rms, "method": method,
+                    "test_rms_mm": result.test_rms, "method": o.method,
                     "parameters": result.params.to_dict(), "fixed": list(result.fixed),
                     "determined": det, "not_determined": undet,
                     "rotation_vector_rad": rotation_vector(result.params),
@@ -349,7 +415,7 @@ def calibrate(
     typer.echo("determined by the data: " + (", ".join(det) or "none")
                + ("; NOT determined: " + ", ".join(undet)
                   + f" (see {GLOSSARY_URL}#flat-direction)" if undet else ""))
-    _written(path, report_path, verdict, warns, quiet)
+    _written(path, report_path, verdict, warns, o.quiet)
 
 
 def _written(path: Path, report_path: Optional[Path], verdict: Any, warns: list,

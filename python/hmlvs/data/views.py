@@ -4,6 +4,7 @@ the stripe pixels and the robot pose."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
@@ -22,3 +23,19 @@ class ViewData:
     corner_index: np.ndarray
     laser_pixels: np.ndarray
     base_from_hand: np.ndarray | None = None
+
+
+def split_views(views: Sequence[ViewData], holdout: float, seed: int = 0
+                ) -> tuple[list[ViewData], list[ViewData]]:
+    """The views to calibrate on and a held-out fraction ``holdout`` of them (at least one
+    when > 0), drawn with ``seed``; ``holdout`` 0 holds none out."""
+    views = list(views)
+    if holdout == 0:
+        return views, []
+    if not 0 < holdout < 1:
+        raise ValueError(f"--holdout must be a fraction in (0, 1), got {holdout}")
+    rng = np.random.default_rng(seed)
+    n_test = max(1, int(round(holdout * len(views))))
+    pick = set(rng.choice(len(views), n_test, replace=False).tolist())
+    return ([v for i, v in enumerate(views) if i not in pick],
+            [v for i, v in enumerate(views) if i in pick])
