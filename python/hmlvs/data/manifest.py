@@ -110,6 +110,57 @@ def checkerboard_of(spec: Any, source: Any) -> Any:
         raise ValueError(f"{source}: board: {e}") from None
 
 
+def _entry(e: Any, i: int, path: Path, seen: dict[str, int], in_pose_file: bool, bench: bool,
+           fmt: PoseFormat, doc: dict[str, Any]) -> dict[str, Any]:
+    """One manifest entry checked (id unique, one kind of pose or none in a bench session,
+    an image pair or a stripe list), its pose read in the manifest's format."""
+    from .schema import validate
+
+    where = f"{path}: entry {i}"
+    if not isinstance(e, dict):
+        raise ValueError(f"{where} is not a mapping")
+    if True in e or False in e:  # YAML 1.1 reads the keys on/off as booleans
+        e = {("on" if k is True else "off" if k is False else k): v for k, v in e.items()}
+    if "id" not in e or not str(e["id"]).strip():
+        raise ValueError(f"{where} has no id; every entry needs a unique id that pairs its "
+                         "files with its readings")
+    pid = str(e["id"])
+    where = f"{path}: entry {i} (id {pid})"
+    validate(e, _entry_schema(), where)
+    if pid in seen:
+        raise ValueError(f"{where} repeats the id of entry {seen[pid]}")
+    seen[pid] = i
+    e = dict(e)
+    if in_pose_file:
+        if "joints" in e or "pose" in e:
+            raise ValueError(f"{where} has '{'joints' if 'joints' in e else 'pose'}' but "
+                             f"the manifest gives every pose in its pose_file "
+                             f"{doc['pose_file']}")
+    elif "joints" in e and "pose" in e:
+        raise ValueError(f"{where} must have either 'joints' or 'pose' (not both)")
+    elif not bench and "joints" not in e and "pose" not in e:
+        raise ValueError(f"{where} has neither 'joints' nor 'pose', but other entries "
+                         "do: give every entry its robot pose, or none (a bench session: "
+                         "the camera and laser plane alone)")
+    elif bench and ("joints" in e or "pose" in e):
+        raise ValueError(f"{where} has '{'joints' if 'joints' in e else 'pose'}', but "
+                         "other entries have no robot pose: give every entry its robot "
+                         "pose, or none (a bench session: the camera and laser plane "
+                         "alone)")
+    if "pose" in e:
+        try:
+            e["pose"] = pose_from_entry(e["pose"], fmt)
+        except ValueError as err:
+            raise ValueError(f"{where}: {err}") from None
+    has_images = "on" in e or "off" in e
+    if has_images == ("stripe" in e):
+        raise ValueError(f"{where} must name either an image pair ('on' and 'off') or a "
+                         "stripe list ('stripe'), not both or neither")
+    if has_images and "on" not in e:
+        raise ValueError(f"{where} names a laser-off image but no laser-on image ('on')")
+    return e
+
+
 def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Path]:
     """Read and validate a manifest (a folder holding manifest.json, or the file itself).
 
@@ -141,49 +192,7 @@ def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Pa
     bench = file_poses is None and bool(entries) and isinstance(entries[0], dict) and \
         "joints" not in entries[0] and "pose" not in entries[0]
     for i, e in enumerate(entries):
-        where = f"{path}: entry {i}"
-        if not isinstance(e, dict):
-            raise ValueError(f"{where} is not a mapping")
-        if True in e or False in e:  # YAML 1.1 reads the keys on/off as booleans
-            e = {("on" if k is True else "off" if k is False else k): v for k, v in e.items()}
-        if "id" not in e or not str(e["id"]).strip():
-            raise ValueError(f"{where} has no id; every entry needs a unique id that pairs its "
-                             "files with its readings")
-        pid = str(e["id"])
-        where = f"{path}: entry {i} (id {pid})"
-        validate(e, _entry_schema(), where)
-        if pid in seen:
-            raise ValueError(f"{where} repeats the id of entry {seen[pid]}")
-        seen[pid] = i
-        e = dict(e)
-        if file_poses is not None:
-            if "joints" in e or "pose" in e:
-                raise ValueError(f"{where} has '{'joints' if 'joints' in e else 'pose'}' but "
-                                 f"the manifest gives every pose in its pose_file "
-                                 f"{doc['pose_file']}")
-        elif "joints" in e and "pose" in e:
-            raise ValueError(f"{where} must have either 'joints' or 'pose' (not both)")
-        elif not bench and "joints" not in e and "pose" not in e:
-            raise ValueError(f"{where} has neither 'joints' nor 'pose', but other entries "
-                             "do: give every entry its robot pose, or none (a bench session: "
-                             "the camera and laser plane alone)")
-        elif bench and ("joints" in e or "pose" in e):
-            raise ValueError(f"{where} has '{'joints' if 'joints' in e else 'pose'}', but "
-                             "other entries have no robot pose: give every entry its robot "
-                             "pose, or none (a bench session: the camera and laser plane "
-                             "alone)")
-        if "pose" in e:
-            try:
-                e["pose"] = pose_from_entry(e["pose"], fmt)
-            except ValueError as err:
-                raise ValueError(f"{where}: {err}") from None
-        has_images = "on" in e or "off" in e
-        if has_images == ("stripe" in e):
-            raise ValueError(f"{where} must name either an image pair ('on' and 'off') or a "
-                             "stripe list ('stripe'), not both or neither")
-        if has_images and "on" not in e:
-            raise ValueError(f"{where} names a laser-off image but no laser-on image ('on')")
-        out.append(e)
+        out.append(_entry(e, i, path, seen, file_poses is not None, bench, fmt, doc))
     if file_poses is not None:
         _pair_poses(out, file_poses, doc["pose_file"], path)
     else:  # the entries' own poses: the pose files' units check
