@@ -628,14 +628,21 @@ void RefineLine(const V& v, int s, double noise, const StripeRefineOptions& o, S
     const int m = static_cast<int>(std::lround(c));
     if (m - hw < 0 || m + hw > v.n_prof - 1) break;
     f_sum = df_sum = var_sum = 0.0;
-    for (int p = m - hw; p <= m + hw; ++p) {
+    // P(x) = peak exp(-x^2 / (2 sp^2)) at x = p - c, by the recurrence exp(-(x + 1)^2 / 2 s2)
+    // = exp(-x^2 / 2 s2) exp(-(2 x + 1) / 2 s2), whose factor shrinks by exp(-1 / s2) a step
+    const double x0 = (m - hw) - c;
+    double g = peak * std::exp(-0.5 * x0 * x0 * inv_s2);
+    double ratio = std::exp(-0.5 * (2.0 * x0 + 1.0) * inv_s2);
+    const double shrink = std::exp(-inv_s2);
+    for (int p = m - hw; p <= m + hw; ++p, g *= ratio, ratio *= shrink) {
       const double x = p - c;
-      const double pp = peak * std::exp(-0.5 * x * x * inv_s2);  // P(x)
+      const double pp = g;                                       // P(x)
       const double dp = -x * inv_s2 * pp;                        // P'(x)
       const double ddp = (x * x * inv_s2 - 1.0) * inv_s2 * pp;   // P''(x)
       const double den = a2 + k2 * pp * pp;
-      const double w = dp / den;
-      const double dw = (ddp * den - dp * 2.0 * k2 * pp * dp) / (den * den);
+      const double inv = 1.0 / den;
+      const double w = dp * inv;
+      const double dw = (ddp - dp * 2.0 * k2 * pp * dp * inv) * inv;
       const double y = v.at(s, p);
       f_sum += w * y;
       df_sum -= dw * y;  // d/dc of w(p - c) y
