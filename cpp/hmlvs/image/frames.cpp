@@ -14,6 +14,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <memory>
@@ -43,6 +44,15 @@ using scan::kNaN;
 using scan::Runs;
 
 constexpr int kSb = 16;  // columns of a block: the unit of the bounds and of the planes
+
+#if defined(HMLVS_AVX2)
+// Whether to take the AVX2 loops: on CPUs that have it, unless the environment variable
+// HMLVS_NO_AVX2 is set (the tests compare both ways: the same values on every x86-64 CPU).
+bool UseAvx2() {
+  static const bool use = __builtin_cpu_supports("avx2") && std::getenv("HMLVS_NO_AVX2") == nullptr;
+  return use;
+}
+#endif
 
 // OpenCV's BORDER_REFLECT_101: index i mirrored into 0 .. n - 1 (gfedcb|abcdefgh|gfedcba)
 int Reflect101(int i, int n) {
@@ -1193,8 +1203,7 @@ class RefineImage {
   void BilateralBlock(const T* const* rows, int x0, float* out) const {
 #if defined(HMLVS_AVX2)
     if constexpr (sizeof(T) == 1) {
-      static const bool avx2 = __builtin_cpu_supports("avx2");
-      if (avx2) {
+      if (UseAvx2()) {
         BilateralBlockAvx2(rows, x0, out);
         return;
       }
