@@ -110,7 +110,8 @@ class Marks {
     b0 = std::max(b0, 0);
     b1 = std::min(b1, blocks_ - 1);
     for (int r = r0; r <= r1; ++r) {
-      std::fill_n(bits_.begin() + static_cast<std::ptrdiff_t>(r) * blocks_ + b0, b1 - b0 + 1, 1);
+      std::uint8_t* row = bits_.data() + static_cast<std::ptrdiff_t>(r) * blocks_;
+      for (int b = b0; b <= b1; ++b) row[b] = 1;
     }
     lo_ = std::min(lo_, r0);
     hi_ = std::max(hi_, r1);
@@ -740,7 +741,12 @@ double FitOffset(const Frames<T>& f, const Stats<T>& st, double noise) {
   std::vector<float> line(kSb + 8);
   hm.ForEach([&](int r, int b) {
     const int x0 = b * kSb, n = std::min(cols, x0 + kSb) - x0;
-    for (int i = 0; i < n + 8; ++i) line[i] = static_cast<float>(f.Off(r, Reflect101(x0 - 4 + i, cols)));
+    const T* row = f.off + r * f.off_rs;
+    if (x0 >= 4 && x0 + n + 4 <= cols) {
+      for (int i = 0; i < n + 8; ++i) line[i] = static_cast<float>(row[x0 - 4 + i]);
+    } else {
+      for (int i = 0; i < n + 8; ++i) line[i] = static_cast<float>(row[Reflect101(x0 - 4 + i, cols)]);
+    }
     scan::SumShifted(line.data(), k.data(), 9, n, h.Row(r) + x0);
     h.Mark(r, b);
   });
@@ -787,16 +793,15 @@ class DView {
   using Pixel = T;
   DView(const Frames<T>& f, const DifferenceRule<T>& rule)
       : n_scan(f.cols), n_prof(f.rows), f_(f), rule_(rule) {
-    if constexpr (sizeof(T) == 1) {
-      if (rule.normalize) rule.Table(&table_);
-    }
+    if constexpr (sizeof(T) == 1) rule.Table(&table_);
   }
   T Value(int s, int p) const {
     const T x = f_.On(p, s), y = f_.Off(p, s);
     if constexpr (sizeof(T) == 1) {
-      if (rule_.normalize) return table_[(y << 8) | x];
+      return table_[(y << 8) | x];
+    } else {
+      return rule_.At(x, y);
     }
-    return rule_.At(x, y);
   }
   double at(int s, int p) const { return static_cast<double>(Value(s, p)); }
   double clamped(int s, int p) const {
@@ -1279,7 +1284,11 @@ class RefineImage {
       if (!fp_->Has(p, k)) ComputeF(p, k);
     }
     const float* row = fp_->Row(p);
-    for (int i = 0; i < x1 - x0 + 2 * r; ++i) line_[i] = row[col_[pad_ + x0 - r + i]];
+    if (x0 - r >= 0 && x1 + r <= n_scan) {
+      std::copy(row + x0 - r, row + x1 + r, line_.begin());
+    } else {
+      for (int i = 0; i < x1 - x0 + 2 * r; ++i) line_[i] = row[col_[pad_ + x0 - r + i]];
+    }
     scan::SumShifted(line_.data(), along_.data(), 2 * r + 1, x1 - x0, ft_->Row(p) + x0);
     ft_->Mark(p, b);
   }
