@@ -463,6 +463,7 @@ void CollectStats(const Frames<T>& f, Stats<T>* st) {
   st->large.clear();
   if (f.transposed) st->albedo_hist.assign(bins, 0);
   Counter joint(sizeof(T) == 1 ? 256 * kSmall : 1);
+  std::vector<std::uint16_t> keys(sizeof(T) == 1 ? static_cast<size_t>(cols) : 0);
   // the 5-column box: padded index i reads column reflect101(i - 2) (OpenCV's BORDER_REFLECT_101)
   std::vector<int> src(static_cast<size_t>(cols) + 4);
   for (size_t i = 0; i < src.size(); ++i) {
@@ -542,23 +543,41 @@ void CollectStats(const Frames<T>& f, Stats<T>* st) {
         std::uint16_t* p1 = joint.Part(1);
         std::uint16_t* p2 = joint.Part(2);
         std::uint16_t* p3 = joint.Part(3);
-        auto key = [&](int c) { return b[c] * kSmall + std::min<int>(d[c], kSmall - 1); };
+        static_assert(kSmall == 8, "the keys below shift by 3");
         int c = 0;
-        for (; c + 3 * step < cols; c += 4 * step) {
-          ++p0[key(c)];
-          ++p1[key(c + step)];
-          ++p2[key(c + 2 * step)];
-          ++p3[key(c + 3 * step)];
-        }
-        for (; c < cols; c += step) ++p0[key(c)];
-        T top = 0;
-        for (int k = 0; k < full; ++k) top = std::max(top, mxd[k]);
-        if (full < st->blocks) top = std::max(top, mxd[full]);
-        if (top >= kSmall - 1) {
-          for (c = 0; c < cols; c += step) {
-            if (d[c] >= kSmall - 1) st->large.push_back(static_cast<std::uint16_t>((b[c] << 8) | d[c]));
+#if defined(__SSE2__)
+        if (step == 1) {  // the keys sixteen at a time, the large differences from a mask
+          const __m128i zero = _mm_setzero_si128(), seven = _mm_set1_epi8(kSmall - 1);
+          for (; c + 16 <= cols; c += 16) {
+            const __m128i vd = _mm_loadu_si128(reinterpret_cast<const __m128i*>(d + c));
+            const __m128i vb = _mm_loadu_si128(reinterpret_cast<const __m128i*>(b + c));
+            const __m128i small = _mm_min_epu8(vd, seven);
+            _mm_storeu_si128(reinterpret_cast<__m128i*>(keys.data() + c),
+                             _mm_or_si128(_mm_slli_epi16(_mm_unpacklo_epi8(vb, zero), 3),
+                                          _mm_unpacklo_epi8(small, zero)));
+            _mm_storeu_si128(reinterpret_cast<__m128i*>(keys.data() + c + 8),
+                             _mm_or_si128(_mm_slli_epi16(_mm_unpackhi_epi8(vb, zero), 3),
+                                          _mm_unpackhi_epi8(small, zero)));
+            if (_mm_movemask_epi8(_mm_cmpeq_epi8(small, seven)) != 0) {
+              for (int i = c; i < c + 16; ++i) {
+                if (d[i] >= kSmall - 1) st->large.push_back(static_cast<std::uint16_t>((b[i] << 8) | d[i]));
+              }
+            }
           }
         }
+#endif
+        for (int i = c; i < cols; i += step) {
+          keys[i] = static_cast<std::uint16_t>(b[i] * kSmall + std::min<int>(d[i], kSmall - 1));
+          if (d[i] >= kSmall - 1) st->large.push_back(static_cast<std::uint16_t>((b[i] << 8) | d[i]));
+        }
+        int i = 0;
+        for (; i + 3 * step < cols; i += 4 * step) {
+          ++p0[keys[i]];
+          ++p1[keys[i + step]];
+          ++p2[keys[i + 2 * step]];
+          ++p3[keys[i + 3 * step]];
+        }
+        for (; i < cols; i += step) ++p0[keys[i]];
       } else {
         for (int c = 0; c < cols; c += step) ++dh[d[c]];
       }
