@@ -50,8 +50,8 @@ def stripe_rows(reps: int) -> list[str]:
     """stripe_from_pair (one C++ call per frame) beside the NumPy composition of the same
     pipeline it replaced (tests/reference_frames.py) and NumPy's argmax + centroid."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    import reference_frames
     from hmlvs.image.session import stripe_from_pair
+    import reference_frames
 
     rows = []
     for size in ((640, 480), (1280, 1024)):

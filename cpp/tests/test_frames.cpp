@@ -35,7 +35,9 @@ void MakePair(unsigned seed, Frame* on, Frame* off) {
       const double level = ((r / 64 + c / 64) % 2 == 0) ? 30.0 : 150.0;
       const double x = (r - TrueCentre(c)) / 1.5;
       const double laser = 60.0 * (level + 40.0) / 150.0 * std::exp(-0.5 * x * x);
-      auto px = [](double v) { return static_cast<std::uint8_t>(std::clamp(std::lround(v), 0L, 255L)); };
+      auto px = [](double v) {
+        return static_cast<std::uint8_t>(std::clamp(std::lround(v), 0L, 255L));
+      };
       (*off)[r * kCols + c] = px(level + noise(gen));
       (*on)[r * kCols + c] = px(level + laser + noise(gen));
     }
@@ -111,7 +113,8 @@ TEST(Frames, DefaultPipelineFindsTheStripe) {
   EXPECT_GT(found, 0.95 * kCols);
   EXPECT_LT(std::sqrt(sum2 / found), 0.05);  // measured 0.027 px
   // the laser-on frame alone: against its estimated background
-  const FrameStripe alone = StripeFromFrames(View(on), ImageView<std::uint8_t>(), FrameStripeOptions());
+  const FrameStripe alone =
+      StripeFromFrames(View(on), ImageView<std::uint8_t>(), FrameStripeOptions());
   int found_alone = 0;
   double sum2_alone = 0.0;
   for (int c = 0; c < kCols; ++c) {
@@ -134,7 +137,9 @@ TEST(Frames, BackgroundIsTheOpeningOfEveryColumn) {
       const int h = std::max(9, 2 * static_cast<int>(std::ceil(1.5 * width)) + 1) / 2;
       Frame out(im.size()), eroded(im.size());
       EstimateBackground<std::uint8_t>({im.data(), rows, cols, cols, 1}, width, out.data());
-      auto at = [&](const Frame& f, int r, int c) { return f[std::clamp(r, 0, rows - 1) * cols + c]; };
+      auto at = [&](const Frame& f, int r, int c) {
+        return f[std::clamp(r, 0, rows - 1) * cols + c];
+      };
       for (int r = 0; r < rows; ++r) {
         for (int c = 0; c < cols; ++c) {
           std::uint8_t m = 255;
@@ -158,9 +163,12 @@ TEST(Frames, ThreadsGiveTheSerialValues) {
   MakePair(4, &on[0], &off[0]);
   MakePair(5, &on[1], &off[1]);
   FrameStripe serial[2], threaded[2];
-  for (int k = 0; k < 2; ++k) serial[k] = StripeFromFrames(View(on[k]), View(off[k]), FrameStripeOptions());
-  std::thread a([&] { threaded[0] = StripeFromFrames(View(on[0]), View(off[0]), FrameStripeOptions()); });
-  std::thread b([&] { threaded[1] = StripeFromFrames(View(on[1]), View(off[1]), FrameStripeOptions()); });
+  for (int k = 0; k < 2; ++k)
+    serial[k] = StripeFromFrames(View(on[k]), View(off[k]), FrameStripeOptions());
+  std::thread a(
+      [&] { threaded[0] = StripeFromFrames(View(on[0]), View(off[0]), FrameStripeOptions()); });
+  std::thread b(
+      [&] { threaded[1] = StripeFromFrames(View(on[1]), View(off[1]), FrameStripeOptions()); });
   a.join();
   b.join();
   for (int k = 0; k < 2; ++k) ExpectSame(threaded[k].stripe, serial[k].stripe);

@@ -329,7 +329,8 @@ void BindImage(py::module_& m) {
       py::arg("on"), py::arg("off"), py::arg("direction"));
   m.def(
       "_drop_jumps",
-      [](const Eigen::VectorXd& centre, const Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1>& status) {
+      [](const Eigen::VectorXd& centre,
+         const Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1>& status) {
         if (centre.size() != status.size()) {
           throw std::invalid_argument("centre and status differ in length");
         }

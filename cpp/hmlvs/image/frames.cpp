@@ -136,7 +136,7 @@ struct Detector {
   bool smoothed = false;
   double threshold = 0.0;
   Runs runs;
-  std::vector<int> start;            // per column: the open run's first row
+  std::vector<int> start;           // per column: the open run's first row
   std::vector<std::uint16_t> open;  // per block: a bit per column with an open run
   int open_total = 0;
   void Init(int cols, int blocks) {
@@ -296,8 +296,8 @@ class Counter {
  private:
   void Flush() {
     for (size_t i = 0; i < bins_; ++i) {
-      total_[i] += std::uint32_t{part_[i]} + part_[bins_ + i] + part_[2 * bins_ + i] +
-                   part_[3 * bins_ + i];
+      total_[i] +=
+          std::uint32_t{part_[i]} + part_[bins_ + i] + part_[2 * bins_ + i] + part_[3 * bins_ + i];
     }
     std::fill(part_.begin(), part_.end(), 0);
     since_ = 0;
@@ -413,16 +413,17 @@ inline void Peaks8(const std::uint8_t* on, std::ptrdiff_t on_rs, const std::uint
     for (int h = 0; h < 2; ++h) {
       __m128i s5 = zero;
       for (int j = 0; j < 5; ++j) {
-        s5 = _mm_add_epi16(s5, _mm_unpacklo_epi8(
-                                   _mm_loadl_epi64(reinterpret_cast<const __m128i*>(seg + 8 * h + j)), zero));
+        s5 = _mm_add_epi16(
+            s5, _mm_unpacklo_epi8(
+                    _mm_loadl_epi64(reinterpret_cast<const __m128i*>(seg + 8 * h + j)), zero));
       }
       __m128i* pb = reinterpret_cast<__m128i*>(best + k * kSb + 8 * h);
       __m128i* pa = reinterpret_cast<__m128i*>(arg + k * kSb + 8 * h);
       const __m128i vb = _mm_loadu_si128(pb), va = _mm_loadu_si128(pa);
       // sums below 2^15: signed compares; rows unsigned
       const __m128i earlier = _mm_cmplt_epi16(_mm_xor_si128(vr, flip), _mm_xor_si128(va, flip));
-      const __m128i take = _mm_or_si128(_mm_cmpgt_epi16(s5, vb),
-                                        _mm_and_si128(_mm_cmpeq_epi16(s5, vb), earlier));
+      const __m128i take =
+          _mm_or_si128(_mm_cmpgt_epi16(s5, vb), _mm_and_si128(_mm_cmpeq_epi16(s5, vb), earlier));
       const __m128i nb = _mm_or_si128(_mm_and_si128(take, s5), _mm_andnot_si128(take, vb));
       _mm_storeu_si128(pb, nb);
       _mm_storeu_si128(pa, _mm_or_si128(_mm_and_si128(take, vr), _mm_andnot_si128(take, va)));
@@ -529,7 +530,8 @@ void CollectStats(const Frames<T>& f, Stats<T>* st) {
     for (int i : {0, 1, cols + 2, cols + 3}) pad[i] = d[src[i]];
     // the column peaks (with SSE2, those of the whole blocks after this pass: Peaks8)
     for (int c = boxed; c < cols; ++c) {
-      const Sum s5 = static_cast<Sum>(Sum(pad[c]) + pad[c + 1] + pad[c + 2] + pad[c + 3] + pad[c + 4]);
+      const Sum s5 =
+          static_cast<Sum>(Sum(pad[c]) + pad[c + 1] + pad[c + 2] + pad[c + 3] + pad[c + 4]);
       const bool gt = s5 > bst[c];  // strictly: a tie keeps the first row (np.argmax)
       bst[c] = gt ? s5 : bst[c];
       ag[c] = gt ? static_cast<std::uint32_t>(r) : ag[c];
@@ -560,7 +562,8 @@ void CollectStats(const Frames<T>& f, Stats<T>* st) {
                                           _mm_unpackhi_epi8(small, zero)));
             if (_mm_movemask_epi8(_mm_cmpeq_epi8(small, seven)) != 0) {
               for (int i = c; i < c + 16; ++i) {
-                if (d[i] >= kSmall - 1) st->large.push_back(static_cast<std::uint16_t>((b[i] << 8) | d[i]));
+                if (d[i] >= kSmall - 1)
+                  st->large.push_back(static_cast<std::uint16_t>((b[i] << 8) | d[i]));
               }
             }
           }
@@ -568,7 +571,8 @@ void CollectStats(const Frames<T>& f, Stats<T>* st) {
 #endif
         for (int i = c; i < cols; i += step) {
           keys[i] = static_cast<std::uint16_t>(b[i] * kSmall + std::min<int>(d[i], kSmall - 1));
-          if (d[i] >= kSmall - 1) st->large.push_back(static_cast<std::uint16_t>((b[i] << 8) | d[i]));
+          if (d[i] >= kSmall - 1)
+            st->large.push_back(static_cast<std::uint16_t>((b[i] << 8) | d[i]));
         }
         int i = 0;
         for (; i + 3 * step < cols; i += 4 * step) {
@@ -764,7 +768,8 @@ double FitOffset(const Frames<T>& f, const Stats<T>& st, double noise) {
     if (x0 >= 4 && x0 + n + 4 <= cols) {
       for (int i = 0; i < n + 8; ++i) line[i] = static_cast<float>(row[x0 - 4 + i]);
     } else {
-      for (int i = 0; i < n + 8; ++i) line[i] = static_cast<float>(row[Reflect101(x0 - 4 + i, cols)]);
+      for (int i = 0; i < n + 8; ++i)
+        line[i] = static_cast<float>(row[Reflect101(x0 - 4 + i, cols)]);
     }
     scan::SumShifted(line.data(), k.data(), 9, n, h.Row(r) + x0);
     h.Mark(r, b);
@@ -933,7 +938,9 @@ template <typename T>
 class Limits {
  public:
   Limits(const DifferenceRule<T>& rule, double threshold, double factor)
-      : rule_(rule), threshold_(threshold), factor_(factor),
+      : rule_(rule),
+        threshold_(threshold),
+        factor_(factor),
         lim_(static_cast<size_t>(std::numeric_limits<T>::max()) + 1, -2) {
     if constexpr (sizeof(T) == 1) {
       for (int y = 0; y < 256; ++y) Compute(static_cast<T>(y));
@@ -1111,7 +1118,8 @@ class RefineImage {
     along_ = GaussianKernel(2 * radius_ + 1, o.sigma_along);
     pad_ = std::max(radius_, 3) + 1;
     for (int c = -pad_; c < n_scan + pad_; ++c) col_.push_back(Reflect101(c, n_scan));
-    for (int p = o.lo - 4; p < o.hi + 4; ++p) band_.push_back(o.lo + Reflect101(p - o.lo, o.hi - o.lo));
+    for (int p = o.lo - 4; p < o.hi + 4; ++p)
+      band_.push_back(o.lo + Reflect101(p - o.lo, o.hi - o.lo));
     line_.resize(static_cast<size_t>(kSb + 2 * radius_));
   }
   // the value refine_centres reads: the image smoothed along the stripe (cv2.sepFilter2D,
@@ -1200,7 +1208,7 @@ class RefineImage {
   // BilateralBlock eight at a time, on CPUs with AVX2 (the same operations on each pixel, so
   // the same values: no fused multiply-add)
   __attribute__((target("avx2"))) void BilateralBlockAvx2(const T* const* rows, int x0,
-                                                           float* out) const {
+                                                          float* out) const {
     const __m128i cc = _mm_loadu_si128(reinterpret_cast<const __m128i*>(rows[3] + x0));
     const __m256i c0 = _mm256_cvtepu8_epi32(cc), c1 = _mm256_cvtepu8_epi32(_mm_srli_si128(cc, 8));
     __m256 s0 = _mm256_setzero_ps(), s1 = s0, w0 = s0, w1 = s0;
@@ -1323,7 +1331,8 @@ class RefineImage {
       auto pf = [this](int pp, int cc) { return P(pp, cc); };
       auto lf = [this](int pp, int cc) { return LogLevel(pp, cc); };
       for (int x = x0; x < x1; ++x) {
-        const float t = GradRow(p, x, pf) * GradRow(p, x, lf) + GradCol(p, x, pf) * GradCol(p, x, lf);
+        const float t =
+            GradRow(p, x, pf) * GradRow(p, x, lf) + GradCol(p, x, pf) * GradCol(p, x, lf);
         out[x] = P(p, x) - blur_ * t;
       }
     }
@@ -1346,8 +1355,8 @@ class RefineImage {
 // session._weighted_centres: Steger's found centres refined (RefineStripeCentres) on the
 // RefineImage.
 template <typename T>
-bool WeightedCentres(const Frames<T>& f, bool normalize, double offset, double mean,
-                     double noise, double sigma_along, double blur_var, StripeResult* st) {
+bool WeightedCentres(const Frames<T>& f, bool normalize, double offset, double mean, double noise,
+                     double sigma_along, double blur_var, StripeResult* st) {
   const int n = f.cols, n_prof = f.rows;
   // the band of rows each scan line's window reaches (Steger's centre +- 4.5 profile sigmas
   // plus a pixel), and the filter's 3 px more
@@ -1401,8 +1410,10 @@ bool WeightedCentres(const Frames<T>& f, bool normalize, double offset, double m
     double line_noise = o.frame_noise;
     if (normalize) {
       const double rc = std::isfinite(st->centre[s]) ? std::nearbyint(st->centre[s]) : 0.0;
-      const int pos = static_cast<int>(std::clamp(rc - o.lo, 0.0, static_cast<double>(o.hi - o.lo - 1)));
-      line_noise = static_cast<double>(static_cast<float>(o.frame_noise) * image.Gain(s, pos + o.lo));
+      const int pos =
+          static_cast<int>(std::clamp(rc - o.lo, 0.0, static_cast<double>(o.hi - o.lo - 1)));
+      line_noise =
+          static_cast<double>(static_cast<float>(o.frame_noise) * image.Gain(s, pos + o.lo));
     }
     scan::RefineLine(image, s, line_noise, ro, st);
     st->sigma[s] = st->sigma[s] * factor;
@@ -1598,9 +1609,8 @@ FrameStripe PairStripe(const Frames<T>& f, const FrameStripeOptions& o) {
     std::vector<double> y;
     for (int s = 0; s < res.status.size(); ++s) {
       if (res.status[s] != static_cast<std::uint8_t>(StripeStatus::kFound)) continue;
-      res.status[s] = static_cast<std::uint8_t>(
-          scan::AssessLine(d, von, voff, with_off, q, s, res.centre[s], res.width[s],
-                           res.threshold, &y));
+      res.status[s] = static_cast<std::uint8_t>(scan::AssessLine(
+          d, von, voff, with_off, q, s, res.centre[s], res.width[s], res.threshold, &y));
     }
   }
   return out;

@@ -147,7 +147,8 @@ void DifferenceImage(const ImageView<T>& on, const ImageView<T>& off, T* out,
     for (int c = 0; c < cols; ++c) row += b[c * off_cs];
     sum += row;
   }
-  const scan::DifferenceRule<T> rule(o, static_cast<double>(sum) / (static_cast<double>(rows) * cols));
+  const scan::DifferenceRule<T> rule(o,
+                                     static_cast<double>(sum) / (static_cast<double>(rows) * cols));
   if (rule.offset_rule) {
     // double precision per pixel, the same value as NumPy's formula (DifferenceOptions)
     if constexpr (sizeof(T) == 1) {
@@ -324,7 +325,7 @@ std::vector<float> SmoothAlong(const ScanView<T>& v, const Kernels& g) {
       mid[n - 1 + i] = mid[n - 1];
     }
     scan::SumShifted(line.data(), w.data(), 2 * r + 1, n,
-               out.data() + static_cast<size_t>(p) * static_cast<size_t>(n));
+                     out.data() + static_cast<size_t>(p) * static_cast<size_t>(n));
   }
   return out;
 }

@@ -406,7 +406,8 @@ struct DifferenceRule {
         const double den = std::max(y + offset, floor);
         for (int x = y + 1; x < 256; ++x) {
           const double d = (x - y) * scale / den;
-          row[x] = static_cast<T>(static_cast<int>((std::min(std::max(d, 0.0), kTop) + kRound) - kRound));
+          row[x] = static_cast<T>(
+              static_cast<int>((std::min(std::max(d, 0.0), kTop) + kRound) - kRound));
         }
       } else {
         const Acc g = gain[y];
@@ -641,9 +642,9 @@ void RefineLine(const V& v, int s, double noise, const StripeRefineOptions& o, S
     const double shrink = std::exp(-inv_s2);
     for (int p = m - hw; p <= m + hw; ++p, g *= ratio, ratio *= shrink) {
       const double x = p - c;
-      const double pp = g;                                       // P(x)
-      const double dp = -x * inv_s2 * pp;                        // P'(x)
-      const double ddp = (x * x * inv_s2 - 1.0) * inv_s2 * pp;   // P''(x)
+      const double pp = g;                                      // P(x)
+      const double dp = -x * inv_s2 * pp;                       // P'(x)
+      const double ddp = (x * x * inv_s2 - 1.0) * inv_s2 * pp;  // P''(x)
       const double den = a2 + k2 * pp * pp;
       const double inv = 1.0 / den;
       const double w = dp * inv;

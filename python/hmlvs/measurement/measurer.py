@@ -105,7 +105,6 @@ class Measurer:
                off: np.ndarray | None = None) -> Profile:
         """The stripe of ``frame`` (laser on; ``off``: the laser-off frame at the same pose,
         if taken) measured at the robot pose ``base_from_hand`` (4 x 4, mm)."""
-        from ..image.session import stripe_from_pair
 
         frame = _image(frame, "the frame")
         if self.image_size is not None and (frame.shape[1], frame.shape[0]) != self.image_size:
