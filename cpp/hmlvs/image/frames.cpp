@@ -175,41 +175,30 @@ struct Workspace {
   Plane a, b, c;
   Marks marks, marks2;
   Detector detectors[2];
-  std::vector<std::uint8_t> frames8;
-  std::vector<std::uint16_t> frames16;
-  std::vector<std::uint8_t> background8;
-  std::vector<std::uint16_t> background16;
+  // per pixel type: the frames in the working orientation, the background estimated for a
+  // laser-on frame alone, and EstimateBackground's buffers
   template <typename T>
-  std::vector<T>& Frames() {
-    if constexpr (sizeof(T) == 1) {
-      return frames8;
-    } else {
-      return frames16;
-    }
-  }
-  std::vector<std::uint8_t> opening8[3];
-  std::vector<std::uint16_t> opening16[3];
-  // a buffer of EstimateBackground, at least n long
+  struct Buffers {
+    std::vector<T> frames, background, opening[3];
+  };
+  Buffers<std::uint8_t> u8;
+  Buffers<std::uint16_t> u16;
   template <typename T>
-  std::vector<T>& Opening(int k, size_t n) {
-    std::vector<T>* v;
+  Buffers<T>& Of() {
     if constexpr (sizeof(T) == 1) {
-      v = &opening8[k];
+      return u8;
     } else {
-      v = &opening16[k];
-    }
-    if (v->size() < n) v->resize(n);
-    return *v;
-  }
-  template <typename T>
-  std::vector<T>& Background() {
-    if constexpr (sizeof(T) == 1) {
-      return background8;
-    } else {
-      return background16;
+      return u16;
     }
   }
 };
+
+// v, grown to at least n elements (never shrunk: the thread's next call reuses it)
+template <typename T>
+std::vector<T>& Grown(std::vector<T>* v, size_t n) {
+  if (v->size() < n) v->resize(n);
+  return *v;
+}
 
 Workspace& ThreadWorkspace() {
   thread_local Workspace w;
@@ -1630,12 +1619,7 @@ FrameStripe StripeFromFrames(const ImageView<T>& on, const ImageView<T>& off,
   const bool alone = off.data == nullptr;
   if (!alone) {
     Require(off, "the laser-off image");
-    if (on.rows != off.rows || on.cols != off.cols) {
-      std::ostringstream msg;
-      msg << "the laser-on image is " << on.cols << " x " << on.rows
-          << " pixels but the laser-off image is " << off.cols << " x " << off.rows;
-      throw std::invalid_argument(msg.str());
-    }
+    scan::RequireSameSize(on, off);
   }
   scan::ValidateOptions(o.stripe);
   if (!(o.smooth_along >= 1.0 && o.smooth_along <= 10.0) ||
@@ -1652,9 +1636,8 @@ FrameStripe StripeFromFrames(const ImageView<T>& on, const ImageView<T>& off,
         "(direction='columns')");
   }
   Workspace& ws = ThreadWorkspace();
-  std::vector<T>& buffer = ws.Frames<T>();
   const size_t n = static_cast<size_t>(on.rows) * on.cols;
-  if (buffer.size() < 2 * n) buffer.resize(2 * n);
+  std::vector<T>& buffer = Grown(&ws.Of<T>().frames, 2 * n);
   Frames<T> f;
   f.rows = transpose ? on.cols : on.rows;
   f.cols = transpose ? on.rows : on.cols;
@@ -1668,8 +1651,7 @@ FrameStripe StripeFromFrames(const ImageView<T>& on, const ImageView<T>& off,
   // at the stripe's median FWHM
   FrameStripeOptions oa = o;
   if (!o.dominance_given) oa.stripe.dominance = FrameStripeOptions::kAloneDominance;
-  std::vector<T>& bg = ws.Background<T>();
-  if (bg.size() < n) bg.resize(n);
+  std::vector<T>& bg = Grown(&ws.Of<T>().background, n);
   const ImageView<T> on_w{f.on, f.rows, f.cols, f.on_rs, 1};
   EstimateBackground(on_w, FrameStripeOptions::kAloneFirstWidth, bg.data());
   f.off = bg.data();
@@ -1716,9 +1698,9 @@ void EstimateBackground(const ImageView<T>& on, double width, T* out) {
   const int n = rows + 2 * h;
   const size_t size = static_cast<size_t>(n) * cols;
   Workspace& ws = ThreadWorkspace();
-  std::vector<T>& g = ws.Opening<T>(0, size);
-  std::vector<T>& e = ws.Opening<T>(1, size);
-  std::vector<T>& eroded = ws.Opening<T>(2, static_cast<size_t>(rows) * cols);
+  std::vector<T>& g = Grown(&ws.Of<T>().opening[0], size);
+  std::vector<T>& e = Grown(&ws.Of<T>().opening[1], size);
+  std::vector<T>& eroded = Grown(&ws.Of<T>().opening[2], static_cast<size_t>(rows) * cols);
   auto at = [cols](std::vector<T>& v, int i) { return v.data() + static_cast<size_t>(i) * cols; };
   auto pass = [&](auto pick, auto src_row, T* dst) {
     auto ext = [&](int i) { return src_row(std::clamp(i - h, 0, rows - 1)); };
@@ -1768,12 +1750,7 @@ double FitAlbedoOffset(const ImageView<T>& on, const ImageView<T>& off, StripeDi
                        double* noise) {
   Require(on, "the laser-on image");
   Require(off, "the laser-off image");
-  if (on.rows != off.rows || on.cols != off.cols) {
-    std::ostringstream msg;
-    msg << "the laser-on image is " << on.cols << " x " << on.rows
-        << " pixels but the laser-off image is " << off.cols << " x " << off.rows;
-    throw std::invalid_argument(msg.str());
-  }
+  scan::RequireSameSize(on, off);
   const bool transpose = direction == StripeDirection::kRows;
   std::vector<T> buffer(2 * static_cast<size_t>(on.rows) * on.cols);
   Frames<T> f;

@@ -99,12 +99,7 @@ void DifferenceImage(const ImageView<T>& on, const ImageView<T>& off, T* out,
                      const DifferenceOptions& o) {
   RequireImage(on, "the laser-on image");
   RequireImage(off, "the laser-off image");
-  if (on.rows != off.rows || on.cols != off.cols) {
-    std::ostringstream msg;
-    msg << "the laser-on image is " << on.cols << " x " << on.rows
-        << " pixels but the laser-off image is " << off.cols << " x " << off.rows;
-    throw std::invalid_argument(msg.str());
-  }
+  scan::RequireSameSize(on, off);
   if (!std::isfinite(o.scale) || !std::isfinite(o.floor) || o.scale == 0.0 || o.floor == 0.0) {
     std::ostringstream msg;
     msg << "normalisation scale and floor must be finite and positive (or negative for "

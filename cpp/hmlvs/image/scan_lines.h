@@ -34,6 +34,17 @@ void RequireImage(const ImageView<T>& im, const char* name) {
   }
 }
 
+// Throws std::invalid_argument unless the laser-on and laser-off frames have one size.
+template <typename T>
+void RequireSameSize(const ImageView<T>& on, const ImageView<T>& off) {
+  if (on.rows != off.rows || on.cols != off.cols) {
+    std::ostringstream msg;
+    msg << "the laser-on image is " << on.cols << " x " << on.rows
+        << " pixels but the laser-off image is " << off.cols << " x " << off.rows;
+    throw std::invalid_argument(msg.str());
+  }
+}
+
 struct Kernels {
   int radius = 0;
   std::vector<double> g0, g1, g2;  // smoothing, first and second derivative (correlation)
