@@ -65,8 +65,27 @@ int Reflect101(int i, int n) {
 // Workspace
 
 // A float image computed per (row, block of kSb columns) on first read.
+// Memory that grows, never shrinks and is never cleared: only the pages a call writes are
+// ever touched (the planes below are written around the stripe only).
+template <typename T>
+class Scratch {
+ public:
+  T* Get(size_t n) {
+    if (n > size_) {
+      data_.reset(new T[n]);  // default-initialised: not written until used
+      size_ = n;
+    }
+    return data_.get();
+  }
+
+ private:
+  std::unique_ptr<T[]> data_;
+  size_t size_ = 0;
+};
+
 struct Plane {
-  std::vector<float> data;
+  Scratch<float> memory;
+  float* data = nullptr;
   std::vector<std::uint32_t> stamp;  // per (row, block): == epoch once computed
   std::uint32_t epoch = 0;
   int rows = 0, cols = 0, blocks = 0;
@@ -75,7 +94,7 @@ struct Plane {
     cols = c;
     blocks = (c + kSb - 1) / kSb;
     const size_t n = static_cast<size_t>(r) * c, nb = static_cast<size_t>(r) * blocks;
-    if (data.size() < n) data.resize(n);
+    data = memory.Get(n);
     if (stamp.size() < nb) stamp.resize(nb, 0);
     if (++epoch == 0) {
       std::fill(stamp.begin(), stamp.end(), 0);
@@ -84,7 +103,7 @@ struct Plane {
   }
   bool Has(int r, int b) const { return stamp[static_cast<size_t>(r) * blocks + b] == epoch; }
   void Mark(int r, int b) { stamp[static_cast<size_t>(r) * blocks + b] = epoch; }
-  float* Row(int r) { return data.data() + static_cast<size_t>(r) * cols; }
+  float* Row(int r) { return data + static_cast<size_t>(r) * cols; }
 };
 
 // (row, block) pairs to compute ahead, visited row by row: values computed in the order the
@@ -179,7 +198,7 @@ struct Workspace {
   // laser-on frame alone, and EstimateBackground's buffers
   template <typename T>
   struct Buffers {
-    std::vector<T> frames, background, opening[3];
+    Scratch<T> frames, background, opening[3];
   };
   Buffers<std::uint8_t> u8;
   Buffers<std::uint16_t> u16;
@@ -192,13 +211,6 @@ struct Workspace {
     }
   }
 };
-
-// v, grown to at least n elements (never shrunk: the thread's next call reuses it)
-template <typename T>
-std::vector<T>& Grown(std::vector<T>* v, size_t n) {
-  if (v->size() < n) v->resize(n);
-  return *v;
-}
 
 Workspace& ThreadWorkspace() {
   thread_local Workspace w;
@@ -1637,24 +1649,24 @@ FrameStripe StripeFromFrames(const ImageView<T>& on, const ImageView<T>& off,
   }
   Workspace& ws = ThreadWorkspace();
   const size_t n = static_cast<size_t>(on.rows) * on.cols;
-  std::vector<T>& buffer = Grown(&ws.Of<T>().frames, 2 * n);
+  T* buffer = ws.Of<T>().frames.Get(2 * n);
   Frames<T> f;
   f.rows = transpose ? on.cols : on.rows;
   f.cols = transpose ? on.rows : on.cols;
   f.transposed = transpose;
-  f.on = Working(on, transpose, buffer.data(), &f.on_rs);
+  f.on = Working(on, transpose, buffer, &f.on_rs);
   if (!alone) {
-    f.off = Working(off, transpose, buffer.data() + n, &f.off_rs);
+    f.off = Working(off, transpose, buffer + n, &f.off_rs);
     return PairStripe(f, o);
   }
   // the laser-on frame alone: against its background, estimated at a generous width, then
   // at the stripe's median FWHM
   FrameStripeOptions oa = o;
   if (!o.dominance_given) oa.stripe.dominance = FrameStripeOptions::kAloneDominance;
-  std::vector<T>& bg = Grown(&ws.Of<T>().background, n);
+  T* bg = ws.Of<T>().background.Get(n);
   const ImageView<T> on_w{f.on, f.rows, f.cols, f.on_rs, 1};
-  EstimateBackground(on_w, FrameStripeOptions::kAloneFirstWidth, bg.data());
-  f.off = bg.data();
+  EstimateBackground(on_w, FrameStripeOptions::kAloneFirstWidth, bg);
+  f.off = bg;
   f.off_rs = f.cols;
   FrameStripe first = PairStripe(f, oa);
   if (first.no_pixel) return first;
@@ -1669,14 +1681,14 @@ FrameStripe StripeFromFrames(const ImageView<T>& on, const ImageView<T>& off,
     std::sort(w.begin(), w.end());
     const size_t h = w.size() / 2;
     const double median = w.size() % 2 == 1 ? w[h] : (w[h - 1] + w[h]) / 2.0;
-    EstimateBackground(on_w, median, bg.data());
+    EstimateBackground(on_w, median, bg);
     out = PairStripe(f, oa);
     if (out.no_pixel) return out;
   }
   out.offset_fitted = false;
   out.albedo_offset = kNaN;
   DropJumps(&out.stripe);
-  if (background != nullptr) std::copy(bg.begin(), bg.begin() + n, background);
+  if (background != nullptr) std::copy(bg, bg + n, background);
   return out;
 }
 
@@ -1698,10 +1710,10 @@ void EstimateBackground(const ImageView<T>& on, double width, T* out) {
   const int n = rows + 2 * h;
   const size_t size = static_cast<size_t>(n) * cols;
   Workspace& ws = ThreadWorkspace();
-  std::vector<T>& g = Grown(&ws.Of<T>().opening[0], size);
-  std::vector<T>& e = Grown(&ws.Of<T>().opening[1], size);
-  std::vector<T>& eroded = Grown(&ws.Of<T>().opening[2], static_cast<size_t>(rows) * cols);
-  auto at = [cols](std::vector<T>& v, int i) { return v.data() + static_cast<size_t>(i) * cols; };
+  T* g = ws.Of<T>().opening[0].Get(size);
+  T* e = ws.Of<T>().opening[1].Get(size);
+  T* eroded = ws.Of<T>().opening[2].Get(static_cast<size_t>(rows) * cols);
+  auto at = [cols](T* v, int i) { return v + static_cast<size_t>(i) * cols; };
   auto pass = [&](auto pick, auto src_row, T* dst) {
     auto ext = [&](int i) { return src_row(std::clamp(i - h, 0, rows - 1)); };
     for (int b0 = 0; b0 < n; b0 += k) {
@@ -1741,8 +1753,8 @@ void EstimateBackground(const ImageView<T>& on, double width, T* out) {
     base = contiguous.data();
     rs = cols;
   }
-  pass(lower, [&](int r) { return base + r * rs; }, eroded.data());
-  pass(upper, [&](int r) { return eroded.data() + static_cast<size_t>(r) * cols; }, out);
+  pass(lower, [&](int r) { return base + r * rs; }, eroded);
+  pass(upper, [&](int r) { return eroded + static_cast<size_t>(r) * cols; }, out);
 }
 
 template <typename T>
