@@ -150,9 +150,12 @@ def test_background_and_jumps_are_opencvs_and_scipys():
                         (60, 1, np.uint16)):
         top = np.iinfo(dtype).max
         on = rng.integers(0, top, (h, w), endpoint=True).astype(dtype)
-        for width in (0.5, 3.3, 16.0, 40.0):
+        for width in (0.0, 0.5, 3.3, 16.0, 40.0):
             np.testing.assert_array_equal(estimate_background(on, width),
                                           ref.estimate_background(on, width))
+    colour = rng.integers(0, 256, (50, 70, 3), dtype=np.uint8)
+    np.testing.assert_array_equal(estimate_background(colour, 4.0),
+                                  ref.estimate_background(colour, 4.0))
     stripe = stripe_from_pair(*_pair(rng))
     centre = stripe.centre.copy()
     centre[100:104] += 3.0  # a jump

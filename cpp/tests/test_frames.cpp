@@ -193,7 +193,7 @@ TEST(Frames, JumpsAndBadInput) {
   FrameStripeOptions bad;
   bad.smooth_along = 0.5;
   EXPECT_THROW(StripeFromFrames(View(on), View(off), bad), std::invalid_argument);
-  EXPECT_THROW(EstimateBackground(View(on), 0.0, on.data()), std::invalid_argument);
+  EXPECT_THROW(EstimateBackground(View(on), std::nan(""), on.data()), std::invalid_argument);
 }
 
 }  // namespace

@@ -1695,9 +1695,9 @@ FrameStripe StripeFromFrames(const ImageView<T>& on, const ImageView<T>& off,
 template <typename T>
 void EstimateBackground(const ImageView<T>& on, double width, T* out) {
   Require(on, "the laser-on image");
-  if (!(width > 0.0 && std::isfinite(width))) {
+  if (!std::isfinite(width)) {
     std::ostringstream msg;
-    msg << "the stripe width must be a finite number > 0, got " << width;
+    msg << "the stripe width must be a finite number, got " << width;
     throw std::invalid_argument(msg.str());
   }
   const int rows = on.rows, cols = on.cols;

@@ -90,7 +90,7 @@ FrameStripe StripeFromFrames(const ImageView<T>& on, const ImageView<T>& off,
 /// and keeps larger ones (a board's squares). The values of OpenCV's
 /// morphologyEx(MORPH_OPEN, ones(k, 1), borderType=BORDER_REPLICATE). Written to `out`
 /// (rows x cols, contiguous). Throws std::invalid_argument for an empty frame or a width that
-/// is not a finite number > 0.
+/// is not a finite number.
 template <typename T>
 void EstimateBackground(const ImageView<T>& on, double width, T* out);
 

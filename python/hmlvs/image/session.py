@@ -741,8 +741,12 @@ def estimate_background(on: np.ndarray, width: float = 8.0) -> np.ndarray:
     ``width``, and keeps the board's squares and edges (larger than the line). Stands in
     for the laser-off frame of a session taken without one; the stripe must run across the
     columns (``direction="columns"``). Computed in C++ (the values of OpenCV's
-    ``morphologyEx(MORPH_OPEN, ones((k, 1)), borderType=BORDER_REPLICATE)``)."""
-    return _core._estimate_background(_as_gray(on, "the laser-on image", None), float(width))
+    ``morphologyEx(MORPH_OPEN, ones((k, 1)), borderType=BORDER_REPLICATE)``; a colour image
+    channel by channel)."""
+    if is_colour(on) and on.dtype in (np.uint8, np.uint16):
+        return np.dstack([estimate_background(on[:, :, c], width) for c in range(on.shape[2])])
+    return _core._estimate_background(_as_gray(on, "the laser-on image", None),
+                                      _real(width, "width"))
 
 
 def _stripe_and_background(on_g: np.ndarray, off_g: np.ndarray | None, normalize: bool,
