@@ -134,7 +134,7 @@ def test_albedo_offset_local_filters_are_the_whole_image_ones(rng):
     window around the peak, they equal OpenCV's filters of the whole image to the bit
     (image borders, widths that are not a multiple of 8, 8- and 16-bit, small images)."""
     from hmlvs import _core
-    from hmlvs.image.stripe import _level_at
+    from reference_frames import _level_at
 
     box = np.ones((7, 7), np.uint8)
     for h, w, dtype in ((480, 640, np.uint8), (97, 203, np.uint16), (150, 1001, np.uint8),

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "bindings.h"
+#include "hmlvs/image/frames.h"
 #include "hmlvs/image/image.h"
 
 namespace py = pybind11;
@@ -69,6 +70,39 @@ StripeResult Extract(const py::array& image, const StripeOptions& options) {
   const ImageView<T> v = ViewOf<T>(image, "the image");
   py::gil_scoped_release release;
   return ExtractStripe(v, options);
+}
+
+// The frames' common bit depth (the laser-off frame may be None).
+Depth FramesDepth(const py::array& on, const py::object& off) {
+  const Depth d = DepthOf(on, "the laser-on image");
+  if (!off.is_none() && DepthOf(off.cast<py::array>(), "the laser-off image") != d) {
+    throw std::invalid_argument("the laser-on and laser-off images have different bit depths (" +
+                                std::string(py::str(on.dtype())) + " and " +
+                                std::string(py::str(off.attr("dtype"))) + ")");
+  }
+  return d;
+}
+
+template <typename T>
+py::tuple FromFrames(const py::array& on, const py::object& off, const FrameStripeOptions& o,
+                     bool want_background) {
+  const ImageView<T> a = ViewOf<T>(on, "the laser-on image");
+  const ImageView<T> b =
+      off.is_none() ? ImageView<T>() : ViewOf<T>(off.cast<py::array>(), "the laser-off image");
+  py::object background = py::none();
+  T* bg = nullptr;
+  if (want_background && off.is_none()) {
+    py::array_t<T> out({static_cast<py::ssize_t>(a.rows), static_cast<py::ssize_t>(a.cols)});
+    bg = out.mutable_data();
+    background = std::move(out);
+  }
+  FrameStripe r;
+  {
+    py::gil_scoped_release release;
+    r = StripeFromFrames(a, b, o, bg);
+  }
+  return py::make_tuple(r.stripe, r.offset_fitted, r.albedo_offset, r.no_pixel, r.image_max,
+                        r.refined, background);
 }
 
 }  // namespace
@@ -232,6 +266,81 @@ void BindImage(py::module_& m) {
         return EstimateDifferenceNoise(v);
       },
       py::arg("image"));
+  py::class_<FrameStripeOptions>(m, "_FrameStripeOptions")
+      .def(py::init<>())
+      .def_readwrite("stripe", &FrameStripeOptions::stripe)
+      .def_readwrite("method_given", &FrameStripeOptions::method_given)
+      .def_readwrite("steger_sigma_given", &FrameStripeOptions::steger_sigma_given)
+      .def_readwrite("steger_sigma_along_given", &FrameStripeOptions::steger_sigma_along_given)
+      .def_readwrite("detect_sigma_along_given", &FrameStripeOptions::detect_sigma_along_given)
+      .def_readwrite("dominance_given", &FrameStripeOptions::dominance_given)
+      .def_readwrite("normalize", &FrameStripeOptions::normalize)
+      .def_readwrite("albedo_offset", &FrameStripeOptions::albedo_offset)
+      .def_readwrite("assess", &FrameStripeOptions::assess)
+      .def_readwrite("albedo_step", &FrameStripeOptions::albedo_step)
+      .def_readwrite("blur_var", &FrameStripeOptions::blur_var)
+      .def_readwrite("smooth_along", &FrameStripeOptions::smooth_along)
+      .def_readonly_static("detect_along", &FrameStripeOptions::kDetectAlong);
+  m.def(
+      "_stripe_from_frames",
+      [](const py::array& on, const py::object& off, const FrameStripeOptions& options,
+         bool want_background) {
+        return FramesDepth(on, off) == Depth::kU8
+                   ? FromFrames<std::uint8_t>(on, off, options, want_background)
+                   : FromFrames<std::uint16_t>(on, off, options, want_background);
+      },
+      py::arg("on"), py::arg("off"), py::arg("options"), py::arg("want_background") = false);
+  m.def(
+      "_estimate_background",
+      [](const py::array& on, double width) -> py::array {
+        auto run = [&](auto tag) -> py::array {
+          using T = decltype(tag);
+          const ImageView<T> a = ViewOf<T>(on, "the laser-on image");
+          py::array_t<T> out({static_cast<py::ssize_t>(a.rows), static_cast<py::ssize_t>(a.cols)});
+          T* dst = out.mutable_data();
+          {
+            py::gil_scoped_release release;
+            EstimateBackground(a, width, dst);
+          }
+          return std::move(out);
+        };
+        return DepthOf(on, "the laser-on image") == Depth::kU8 ? run(std::uint8_t{})
+                                                               : run(std::uint16_t{});
+      },
+      py::arg("on"), py::arg("width"));
+  m.def(
+      "_fit_albedo_offset",
+      [](const py::array& on, const py::array& off, StripeDirection direction) {
+        double offset = 0.0, noise = 0.0;
+        auto run = [&](auto tag) {
+          using T = decltype(tag);
+          const ImageView<T> a = ViewOf<T>(on, "the laser-on image");
+          const ImageView<T> b = ViewOf<T>(off, "the laser-off image");
+          py::gil_scoped_release release;
+          offset = FitAlbedoOffset(a, b, direction, &noise);
+        };
+        if (FramesDepth(on, off) == Depth::kU8) {
+          run(std::uint8_t{});
+        } else {
+          run(std::uint16_t{});
+        }
+        return py::make_tuple(offset, noise);
+      },
+      py::arg("on"), py::arg("off"), py::arg("direction"));
+  m.def(
+      "_drop_jumps",
+      [](const Eigen::VectorXd& centre,
+         const Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1>& status) {
+        if (centre.size() != status.size()) {
+          throw std::invalid_argument("centre and status differ in length");
+        }
+        StripeResult r;
+        r.centre = centre;
+        r.status = status;
+        DropJumps(&r);
+        return r.status;
+      },
+      py::arg("centre"), py::arg("status"));
   m.def("_smoothing_noise_gain", &SmoothingNoiseGain, py::arg("sigma"));
 }
 

@@ -14,15 +14,13 @@ from .colour import board_gray, colour_stripe, is_colour
 from .corners import BoardNotFoundError, find_corners
 from .points import Mode, calibration_points, fit_division_distortion
 from .stripe import (
+    StripeOptions,
     StripeResult,
     StripeStatus,
-    _albedo_offset,
     _as_gray,
-    _normalized_threshold,
-    assess_stripe,
-    difference_image,
+    _finite,
+    _real,
     extract_stripe,
-    refine_centres,
 )
 
 #: the laser-off name of a pair without a laser-off frame (shown in its report)
@@ -621,7 +619,7 @@ class _Pair:
     # laser-on one
     stripe: StripeResult
     size: tuple[int, int]
-    offset: float | None = None  # the albedo offset fitted (see _pair_stripe)
+    offset: float | None = None  # the albedo offset fitted (see _stripe_and_background)
     board: np.ndarray | None = None  # the frame for the board's corners, when not ``off``
 
     @property
@@ -761,63 +759,35 @@ def estimate_background(on: np.ndarray, width: float = 8.0) -> np.ndarray:
     narrower than that along the column, such as a roughly horizontal stripe of FWHM
     ``width``, and keeps the board's squares and edges (larger than the line). Stands in
     for the laser-off frame of a session taken without one; the stripe must run across the
-    columns (``direction="columns"``)."""
-    import cv2
-    k = max(9, 2 * int(np.ceil(1.5 * width)) + 1)
-    kernel = np.ones((k, 1), np.uint8)
-    return cv2.morphologyEx(np.ascontiguousarray(on), cv2.MORPH_OPEN, kernel,
-                            borderType=cv2.BORDER_REPLICATE)
+    columns (``direction="columns"``). Computed in C++ (the values of OpenCV's
+    ``morphologyEx(MORPH_OPEN, ones((k, 1)), borderType=BORDER_REPLICATE)``; a colour image
+    channel by channel)."""
+    if is_colour(on) and on.dtype in (np.uint8, np.uint16):
+        return np.dstack([estimate_background(on[:, :, c], width) for c in range(on.shape[2])])
+    return _core._estimate_background(_as_gray(on, "the laser-on image", None),
+                                      _real(width, "width"))
 
 
 def _stripe_and_background(on_g: np.ndarray, off_g: np.ndarray | None, normalize: bool,
                            stripe_options: dict[str, Any]
                            ) -> tuple[StripeResult, np.ndarray, float | None]:
-    """The stripe of a pair, its laser-off frame (estimated when None) and the albedo offset
-    fitted to a given laser-off frame (see :func:`_pair_stripe`)."""
-    if off_g is not None:
-        o = dict(stripe_options)
-        assess = o.pop("assess", True)
-        step, offset = o.pop("albedo_step", None), o.pop("albedo_offset", None)
-        blur_var = _blur_var(o.pop("blur_var", None))
-        stripe, fitted = _pair_stripe(on_g, off_g, normalize, assess, step, offset, o,
-                                      blur_var)
-        return stripe, off_g, fitted
-    if stripe_options.get("direction", "columns") != "columns":
-        raise ValueError("a laser-on image without a laser-off frame needs a roughly "
-                         "horizontal stripe (direction='columns')")
-    # a first pass at a generous width finds the stripe's FWHM; the second fits the
-    # opening to it (a longer line than needed would also open up small squares). What the
-    # opening leaves of the board (short white segments of a column near the squares'
-    # corners) is fainter than the laser: the stripe is taken when 1.5 x brighter than it.
-    if "dominance" not in stripe_options:
-        stripe_options = dict(stripe_options, dominance=1.5)
-    bg = estimate_background(on_g, 16.0)
-    first = stripe_from_pair(on_g, bg, normalize=normalize, **stripe_options)
-    w = first.width[first.found]
-    if w.size:
-        bg = estimate_background(on_g, float(np.median(w)))
-    stripe = stripe_from_pair(on_g, bg, normalize=normalize, **stripe_options)
-    return _drop_jumps(stripe), bg, None
+    """The stripe of a pair, its laser-off frame (estimated when None: see
+    :func:`stripe_from_pair`) and the albedo offset fitted to a given laser-off frame (NaN
+    when the stripe does not lie on two clearly different levels and 0 was used; None when
+    none was fitted: given, no normalisation, or no laser-off frame)."""
+    core = frames_options(normalize=normalize, **stripe_options)
+    stripe, background, fitted = frames_stripe(on_g, off_g, core, background=off_g is None)
+    return stripe, off_g if off_g is not None else background, fitted
 
 
 def _drop_jumps(stripe: StripeResult, window: int = 41, jump: float = 1.0) -> StripeResult:
     """Scan lines whose centre lies more than ``jump`` px from the running median of the
     found centres (``window`` of them) become MULTIPLE: without a laser-off frame a leftover
     of the board (near a square's corner) can outshine a faint stripe in a few neighbouring
-    columns, and the stripe is continuous where those are not."""
-    from scipy.ndimage import median_filter
-
-    f = np.nonzero(stripe.found)[0]
-    if f.size < 5:
-        return stripe
-    c = stripe.centre[f]
-    med = median_filter(c, size=min(window, f.size | 1), mode="nearest")
-    bad = f[np.abs(c - med) > jump]
-    if not bad.size:
-        return stripe
-    status = stripe.status.copy()
-    status[bad] = 2  # StripeStatus.MULTIPLE
-    return replace(stripe, status=status)
+    columns, and the stripe is continuous where those are not (computed in C++)."""
+    status = _core._drop_jumps(np.asarray(stripe.centre, float),
+                               np.asarray(stripe.status, np.uint8))
+    return replace(stripe, status=np.asarray(status, np.uint8))
 
 
 def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool = True,
@@ -850,8 +820,18 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
     px RMS, each view's mean error 0.0041 -> 0.0023 px. Calibration sessions fit it
     (:func:`session_blur_var`).
     ``off``
-    None: a laser-on image alone, its background estimated (:func:`estimate_background`).
-    Colour frames use ``channel``, by default the laser's (:func:`laser_channel`).
+    None: a laser-on image alone, its background estimated (:func:`estimate_background` at a
+    stripe width of 16 px, then at the median FWHM of the stripe found against it), the
+    peaks taken when 1.5 x brighter than any other (``dominance``, unless given) and centres
+    that jump from their neighbours' dropped (MULTIPLE).
+    Colour frames use ``channel``, by default the laser's (:func:`laser_channel`); a colour
+    laser-on frame alone without a channel goes to :func:`~hmlvs.image.colour.colour_stripe`.
+
+    The whole pipeline runs in C++ (``hmlvs._core``, cpp/hmlvs/image/frames.h), one call
+    per frame that releases the GIL, computing the normalised difference, its smoothing and
+    the denoised laser-off frame only around the stripe and wherever a pixel could clear a
+    threshold; tests/reference_frames.py holds the NumPy composition of the whole-image
+    steps it reproduces (tests/test_frames.py compares them).
 
     Raises ``ValueError`` naming the threshold when an automatic one leaves no pixel of the
     image above it (nothing to find, rather than a silent empty stripe).
@@ -861,154 +841,74 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
     if channel is None:
         channel = laser_channel(on, off)
     on_g = _as_gray(on, "the laser-on image", channel)
-    stripe_options = dict(stripe_options)
-    albedo_step = stripe_options.pop("albedo_step", None)
-    albedo_offset_ = stripe_options.pop("albedo_offset", None)
-    blur_var = _blur_var(stripe_options.pop("blur_var", None))
-    if off is None:
-        return _stripe_and_background(on_g, None, normalize, dict(
-            stripe_options, assess=assess, albedo_step=albedo_step,
-            albedo_offset=albedo_offset_, blur_var=blur_var))[0]
-    off_g = _as_gray(off, "the laser-off image", channel)
-    return _pair_stripe(on_g, off_g, normalize, assess, albedo_step, albedo_offset_,
-                        stripe_options, blur_var)[0]
+    off_g = None if off is None else _as_gray(off, "the laser-off image", channel)
+    return frames_stripe(on_g, off_g, frames_options(normalize=normalize, assess=assess,
+                                                     **stripe_options))[0]
 
 
-def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: bool,
-                 albedo_step: float | None, albedo_offset_: float | None,
-                 stripe_options: dict[str, Any], blur_var: float = 0.0
-                 ) -> tuple[StripeResult, float | None]:
-    """:func:`stripe_from_pair` of gray frames, and the albedo offset it fitted: NaN when
-    the stripe does not lie on two clearly different levels (0 is used), None when none was
-    fitted (given, or no normalisation)."""
-    opts = dict(stripe_options)
-    along = _smooth_along(opts.pop("smooth_along", None))
-    offset, noise = 0.0, None
-    fitted = None
-    if normalize:
-        if albedo_offset_ is None:
-            direction = opts.get("direction", "columns")
-            offset, noise = _albedo_offset(on_g, off_g, direction)
-            fitted = offset
-            offset = 0.0 if np.isnan(offset) else offset
-            if direction != "columns":
-                noise = None  # estimated on the transposed images: not the threshold's
-        else:
-            offset = float(albedo_offset_)
-        normalize = not np.isinf(offset)
-    d = difference_image(on_g, off_g, normalize=normalize, offset=offset if normalize else 0.0)
-    automatic = opts.get("threshold") is None
-    first_opts: dict[str, Any] = {}
-    if normalize and automatic:
-        # Normalising raises the noise on dark squares, and the threshold that keeps their
-        # noise out would cut a faint stripe on a noisy image (3 grey levels of noise: half
-        # the columns lost): peaks are found on the image smoothed along the stripe.
-        opts.setdefault("detect_sigma_along", DETECT_ALONG)
-        opts["threshold"], plain = _normalized_threshold(
-            on_g, off_g, d, offset, noise, (opts["detect_sigma_along"], 0.0))
-        # the width estimate below needs a sample of the stripe's columns, not all: its pass
-        # finds them on the image itself (half the smoothing's cost)
-        first_opts = {"detect_sigma_along": 0.0, "threshold": plain}
-    weighted = opts.get("method") is None
-    if opts.get("method") is None:
-        # The pipeline's default centre: Steger's line detector at a scale fitted to the
-        # stripe (half its median FWHM, at least 3 px). Its smoothing along the stripe
-        # averages the laser speckle of neighbouring columns, which dominates the error of
-        # a per-column centroid (measured on the general renders: 0.10 -> 0.05 px RMS).
-        first = extract_stripe(d, **dict(opts, method="centroid", **first_opts))
-        w = first.width[first.found]
-        opts["method"] = "steger"
-        if opts.get("steger_sigma") is None:
-            opts["steger_sigma"] = float(np.clip(0.5 * np.median(w), 3.0, 20.0)) if w.size \
-                else 3.0
-        if opts.get("steger_sigma_along") is None and along != 1.0:
-            opts["steger_sigma_along"] = min(along * opts["steger_sigma"], 40.0)
-    stripe = extract_stripe(d, **opts)
-    if automatic and not stripe.found.any() and stripe.threshold >= float(d.max()):
-        raise ValueError(f"the automatic threshold {stripe.threshold:.4g} leaves no pixel of "
-                         f"the difference image (its maximum is {int(d.max())}): no stripe")
-    if weighted:
-        stripe = _weighted_centres(stripe, on_g, off_g, normalize, offset, noise,
-                                   opts.get("steger_sigma_along") or opts["steger_sigma"],
-                                   blur_var)
-    if assess:
-        # An albedo step under the profile is corrected by the normalisation (measured on
-        # the general renders: 0.09 px RMS at steps, against 0.05 px elsewhere, at most 0.2
-        # px), and the paper's corner mode needs the stripe that runs along a row of
-        # squares' edges: by default the ALBEDO_EDGE check runs only without the
-        # normalisation (``albedo_step`` chooses).
-        if albedo_step is None:
-            albedo_step = 0.0 if normalize else 1.5
-        stripe = assess_stripe(stripe, d, on_g, off_g, albedo_step=albedo_step,
-                               albedo_offset=max(offset, 0.0) if normalize else 0.0)
-    return stripe, fitted
+#: the options of :func:`extract_stripe` whose None is the pipeline's choice, not a value
+_CHOSEN = ("method", "threshold", "noise", "steger_sigma", "steger_sigma_along")
 
 
-def _weighted_centres(stripe: StripeResult, on_g: np.ndarray, off_g: np.ndarray,
-                      normalize: bool, offset: float, noise: float | None,
-                      sigma_along: float, blur_var: float = 0.0) -> StripeResult:
-    """The pipeline's default centres: Steger's ``stripe`` refined by
-    :func:`~hmlvs.image.stripe.refine_centres` on the unrounded difference image, whose
-    laser-off frame is first denoised by an edge-preserving (bilateral) filter: the frame is
-    the board's print under steady light, flat but for the squares' edges, and its noise would
-    otherwise enter the difference a second time. Measured on 9 sessions of an independent
-    renderer (tests/independent_check.py): each view's mean centre error 0.0113 px RMS with
-    Steger's centre, 0.0104 px refined on the plain difference, 0.0095 px with the denoised
-    frame. With ``blur_var`` (px^2: the variance of the optics' blur and the pixel's area)
-    the normalised difference is corrected at albedo steps (see :func:`stripe_from_pair`)."""
-    import cv2
+def frames_options(*, normalize: bool = True, **stripe_options: Any) -> Any:
+    """The C++ options of :func:`stripe_from_pair` with ``stripe_options`` (checked: an
+    unknown option raises ``TypeError``, a wrong value ``ValueError`` naming it), built once
+    for many frames (:class:`hmlvs.Measurer`)."""
+    o = dict(stripe_options)
+    assess = o.pop("assess", True)
+    albedo_step = o.pop("albedo_step", None)
+    albedo_offset_ = o.pop("albedo_offset", None)
+    blur_var = _blur_var(o.pop("blur_var", None))
+    along = _smooth_along(o.pop("smooth_along", None))
+    opts = StripeOptions(**{k: v for k, v in o.items() if not (k in _CHOSEN and v is None)
+                            and k != "channel"})
+    fo = _core._FrameStripeOptions()
+    fo.stripe = opts.to_core()
+    fo.method_given = o.get("method") is not None
+    fo.steger_sigma_given = o.get("steger_sigma") is not None
+    fo.steger_sigma_along_given = o.get("steger_sigma_along") is not None
+    fo.detect_sigma_along_given = "detect_sigma_along" in o
+    fo.dominance_given = "dominance" in o
+    fo.normalize = bool(normalize)
+    if albedo_offset_ is not None:
+        a = _real(albedo_offset_, "offset")
+        if np.isnan(a):
+            raise ValueError("offset must be a number or inf, got nan")
+        fo.albedo_offset = a
+    fo.assess = bool(assess)
+    if albedo_step is not None:
+        fo.albedo_step = _finite(albedo_step, "albedo_step")
+    fo.blur_var = blur_var
+    fo.smooth_along = along
+    return fo
 
-    if noise is None:
-        noise = float(_core._estimate_difference_noise(
-            _core._difference_image(on_g, off_g, False, -1.0, -1.0)))
-    frame = noise / np.sqrt(2.0)  # one frame's noise, of the difference of two
-    mean = float(off_g.mean())
-    # Only a band around the stripe is read: each scan line's window reaches at most 4.5
-    # profile sigmas (plus a pixel) from Steger's centre; the filter's 3 px radius more.
-    found = stripe.found & np.isfinite(stripe.centre) & np.isfinite(stripe.width)
-    if not found.any():
-        return stripe
-    reach = 4.5 * np.maximum(0.5, stripe.width[found] / 2.3548) + 2.0
-    n_prof = off_g.shape[0] if stripe.direction == "columns" else off_g.shape[1]
-    lo = int(max(0, np.floor(np.min(stripe.centre[found] - reach)) - 4))
-    hi = int(min(n_prof, np.ceil(np.max(stripe.centre[found] + reach)) + 5))
-    band = (slice(lo, hi), slice(None)) if stripe.direction == "columns" else \
-        (slice(None), slice(lo, hi))
-    full_shape = off_g.shape
-    on_g, off_g = on_g[band], off_g[band]
-    off_f = off_g.astype(np.float32)
-    if frame > 0:
-        # 7 px across, 3 px scale; a step of 4 noise sigmas (the print's edges are tens) is
-        # kept
-        bg = cv2.bilateralFilter(off_f, 7, 4.0 * frame, 3.0)
+
+def frames_stripe(on_g: np.ndarray, off_g: np.ndarray | None, options: Any,
+                  background: bool = False
+                  ) -> tuple[StripeResult, np.ndarray | None, float | None]:
+    """:func:`stripe_from_pair` of grey frames with the C++ ``options`` of
+    :func:`frames_options`: the stripe, the background estimated for a laser-on frame alone
+    (with ``background``; else None) and the albedo offset fitted (see
+    :func:`_stripe_and_background`)."""
+    r, fitted, offset, no_pixel, image_max, refined, bg = _core._stripe_from_frames(
+        on_g, off_g, options, bool(background))
+    if no_pixel:
+        raise ValueError(f"the automatic threshold {r.threshold:.4g} leaves no pixel of the "
+                         f"difference image (its maximum is {int(image_max)}): no stripe")
+    o = options.stripe
+    direction = "columns" if o.direction == _core._StripeDirection.columns else "rows"
+    if not options.method_given:
+        method = "weighted" if refined else "steger"
     else:
-        bg = off_f
-    diff = np.maximum(on_g.astype(np.float32) - bg, 0.0)
-    if normalize:
-        level = np.maximum(bg + np.float32(offset), max(1.0, 0.1 * mean))
-        gain = (mean + offset) / level
-        diff *= gain.astype(np.float32)
-        if blur_var > 0:
-            # Where the albedo changes under the profile, the blurred product of laser and
-            # albedo divided by the blurred albedo is not the laser's profile: to first
-            # order in the blur's variance s2 it is P + s2 grad(P) . grad(log albedo).
-            lv, lu = np.gradient(np.log(level))
-            pv, pu = np.gradient(diff)
-            diff = (diff - np.float32(blur_var) * (pv * lv + pu * lu)).astype(np.float32)
-    else:
-        gain = np.ones(1, np.float32)
-    # each scan line's additive noise: the laser-on frame's, times the gain at its centre
-    pos = np.clip(np.nan_to_num(np.rint(stripe.centre)) - lo, 0, hi - lo - 1).astype(int)
-    if gain.size == 1:
-        g = np.ones(pos.size)
-    elif stripe.direction == "columns":
-        g = gain[pos, np.arange(pos.size)]
-    else:
-        g = gain[np.arange(pos.size), pos]
-    line_noise = np.where(stripe.found, frame * g, np.nan)
-    whole = np.zeros(full_shape, np.float32)
-    whole[band] = diff
-    return refine_centres(stripe, whole, line_noise, sigma_along=sigma_along)
+        method = o.method.name
+    n = r.centre.shape[0]
+    stripe = StripeResult(
+        position=np.arange(n), centre=np.asarray(r.centre), intensity=np.asarray(r.intensity),
+        width=np.asarray(r.width), sigma=np.asarray(r.sigma),
+        status=np.asarray(r.status, dtype=np.uint8), num_peaks=np.asarray(r.num_peaks),
+        direction=direction, method=method, threshold=float(r.threshold),
+        noise=float(r.noise), residual=np.asarray(r.residual))
+    return stripe, bg, (float(offset) if fitted else None)
 
 
 #: Steger's default smoothing along the stripe, as a multiple of its scale across it, in
@@ -1021,8 +921,8 @@ BOARD_SMOOTH_ALONG = 2.0
 
 #: The smoothing along the stripe (px) of the image a normalised stripe's peaks are found
 #: on (``detect_sigma_along`` of :func:`~hmlvs.image.stripe.extract_stripe`): 2.7x less
-#: noise, at most 4 px of a jump's ends blurred together.
-DETECT_ALONG = 2.0
+#: noise, at most 4 px of a jump's ends blurred together (the C++ pipeline's default).
+DETECT_ALONG = float(_core._FrameStripeOptions.detect_along)
 
 
 def _in_range(value: Any, lo: float, hi: float) -> float | None:

@@ -133,112 +133,17 @@ def albedo_offset(on: np.ndarray, off: np.ndarray, direction: Direction = "colum
     laser-off level under it, on the scan lines whose peak lies on a dark and on a light
     surface (each away from edges, unsaturated, well above the noise). Returns 0 when the
     stripe does not cross two clearly different levels (fewer than 10 scan lines on either).
+    Computed in C++ (the fit :func:`stripe_from_pair` makes).
     """
-    a = _albedo_offset(on, off, direction)[0]
-    return 0.0 if np.isnan(a) else a
-
-
-def _albedo_offset(on: np.ndarray, off: np.ndarray,
-                   direction: Direction = "columns") -> tuple[float, float]:
-    """:func:`albedo_offset` (NaN where it returns 0 for want of two levels) and the noise
-    estimate of the plain difference image it used (``_estimate_difference_noise``; for
-    ``direction="rows"`` of the transposed images)."""
+    if direction not in _DIRECTIONS:
+        raise ValueError(f"direction must be 'columns' or 'rows', got {direction!r}")
     a = _as_gray(on, "the laser-on image", None)
     b = _as_gray(off, "the laser-off image", None)
-    if direction == "rows":
-        a, b = a.T, b.T
-    b = np.ascontiguousarray(b)
-    diff = _core._difference_image(np.ascontiguousarray(a), b, False,
-                                   -1.0, -1.0)  # max(on - off, 0), once for both uses
-    noise = float(_core._estimate_difference_noise(diff))
-    # Per column the peak of the difference averaged over 5 px along the stripe (less noise,
-    # the same peak), as cv2.blur(diff, (5, 1)) gives it (the 5-sum / 5 in double, rounded to
-    # float), found in C++ without filtering the whole image; the first row on ties.
-    m, total = _core._column_peaks(diff, 2)
-    m = np.asarray(m, dtype=np.intp)
-    peak = (np.asarray(total) * 0.2).astype(np.float32)
-    # the laser-off level (Gaussian, sigma 1 px) under the peak and whether it is flat (max /
-    # min within 7 x 7 px below 1.2), computed on a window around each column's peak
-    level, flat = _level_at(b, m)
-    top = float(np.iinfo(a.dtype).max)
-    cols = np.arange(a.shape[1])
-    lo, hi = np.clip(m - 2, 0, a.shape[0] - 1), np.clip(m + 2, 0, a.shape[0] - 1)
-    # 5 sigma of the 5-pixel mean (sqrt(5) less noise than a pixel): at 3 grey levels of
-    # noise, 5 sigmas of a pixel left too few dark squares' peaks for the fit
-    ok = flat & (peak > max(5.0 * noise / np.sqrt(5.0), 3.0)) & (a[lo, cols] < top) & \
-        (a[m, cols] < top) & (a[hi, cols] < top)
-    return _affine_offset(peak[ok], level[ok]), noise
-
-
-def _affine_offset(peak: np.ndarray, level: np.ndarray) -> float:
-    """The offset a of the peaks' fit as proportional to level + a (see albedo_offset); NaN
-    when the peaks do not lie on two clearly different levels."""
-    if peak.size < 20:
-        return float("nan")
-    p2, p98 = np.percentile(level, [2, 98])
-    if not p98 > 2.0 * max(p2, 1.0):
-        return float("nan")
-    split = np.sqrt(max(p2, 1.0) * p98)
-    dark = level < split
-    if dark.sum() < 10 or (~dark).sum() < 10:
-        return float("nan")
-    pd, pl = float(np.median(peak[dark])), float(np.median(peak[~dark]))
-    od, ol = float(np.median(level[dark])), float(np.median(level[~dark]))
-    if pl <= pd:
-        return float("inf")
-    return max((pd * ol - pl * od) / (pl - pd), -0.5 * od)
-
-
-def _reflect101(i: np.ndarray, n: int) -> np.ndarray:
-    """Indices mirrored into 0..n-1 as OpenCV's BORDER_REFLECT_101 does (``gfedcb|abcdefgh``)."""
-    if n == 1:
-        return np.zeros_like(i)
-    i = np.abs(i) % (2 * (n - 1))
-    return np.where(i >= n, 2 * (n - 1) - i, i)
-
-
-def _level_at(off: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per column c, with ``g = cv2.GaussianBlur(off.astype(np.float32), (0, 0), 1.0)``:
-    ``g[m[c], c]`` and whether ``max <= 1.2 * max(min, 1)`` over the 7 x 7 pixels of ``g``
-    around it that lie in the image (``cv2.dilate`` / ``cv2.erode`` with a 7 x 7 box), the
-    same values as filtering the whole image, at a fraction of its cost.
-
-    The 15 x 15 pixel window of ``off`` around each (m[c], c) (mirrored at the image border
-    as GaussianBlur's BORDER_REFLECT_101) holds every pixel the 9-tap kernel reads for the
-    central 7 x 7: the windows side by side make one 15-row image for GaussianBlur, whose
-    value at a pixel depends only on its neighbours, except in OpenCV's scalar loop over an
-    image's last (width mod vector width, 8 here) columns, which rounds differently from its
-    vector loop: windows reaching those columns are taken from a blur of the image's last
-    24..87 columns, started at a multiple of 64 so that the same columns fall in its scalar
-    loop. (That these are OpenCV's values to the bit is a test, run on this OpenCV build.)
-    """
-    import cv2
-    from numpy.lib.stride_tricks import sliding_window_view
-
-    h, w = off.shape
-    r7 = np.arange(-3, 4)
-    rows = m[:, None] + r7                                   # (w, 7)
-    cols = np.arange(w)[:, None] + r7                        # (w, 7)
-    inside = ((rows >= 0) & (rows < h))[:, :, None] & ((cols >= 0) & (cols < w))[:, None, :]
-    rc, cc = np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)
-    if h < 15 or w < 128:  # small images: the whole image
-        g = cv2.GaussianBlur(off.astype(np.float32), (0, 0), 1.0)
-        win = g[rc[:, :, None], cc[:, None, :]]
-    else:
-        pad = cv2.copyMakeBorder(off, 7, 7, 7, 7, cv2.BORDER_REFLECT_101)
-        mosaic = np.zeros((15, -(-15 * w // 64) * 64), np.float32)  # no scalar tail in it
-        mosaic[:, :15 * w].reshape(15, w, 15)[...] = \
-            sliding_window_view(pad, (15, 15))[m, np.arange(w)].transpose(1, 0, 2)
-        g = cv2.GaussianBlur(mosaic, (0, 0), 1.0)
-        win = g[:, :15 * w].reshape(15, w, 15)[4:11, :, 4:11].transpose(1, 0, 2).copy()
-        x0 = max(0, (w - 24) // 64 * 64)
-        tail = np.arange(x0 + 7, w)  # windows from column x0 + 4 on: the strip's own pixels
-        strip = cv2.GaussianBlur(off[:, x0:].astype(np.float32), (0, 0), 1.0)
-        win[tail] = strip[rc[tail][:, :, None], cc[tail][:, None, :] - x0]
-    inf = np.float32(np.inf)
-    hi = np.where(inside, win, -inf).max(axis=(1, 2))
-    lo = np.where(inside, win, inf).min(axis=(1, 2))
-    return win[:, 3, 3], hi <= 1.2 * np.maximum(lo, 1.0)
+    if a.shape != b.shape:
+        raise ValueError(f"the laser-on image is {a.shape[1]} x {a.shape[0]} pixels but the "
+                         f"laser-off image is {b.shape[1]} x {b.shape[0]}")
+    offset = float(_core._fit_albedo_offset(a, b, _DIRECTIONS[direction])[0])
+    return 0.0 if np.isnan(offset) else offset
 
 
 # ------------------------------------------------------------------------------------------

@@ -3,10 +3,10 @@ points, frame after frame, from one or several threads.
 
 ``Measurer(calibration).points(frame, base_from_hand)`` extracts the stripe as the session
 pipeline does (:func:`hmlvs.image.session.stripe_from_pair`: a laser-on frame alone, or with
-its laser-off frame) and maps every found centre through the calibration to the camera and the
-robot base. Nothing is shared between calls but the calibration, which is read only: one
-``Measurer`` serves several threads, and the heavy parts (OpenCV, the C++ kernels) release the
-GIL.
+its laser-off frame; one C++ call per frame) and maps every found centre through the
+calibration to the camera and the robot base. Nothing is shared between calls but the
+calibration and the options, which are read only: one ``Measurer`` serves several threads, and
+the heavy parts (the C++ kernels) release the GIL.
 """
 
 from __future__ import annotations
@@ -85,7 +85,7 @@ class Measurer:
         options = dict(stripe_options)
         if options.get("blur_var") is None and getattr(calibration, "blur_var", None):
             options["blur_var"] = calibration.blur_var
-        from ..image.session import stripe_from_pair
+        from ..image.session import frames_options, stripe_from_pair
 
         # a typo in the options is the caller's error, found now rather than at frame one
         try:
@@ -94,12 +94,17 @@ class Measurer:
         except TypeError as e:  # an unknown keyword
             raise ValueError(f"stripe options {sorted(options)}: {e}") from None
         self._options = options
+        # grey frames (or a colour frame's channel) go straight to the C++ pipeline with its
+        # options built once; colour frames first pick the laser's channel (stripe_from_pair)
+        fast = {k: v for k, v in options.items() if k != "channel"}
+        self._channel = options.get("channel")
+        self._core = frames_options(**fast)
+        self._hand_from_camera = np.asarray(self._model.hand_from_camera_matrix(), float)
 
     def points(self, frame: np.ndarray, base_from_hand: Any,
                off: np.ndarray | None = None) -> Profile:
         """The stripe of ``frame`` (laser on; ``off``: the laser-off frame at the same pose,
         if taken) measured at the robot pose ``base_from_hand`` (4 x 4, mm)."""
-        from ..image.session import stripe_from_pair
 
         frame = _image(frame, "the frame")
         if self.image_size is not None and (frame.shape[1], frame.shape[0]) != self.image_size:
@@ -113,7 +118,7 @@ class Measurer:
             raise ValueError(f"base_from_hand must be a finite 4 x 4 transform, got shape "
                              f"{pose.shape}")
         try:
-            stripe = stripe_from_pair(frame, off, **self._options)
+            stripe = self._stripe(frame, off)
         except ValueError as e:
             if "leaves no pixel" not in str(e):
                 raise
@@ -135,13 +140,25 @@ class Measurer:
         px = stripe.pixels
         if len(px):
             cam, ok = self._model.points_in_camera(px, on_invalid="mask")
-            base, _ = self._model.points_in_base(px, np.repeat(pose[None], len(px), axis=0),
-                                                 on_invalid="mask")
+            base_from_camera = pose @ self._hand_from_camera
             pixels[found] = px
             camera[found[ok]] = cam[ok]
-            points[found[ok]] = base[ok]
+            points[found[ok]] = cam[ok] @ base_from_camera[:3, :3].T + base_from_camera[:3, 3]
             status[found] = np.where(ok, PointStatus.MEASURED, PointStatus.NO_POINT)
         return Profile(pixels, points, camera, status, stripe_status)
+
+    def _stripe(self, frame: np.ndarray, off: np.ndarray | None) -> Any:
+        """The frame's stripe: grey frames (or with a given channel) through the C++ options
+        built once, colour ones through stripe_from_pair (which picks the laser's channel)."""
+        from ..image.colour import is_colour
+        from ..image.session import frames_stripe, stripe_from_pair
+        from ..image.stripe import _as_gray
+
+        if self._channel is None and is_colour(frame):
+            return stripe_from_pair(frame, off, **self._options)
+        on_g = _as_gray(frame, "the laser-on image", self._channel)
+        off_g = None if off is None else _as_gray(off, "the laser-off image", self._channel)
+        return frames_stripe(on_g, off_g, self._core)[0]
 
 
 def _checked_only(options: dict[str, Any]) -> dict[str, Any]:
