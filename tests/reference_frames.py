@@ -22,8 +22,8 @@ from hmlvs.image.session import DETECT_ALONG, _blur_var, _smooth_along
 from hmlvs.image.stripe import (
     Direction,
     StripeResult,
-    _as_gray,
     _normalized_threshold,
+    as_gray,
     assess_stripe,
     difference_image,
     extract_stripe,
@@ -100,7 +100,7 @@ def _drop_jumps(stripe: StripeResult, window: int = 41, jump: float = 1.0) -> St
 def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool = True,
                      assess: bool = True, **stripe_options: Any) -> StripeResult:
     """hmlvs.image.session.stripe_from_pair of grey frames, in NumPy and OpenCV."""
-    on_g = _as_gray(on, "the laser-on image", None)
+    on_g = as_gray(on, "the laser-on image", None)
     stripe_options = dict(stripe_options)
     albedo_step = stripe_options.pop("albedo_step", None)
     albedo_offset_ = stripe_options.pop("albedo_offset", None)
@@ -109,7 +109,7 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
         return _stripe_and_background(on_g, None, normalize, dict(
             stripe_options, assess=assess, albedo_step=albedo_step,
             albedo_offset=albedo_offset_, blur_var=blur_var))[0]
-    off_g = _as_gray(off, "the laser-off image", None)
+    off_g = as_gray(off, "the laser-off image", None)
     return _pair_stripe(on_g, off_g, normalize, assess, albedo_step, albedo_offset_,
                         stripe_options, blur_var)[0]
 
@@ -256,8 +256,8 @@ def _albedo_offset(on: np.ndarray, off: np.ndarray,
     """:func:`albedo_offset` (NaN where it returns 0 for want of two levels) and the noise
     estimate of the plain difference image it used (``_estimate_difference_noise``; for
     ``direction="rows"`` of the transposed images)."""
-    a = _as_gray(on, "the laser-on image", None)
-    b = _as_gray(off, "the laser-off image", None)
+    a = as_gray(on, "the laser-on image", None)
+    b = as_gray(off, "the laser-off image", None)
     if direction == "rows":
         a, b = a.T, b.T
     b = np.ascontiguousarray(b)

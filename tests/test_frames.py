@@ -18,7 +18,8 @@ import subprocess
 import sys
 
 import cv2
-from hmlvs.image.session import _drop_jumps, estimate_background, stripe_from_pair
+from hmlvs.image.colour import drop_jumps
+from hmlvs.image.session import estimate_background, stripe_from_pair
 from hmlvs.image.stripe import StripeStatus, albedo_offset
 from hmlvs.sim.general import example_sensor, general_session, render_general_view
 import numpy as np
@@ -160,8 +161,8 @@ def test_background_and_jumps_are_opencvs_and_scipys():
     centre = stripe.centre.copy()
     centre[100:104] += 3.0  # a jump
     for s in (replace_centre(stripe, centre), stripe):
-        np.testing.assert_array_equal(_drop_jumps(s).status, ref._drop_jumps(s).status)
-    assert (_drop_jumps(replace_centre(stripe, centre)).status[100:104] ==
+        np.testing.assert_array_equal(drop_jumps(s).status, ref._drop_jumps(s).status)
+    assert (drop_jumps(replace_centre(stripe, centre)).status[100:104] ==
             StripeStatus.MULTIPLE).all()
 
 

@@ -2,7 +2,7 @@
 
 A real capture is often one colour frame per pose with the laser on (no laser-off frame):
 the board's squares, the sheet it is printed on, glare and a darkened room all lie under the
-stripe. The laser shows most in one channel (:func:`~hmlvs.image.session.laser_channel`);
+stripe. The laser shows most in one channel (:func:`laser_channel`);
 the stripe is found on that channel less its background, estimated by opening each column
 with a vertical line longer than the stripe is wide (the stripe goes, the board's squares
 and edges, taller than the line, stay): :func:`laser_feature`. No division by the
@@ -27,7 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from .stripe import StripeResult, StripeStatus, assess_stripe, extract_stripe
+from .. import _core
+from .stripe import StripeResult, StripeStatus, as_gray, assess_stripe, extract_stripe, real_number
 
 #: the first opening's stripe width (px): a line of 2 ceil(1.5 x 10) + 1 = 31 px; the second
 #: fits the stripe's median FWHM measured on the first (4-45 px: the Blaser frames' stripes
@@ -44,10 +45,9 @@ def is_colour(image: Any) -> bool:
 def laser_feature(on: np.ndarray, channel: int | None = None,
                   width: float = BACKGROUND_WIDTH) -> np.ndarray:
     """The laser's light in a colour laser-on frame: its channel less the channel's
-    background (:func:`~hmlvs.image.session.estimate_background` at stripe FWHM ``width``
+    background (:func:`estimate_background` at stripe FWHM ``width``
     px), same dtype as ``on``. ``channel``: the laser's (default:
-    :func:`~hmlvs.image.session.laser_channel`)."""
-    from .session import estimate_background, laser_channel
+    :func:`laser_channel`)."""
 
     if not is_colour(on) or on.dtype not in (np.uint8, np.uint16):
         raise ValueError("laser_feature needs an 8- or 16-bit colour (BGR/BGRA) image")
@@ -80,7 +80,6 @@ def colour_stripe(on: np.ndarray, channel: int | None = None,
 
     Raises ``ValueError`` when the automatic threshold leaves no pixel (no stripe).
     """
-    from .session import _drop_jumps, laser_channel
 
     channel = laser_channel(on) if channel is None else channel
     feat = laser_feature(on, channel)
@@ -111,7 +110,7 @@ def colour_stripe(on: np.ndarray, channel: int | None = None,
     # Blaser laser-only frames: up to 1,300 saturated pixels a frame).
     status = np.where(assessed.status == StripeStatus.SATURATED, StripeStatus.FOUND,
                       assessed.status).astype(np.uint8)
-    return _drop_jumps(replace(assessed, status=status))
+    return drop_jumps(replace(assessed, status=status))
 
 
 def board_gray(image: np.ndarray) -> np.ndarray:
@@ -122,3 +121,55 @@ def board_gray(image: np.ndarray) -> np.ndarray:
         return image
     code = cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY
     return cv2.cvtColor(np.ascontiguousarray(image), code)
+
+
+def laser_channel(on: np.ndarray, off: np.ndarray | None = None) -> int | None:
+    """The colour channel that shows the laser: None for a grayscale image; for colour
+    (BGR / BGRA) the channel with the strongest laser-on minus laser-off difference (its
+    99.9th-percentile excess), or without a laser-off frame the channel whose stripe stands
+    out most from its background (:func:`estimate_background`) in a typical column: the
+    median over the columns of their largest excess. (Not a percentile over the image: where
+    a stripe's core saturates to white every channel reaches the top there, and the channel
+    with the darkest background wins; measured on the Blaser frames, 7 of 55 laser-on
+    frames then gave green for a red laser, none with the median.)"""
+    if not isinstance(on, np.ndarray) or on.ndim != 3 or on.shape[2] == 1:
+        return None
+    if on.shape[2] not in (3, 4):
+        raise ValueError(f"the laser-on image has {on.shape[2]} channels; expected 1 (gray), "
+                         "3 (BGR) or 4 (BGRA)")
+    score = []
+    for c in range(3):
+        a = on[:, :, c]
+        b = (estimate_background(np.ascontiguousarray(a)) if off is None
+             else off[:, :, c] if isinstance(off, np.ndarray) and off.ndim == 3 else None)
+        if b is None:
+            return None  # a colour laser-on frame with a gray laser-off one: convert both
+        d = a.astype(np.float64) - b
+        score.append(float(np.percentile(d, 99.9)) if off is not None
+                     else float(np.median(d.max(axis=0))))
+    return int(np.argmax(score))
+
+
+def estimate_background(on: np.ndarray, width: float = 8.0) -> np.ndarray:
+    """The laser-on image without its stripe: a morphological opening of every column (a
+    vertical line of 2 * ceil(1.5 * width) + 1 px, at least 9) removes bright structures
+    narrower than that along the column, such as a roughly horizontal stripe of FWHM
+    ``width``, and keeps the board's squares and edges (larger than the line). Stands in
+    for the laser-off frame of a session taken without one; the stripe must run across the
+    columns (``direction="columns"``). Computed in C++ (the values of OpenCV's
+    ``morphologyEx(MORPH_OPEN, ones((k, 1)), borderType=BORDER_REPLICATE)``; a colour image
+    channel by channel)."""
+    if is_colour(on) and on.dtype in (np.uint8, np.uint16):
+        return np.dstack([estimate_background(on[:, :, c], width) for c in range(on.shape[2])])
+    return _core._estimate_background(as_gray(on, "the laser-on image", None),
+                                      real_number(width, "width"))
+
+
+def drop_jumps(stripe: StripeResult, window: int = 41, jump: float = 1.0) -> StripeResult:
+    """Scan lines whose centre lies more than ``jump`` px from the running median of the
+    found centres (``window`` of them) become MULTIPLE: without a laser-off frame a leftover
+    of the board (near a square's corner) can outshine a faint stripe in a few neighbouring
+    columns, and the stripe is continuous where those are not (computed in C++)."""
+    status = _core._drop_jumps(np.asarray(stripe.centre, float),
+                               np.asarray(stripe.status, np.uint8))
+    return replace(stripe, status=np.asarray(status, np.uint8))

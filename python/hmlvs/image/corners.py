@@ -12,7 +12,7 @@ from .._arrays import robust_sigma
 from .._opencv import calibrate_camera
 from ..errors import BoardNotFoundError, NumberingError  # noqa: F401 (re-exported)
 from ..models.paper import project
-from .stripe import _as_gray
+from .stripe import as_gray
 
 # ------------------------------------------------------------------------------------------
 # Options
@@ -383,7 +383,7 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
         raise ValueError(f"options must be a CornerOptions, got {options!r}")
     extend, max_error = options.extend, options.max_error
     board = Checkerboard() if board is None else board
-    gray = _to_8bit(_as_gray(image, "the image", None))
+    gray = _to_8bit(as_gray(image, "the image", None))
     h, w = gray.shape
     n_board = board.rows * board.cols
     bxy = board.board_coordinates()
@@ -749,7 +749,7 @@ def sb_positions(image: np.ndarray, corners: Corners) -> Corners:
     import cv2
 
     board = corners.board
-    gray = _to_8bit(_as_gray(image, "the image", None))
+    gray = _to_8bit(as_gray(image, "the image", None))
     cv2.setRNGSeed(0)
     ok, found = cv2.findChessboardCornersSB(
         gray, (board.cols, board.rows),
@@ -972,7 +972,7 @@ def detect_grid(image: np.ndarray, board: Any = None) -> CornerGrid:
 
     from ..geometry.board import Checkerboard
     board = Checkerboard() if board is None else board
-    gray8 = _to_8bit(_as_gray(image, "the image", None))
+    gray8 = _to_8bit(as_gray(image, "the image", None))
     gray = gray8.astype(np.float32)
     h, w = gray.shape
     top = float(np.percentile(gray, 99.5) - np.percentile(gray, 0.5))
@@ -1099,7 +1099,7 @@ def number_grid(image: np.ndarray, grid: CornerGrid, board: Any, expected: np.nd
     are then refined and extended over the board as in :func:`find_corners`
     (``Corners.rule == "predicted"``)."""
     options = CornerOptions() if options is None else options
-    gray = _to_8bit(_as_gray(image, "the image", None))
+    gray = _to_8bit(as_gray(image, "the image", None))
     exp = np.asarray(expected, dtype=float)
     n_board = board.rows * board.cols
     if exp.shape != (n_board, 2):
@@ -1173,7 +1173,7 @@ def number_grid_by_pose(image: np.ndarray, grid: CornerGrid, board: Any,
     instead of predicted pixels; then refined and extended the same way
     (``Corners.rule == "pose"``)."""
     options = CornerOptions() if options is None else options
-    gray = _to_8bit(_as_gray(image, "the image", None))
+    gray = _to_8bit(as_gray(image, "the image", None))
     m, n = grid.shape
     px = grid.pixels.reshape(-1, 2)
     i, j = (a.ravel() for a in np.meshgrid(np.arange(m), np.arange(n), indexing="ij"))
@@ -1203,7 +1203,7 @@ def detect_charuco(image: np.ndarray, board: Any, min_corners: int = 4) -> Corne
 
     if not getattr(board, "unambiguous", False) or not hasattr(board, "cv_board"):
         raise ValueError(f"detect_charuco needs a CharucoSpec board, got {board!r}")
-    gray = _to_8bit(_as_gray(image, "the image", None))
+    gray = _to_8bit(as_gray(image, "the image", None))
     h, w = gray.shape
     found, ids, markers, _ = cv2.aruco.CharucoDetector(board.cv_board()).detectBoard(gray)
     n = 0 if ids is None else len(ids)

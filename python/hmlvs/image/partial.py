@@ -19,6 +19,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..data.views import ViewData
+from .accounts import ImageReport
 from .corners import (
     BoardNotFoundError,
     CornerGrid,
@@ -27,7 +28,6 @@ from .corners import (
     find_corners,
     number_grid_by_pose,
 )
-from .session import ImageReport
 
 
 @dataclass(frozen=True)

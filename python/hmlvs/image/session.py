@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -10,17 +10,25 @@ import numpy as np
 
 from .. import _core
 from ..data.views import ViewData
-from .colour import board_gray, colour_stripe, is_colour
+from .accounts import ImageReport
+from .colour import (  # noqa: F401 (laser_channel, estimate_background re-exported)
+    board_gray,
+    colour_stripe,
+    drop_jumps,
+    estimate_background,
+    is_colour,
+    laser_channel,
+)
 from .corners import BoardNotFoundError, find_corners
 from .points import Mode, calibration_points, fit_division_distortion
 from .stripe import (
     StripeOptions,
     StripeResult,
     StripeStatus,
-    _as_gray,
     _finite,
-    _real,
+    as_gray,
     extract_stripe,
+    real_number,
 )
 
 #: the laser-off name of a pair without a laser-off frame (shown in its report)
@@ -28,53 +36,6 @@ ESTIMATED_OFF = "none: background estimated from the laser-on image"
 
 # ------------------------------------------------------------------------------------------
 # A session of images -> a calibration data set
-
-
-@dataclass(frozen=True)
-class ImageReport:
-    """What :func:`dataset_from_images` found in one image pair, and what it rejected.
-
-    Attributes
-    ----------
-    id : the pose id (``"p003"``)
-    index : position of the pair in the session (the data set's ``pose_index``)
-    on, off : the image files (or ``"<array>"``)
-    ok : True when the pair gave at least one calibration point
-    reason : why the whole pair was rejected ("" when ok)
-    stripe : scan lines per stripe status (``{"FOUND": 612, "MULTIPLE": 3, ...}``)
-    corners : corners found and numbered
-    points : calibration points contributed
-    rejected : candidate points not used, with the reason for each
-    blur_var : the camera blur variance (px^2) the stripe was corrected with at albedo steps
-        (:func:`stripe_from_pair` ``blur_var``, fitted to the session unless given); None
-        for a rejected pair
-    view : the pair's numbered corners, stripe pixels and robot pose
-        (:class:`hmlvs.data.views.ViewData`) when it was used (for the verdict's corner and
-        chain checks); None otherwise
-    """
-
-    id: str
-    index: int
-    on: str
-    off: str
-    ok: bool
-    reason: str = ""
-    stripe: dict[str, int] = field(default_factory=dict)
-    corners: int = 0
-    points: int = 0
-    rejected: dict[str, str] = field(default_factory=dict)
-    blur_var: float | None = None
-    view: Any = field(default=None, repr=False, compare=False)
-
-    def __str__(self) -> str:
-        if not self.ok:
-            return f"{self.id}: rejected: {self.reason}"
-        n = len(self.rejected)
-        extra = (f"; {n} candidate point{'s' if n > 1 else ''} not used ("
-                 + "; ".join(f"{k}: {v}" for k, v in self.rejected.items()) + ")"
-                 if self.rejected else "")
-        return (f"{self.id}: {self.points} points, {self.corners} corners, stripe in "
-                f"{self.stripe.get('FOUND', 0)} scan lines{extra}")
 
 
 class _Reject(Exception):
@@ -661,8 +622,8 @@ def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
         except ValueError as e:
             raise _Reject(str(e)) from None
     try:
-        on_g = _as_gray(on, "the laser-on image", channel)
-        off_g = None if off is None else _as_gray(off, "the laser-off image", channel)
+        on_g = as_gray(on, "the laser-on image", channel)
+        off_g = None if off is None else as_gray(off, "the laser-off image", channel)
     except ValueError as e:
         raise _Reject(str(e)) from None
     if off_g is not None and (on_g.shape != off_g.shape or on_g.dtype != off_g.dtype):
@@ -726,48 +687,6 @@ def _restripe(pair: _Pair, offset: float, normalize: bool, stripe_options: dict[
     return pair
 
 
-def laser_channel(on: np.ndarray, off: np.ndarray | None = None) -> int | None:
-    """The colour channel that shows the laser: None for a grayscale image; for colour
-    (BGR / BGRA) the channel with the strongest laser-on minus laser-off difference (its
-    99.9th-percentile excess), or without a laser-off frame the channel whose stripe stands
-    out most from its background (:func:`estimate_background`) in a typical column: the
-    median over the columns of their largest excess. (Not a percentile over the image: where
-    a stripe's core saturates to white every channel reaches the top there, and the channel
-    with the darkest background wins; measured on the Blaser frames, 7 of 55 laser-on
-    frames then gave green for a red laser, none with the median.)"""
-    if not isinstance(on, np.ndarray) or on.ndim != 3 or on.shape[2] == 1:
-        return None
-    if on.shape[2] not in (3, 4):
-        raise ValueError(f"the laser-on image has {on.shape[2]} channels; expected 1 (gray), "
-                         "3 (BGR) or 4 (BGRA)")
-    score = []
-    for c in range(3):
-        a = on[:, :, c]
-        b = (estimate_background(np.ascontiguousarray(a)) if off is None
-             else off[:, :, c] if isinstance(off, np.ndarray) and off.ndim == 3 else None)
-        if b is None:
-            return None  # a colour laser-on frame with a gray laser-off one: convert both
-        d = a.astype(np.float64) - b
-        score.append(float(np.percentile(d, 99.9)) if off is not None
-                     else float(np.median(d.max(axis=0))))
-    return int(np.argmax(score))
-
-
-def estimate_background(on: np.ndarray, width: float = 8.0) -> np.ndarray:
-    """The laser-on image without its stripe: a morphological opening of every column (a
-    vertical line of 2 * ceil(1.5 * width) + 1 px, at least 9) removes bright structures
-    narrower than that along the column, such as a roughly horizontal stripe of FWHM
-    ``width``, and keeps the board's squares and edges (larger than the line). Stands in
-    for the laser-off frame of a session taken without one; the stripe must run across the
-    columns (``direction="columns"``). Computed in C++ (the values of OpenCV's
-    ``morphologyEx(MORPH_OPEN, ones((k, 1)), borderType=BORDER_REPLICATE)``; a colour image
-    channel by channel)."""
-    if is_colour(on) and on.dtype in (np.uint8, np.uint16):
-        return np.dstack([estimate_background(on[:, :, c], width) for c in range(on.shape[2])])
-    return _core._estimate_background(_as_gray(on, "the laser-on image", None),
-                                      _real(width, "width"))
-
-
 def _stripe_and_background(on_g: np.ndarray, off_g: np.ndarray | None, normalize: bool,
                            stripe_options: dict[str, Any]
                            ) -> tuple[StripeResult, np.ndarray, float | None]:
@@ -778,16 +697,6 @@ def _stripe_and_background(on_g: np.ndarray, off_g: np.ndarray | None, normalize
     core = frames_options(normalize=normalize, **stripe_options)
     stripe, background, fitted = frames_stripe(on_g, off_g, core, background=off_g is None)
     return stripe, off_g if off_g is not None else background, fitted
-
-
-def _drop_jumps(stripe: StripeResult, window: int = 41, jump: float = 1.0) -> StripeResult:
-    """Scan lines whose centre lies more than ``jump`` px from the running median of the
-    found centres (``window`` of them) become MULTIPLE: without a laser-off frame a leftover
-    of the board (near a square's corner) can outshine a faint stripe in a few neighbouring
-    columns, and the stripe is continuous where those are not (computed in C++)."""
-    status = _core._drop_jumps(np.asarray(stripe.centre, float),
-                               np.asarray(stripe.status, np.uint8))
-    return replace(stripe, status=np.asarray(status, np.uint8))
 
 
 def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool = True,
@@ -840,8 +749,8 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
         return colour_stripe(on, None, **stripe_options)
     if channel is None:
         channel = laser_channel(on, off)
-    on_g = _as_gray(on, "the laser-on image", channel)
-    off_g = None if off is None else _as_gray(off, "the laser-off image", channel)
+    on_g = as_gray(on, "the laser-on image", channel)
+    off_g = None if off is None else as_gray(off, "the laser-off image", channel)
     return frames_stripe(on_g, off_g, frames_options(normalize=normalize, assess=assess,
                                                      **stripe_options))[0]
 
@@ -871,7 +780,7 @@ def frames_options(*, normalize: bool = True, **stripe_options: Any) -> Any:
     fo.dominance_given = "dominance" in o
     fo.normalize = bool(normalize)
     if albedo_offset_ is not None:
-        a = _real(albedo_offset_, "offset")
+        a = real_number(albedo_offset_, "offset")
         if np.isnan(a):
             raise ValueError("offset must be a number or inf, got nan")
         fo.albedo_offset = a

@@ -48,7 +48,7 @@ class StripeStatus(enum.IntEnum):
 # Input checks
 
 
-def _as_gray(image: Any, name: str, channel: int | None) -> np.ndarray:
+def as_gray(image: Any, name: str, channel: int | None) -> np.ndarray:
     """A 2D uint8/uint16 view of ``image``; colour is converted (or one channel taken)."""
     if not isinstance(image, np.ndarray):
         raise ValueError(f"{name} must be a numpy array (an image), got {type(image).__name__}")
@@ -100,12 +100,12 @@ def difference_image(on: np.ndarray, off: np.ndarray, channel: int | None = None
     -------
     (rows, cols) array of the input's dtype: ``on - off`` where ``on > off``, else 0.
     """
-    a = _as_gray(on, "the laser-on image", channel)
-    b = _as_gray(off, "the laser-off image", channel)
+    a = as_gray(on, "the laser-on image", channel)
+    b = as_gray(off, "the laser-off image", channel)
     if a.shape != b.shape:
         raise ValueError(f"the laser-on image is {a.shape[1]} x {a.shape[0]} pixels but the "
                          f"laser-off image is {b.shape[1]} x {b.shape[0]}")
-    offset = _real(offset, "offset")
+    offset = real_number(offset, "offset")
     if np.isnan(offset):
         raise ValueError("offset must be a number or inf, got nan")
     if normalize and np.isinf(offset):
@@ -137,8 +137,8 @@ def albedo_offset(on: np.ndarray, off: np.ndarray, direction: Direction = "colum
     """
     if direction not in _DIRECTIONS:
         raise ValueError(f"direction must be 'columns' or 'rows', got {direction!r}")
-    a = _as_gray(on, "the laser-on image", None)
-    b = _as_gray(off, "the laser-off image", None)
+    a = as_gray(on, "the laser-on image", None)
+    b = as_gray(off, "the laser-off image", None)
     if a.shape != b.shape:
         raise ValueError(f"the laser-on image is {a.shape[1]} x {a.shape[0]} pixels but the "
                          f"laser-off image is {b.shape[1]} x {b.shape[0]}")
@@ -318,7 +318,7 @@ def extract_stripe(image: np.ndarray, direction: Direction = "columns",
     elif not isinstance(options, StripeOptions):
         raise ValueError(f"options must be a StripeOptions, got {options!r}")
     direction, method = options.direction, options.method
-    img = _as_gray(image, "the image", options.channel)
+    img = as_gray(image, "the image", options.channel)
     r = _core._extract_stripe(img, options.to_core())
     n = r.centre.shape[0]
     return StripeResult(
@@ -360,8 +360,8 @@ def assess_stripe(stripe: StripeResult, image: np.ndarray, on: np.ndarray | None
     """
     if not isinstance(stripe, StripeResult):
         raise ValueError(f"stripe must be a StripeResult, got {type(stripe).__name__}")
-    img = _as_gray(image, "the image", None)
-    frames = [None if x is None else _as_gray(x, name, None)
+    img = as_gray(image, "the image", None)
+    frames = [None if x is None else as_gray(x, name, None)
               for x, name in ((on, "the laser-on image"), (off, "the laser-off image"))]
     o = _core._StripeQualityOptions()
     o.albedo_step = _finite(albedo_step, "albedo_step")
@@ -464,14 +464,14 @@ def refine_centres(stripe: StripeResult, image: np.ndarray, noise: Any, *,
                    method="weighted")
 
 
-def _real(x: Any, name: str) -> float:
+def real_number(x: Any, name: str) -> float:
     if isinstance(x, bool) or not isinstance(x, Real):
         raise ValueError(f"stripe.{name} must be a number, got {x!r}")
     return float(x)
 
 
 def _finite(x: Any, name: str) -> float:
-    v = _real(x, name)
+    v = real_number(x, name)
     if not np.isfinite(v):
         raise ValueError(f"stripe.{name} must be a finite number, got {x!r}")
     return v
@@ -485,7 +485,7 @@ def _positive(x: Any, name: str) -> float:
 
 
 def _nonneg(x: Any, name: str) -> float:
-    v = _real(x, name)
+    v = real_number(x, name)
     if not (np.isfinite(v) and v >= 0):
         raise ValueError(f"stripe.{name} must be a finite number >= 0, got {x!r}")
     return v

@@ -152,12 +152,12 @@ class Measurer:
         built once, colour ones through stripe_from_pair (which picks the laser's channel)."""
         from ..image.colour import is_colour
         from ..image.session import frames_stripe, stripe_from_pair
-        from ..image.stripe import _as_gray
+        from ..image.stripe import as_gray
 
         if self._channel is None and is_colour(frame):
             return stripe_from_pair(frame, off, **self._options)
-        on_g = _as_gray(frame, "the laser-on image", self._channel)
-        off_g = None if off is None else _as_gray(off, "the laser-off image", self._channel)
+        on_g = as_gray(frame, "the laser-on image", self._channel)
+        off_g = None if off is None else as_gray(off, "the laser-off image", self._channel)
         return frames_stripe(on_g, off_g, self._core)[0]
 
 

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ..image.stripe import StripeResult, StripeStatus, _as_gray
+from ..image.stripe import StripeResult, StripeStatus, as_gray
 
 #: BGR colour of each stripe status (NONE is not drawn: most scan lines miss the stripe)
 STATUS_COLOURS: dict[StripeStatus, tuple[int, int, int]] = {
@@ -70,7 +70,7 @@ def draw_view(image: np.ndarray, corners: Any = None, stripe: StripeResult | Non
     for rows), and ``title`` at the top left."""
     import cv2
 
-    gray = _as_gray(image, "the image", None)
+    gray = as_gray(image, "the image", None)
     if gray.dtype == np.uint16:
         gray = (gray >> 8).astype(np.uint8)
     out = cv2.cvtColor(np.ascontiguousarray(gray), cv2.COLOR_GRAY2BGR)

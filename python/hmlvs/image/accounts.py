@@ -1,0 +1,54 @@
+"""What the image pipeline says about each image pair it reads (:class:`ImageReport`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+
+@dataclass(frozen=True)
+class ImageReport:
+    """What :func:`~hmlvs.image.session.dataset_from_images` found in one image pair, and what
+    it rejected.
+
+    Attributes
+    ----------
+    id : the pose id (``"p003"``)
+    index : position of the pair in the session (the data set's ``pose_index``)
+    on, off : the image files (or ``"<array>"``)
+    ok : True when the pair gave at least one calibration point
+    reason : why the whole pair was rejected ("" when ok)
+    stripe : scan lines per stripe status (``{"FOUND": 612, "MULTIPLE": 3, ...}``)
+    corners : corners found and numbered
+    points : calibration points contributed
+    rejected : candidate points not used, with the reason for each
+    blur_var : the camera blur variance (px^2) the stripe was corrected with at albedo steps
+        (:func:`~hmlvs.image.session.stripe_from_pair` ``blur_var``, fitted to the session
+        unless given); None for a rejected pair
+    view : the pair's numbered corners, stripe pixels and robot pose
+        (:class:`hmlvs.data.views.ViewData`) when it was used (for the verdict's corner and
+        chain checks); None otherwise
+    """
+
+    id: str
+    index: int
+    on: str
+    off: str
+    ok: bool
+    reason: str = ""
+    stripe: dict[str, int] = field(default_factory=dict)
+    corners: int = 0
+    points: int = 0
+    rejected: dict[str, str] = field(default_factory=dict)
+    blur_var: float | None = None
+    view: Any = field(default=None, repr=False, compare=False)
+
+    def __str__(self) -> str:
+        if not self.ok:
+            return f"{self.id}: rejected: {self.reason}"
+        n = len(self.rejected)
+        extra = (f"; {n} candidate point{'s' if n > 1 else ''} not used ("
+                 + "; ".join(f"{k}: {v}" for k, v in self.rejected.items()) + ")"
+                 if self.rejected else "")
+        return (f"{self.id}: {self.points} points, {self.corners} corners, stripe in "
+                f"{self.stripe.get('FOUND', 0)} scan lines{extra}")
