@@ -18,15 +18,15 @@ from dataclasses import replace
 from typing import Any
 
 from hmlvs import _core
-from hmlvs.image.session import DETECT_ALONG, _blur_var, _smooth_along
+from hmlvs.image.session import DETECT_ALONG, checked_blur_var, smooth_along_of
 from hmlvs.image.stripe import (
     Direction,
     StripeResult,
-    _normalized_threshold,
     as_gray,
     assess_stripe,
     difference_image,
     extract_stripe,
+    normalized_threshold,
     refine_centres,
 )
 import numpy as np
@@ -55,7 +55,7 @@ def _stripe_and_background(on_g: np.ndarray, off_g: np.ndarray | None, normalize
         o = dict(stripe_options)
         assess = o.pop("assess", True)
         step, offset = o.pop("albedo_step", None), o.pop("albedo_offset", None)
-        blur_var = _blur_var(o.pop("blur_var", None))
+        blur_var = checked_blur_var(o.pop("blur_var", None))
         stripe, fitted = _pair_stripe(on_g, off_g, normalize, assess, step, offset, o,
                                       blur_var)
         return stripe, off_g, fitted
@@ -104,7 +104,7 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
     stripe_options = dict(stripe_options)
     albedo_step = stripe_options.pop("albedo_step", None)
     albedo_offset_ = stripe_options.pop("albedo_offset", None)
-    blur_var = _blur_var(stripe_options.pop("blur_var", None))
+    blur_var = checked_blur_var(stripe_options.pop("blur_var", None))
     if off is None:
         return _stripe_and_background(on_g, None, normalize, dict(
             stripe_options, assess=assess, albedo_step=albedo_step,
@@ -122,7 +122,7 @@ def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: b
     the stripe does not lie on two clearly different levels (0 is used), None when none was
     fitted (given, or no normalisation)."""
     opts = dict(stripe_options)
-    along = _smooth_along(opts.pop("smooth_along", None))
+    along = smooth_along_of(opts.pop("smooth_along", None))
     offset, noise = 0.0, None
     fitted = None
     if normalize:
@@ -144,7 +144,7 @@ def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: b
         # noise out would cut a faint stripe on a noisy image (3 grey levels of noise: half
         # the columns lost): peaks are found on the image smoothed along the stripe.
         opts.setdefault("detect_sigma_along", DETECT_ALONG)
-        opts["threshold"], plain = _normalized_threshold(
+        opts["threshold"], plain = normalized_threshold(
             on_g, off_g, d, offset, noise, (opts["detect_sigma_along"], 0.0))
         # the width estimate below needs a sample of the stripe's columns, not all: its pass
         # finds them on the image itself (half the smoothing's cost)

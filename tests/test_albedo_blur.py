@@ -10,9 +10,9 @@ import sys
 
 import cv2
 from hmlvs.image.session import (
-    _edge_shift,
     _Pair,
     dataset_from_images,
+    edge_shift,
     session_blur_var,
     stripe_from_pair,
 )
@@ -72,7 +72,7 @@ def _fitted(pairs) -> float:
     for on, off in pairs:
         s = stripe_from_pair(on, off, smooth_along=2.0)
         pair = _Pair("on", "off", None, np.eye(4), on, off, s, (on.shape[1], on.shape[0]))
-        items.append((s, _edge_shift(pair, True, {"smooth_along": 2.0})))
+        items.append((s, edge_shift(pair, True, {"smooth_along": 2.0})))
     return session_blur_var(items)
 
 

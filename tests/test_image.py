@@ -335,7 +335,7 @@ def test_stripe_reflection_and_glare_are_reported_not_guessed():
             # reflection; only on the albedo-normalised image, as in the plain one a
             # reflection off a white square can outshine the stripe on a black one
             dn = hmlvs.difference_image(r.on[i], r.off[i], normalize=True)
-            thr = hmlvs.image.stripe._normalized_threshold(r.on[i], r.off[i], dn)
+            thr = hmlvs.image.stripe.normalized_threshold(r.on[i], r.off[i], dn)
             s2 = hmlvs.extract_stripe(dn, dominance=1.3, threshold=thr)
             ok = s2.found[band]
             assert ok.mean() > 0.8

@@ -10,13 +10,14 @@ import dataclasses
 import json
 import math
 
-from hmlvs.calibration.joint import _inv, calibrate_joint
+from hmlvs.calibration.joint import calibrate_joint
 from hmlvs.cli import main
 from hmlvs.data.calibration_file import Calibration
 from hmlvs.data.poses import rotation_to_quaternion
 from hmlvs.data.views import ViewData
 from hmlvs.diagnostics.map_sigma import map_sigma_mm
 from hmlvs.diagnostics.verdict import Verdict, judge_joint, reorder_quaternions, require_check
+from hmlvs.geometry.transforms import invert_transform
 from hmlvs.image.views import views_from_images
 from hmlvs.sim.general import general_session, render_general_session
 import numpy as np
@@ -142,7 +143,8 @@ _SWAP = {2: 7, 7: 2, 4: 9, 9: 4}
 MISTAKES = {
     # name: (board square, pose edit, phrase of the first reason)
     "square 25": (25.0, None, "the robot motion implies squares of 20.0 mm, not 25"),
-    "inverted": (None, lambda i, m: _inv(m), "they are hand_from_base, not base_from_hand"),
+    "inverted": (None, lambda i, m: invert_transform(m),
+                 "they are hand_from_base, not base_from_hand"),
     "quaternion": (None, lambda i, m: reorder_quaternions(m, (1, 2, 3, 0)),
                    "quaternions are written xyzw, not wxyz"),
     "metres": (None, lambda i, m: np.vstack([np.c_[m[:3, :3], m[:3, 3] / 1000], [0, 0, 0, 1]]),

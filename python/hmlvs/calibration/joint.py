@@ -33,7 +33,6 @@ from ..data.views import ViewData
 from ..geometry.board import BoardSpec, board_pose_from_corners
 from ..geometry.transforms import (
     invert_transform,
-    rotation_angle,
 )
 from ..models.opencv import DISTORTION_NAMES, OpenCvSensor
 from .joint_result import JointCalibration
@@ -55,9 +54,6 @@ from .joint_solve import (
     solve_uncertain_poses,
     solve_weighted,
 )
-
-# names diagnostics.verdict imports from this module (it moves to geometry.transforms)
-_inv, _rotation_angle = invert_transform, rotation_angle
 
 
 def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int, int], *,
@@ -506,6 +502,3 @@ def evaluate_sensor(sensor: OpenCvSensor, views: Sequence[ViewData], board: Any,
 
     result = calibrate_joint(views, board, image_size, camera=sensor, hold_hand_eye=True)
     return replace(result, std={**(std or {}), **result.std})
-
-
-_board_plane_points = board_plane_points  # the name diagnostics.verdict imports

@@ -25,9 +25,9 @@ from .stripe import (
     StripeOptions,
     StripeResult,
     StripeStatus,
-    _finite,
     as_gray,
     extract_stripe,
+    finite_number,
     real_number,
 )
 
@@ -38,7 +38,7 @@ ESTIMATED_OFF = "none: background estimated from the laser-on image"
 # A session of images -> a calibration data set
 
 
-class _Reject(Exception):
+class PairRejected(Exception):
     """A whole image pair is unusable (the message says why)."""
 
 
@@ -46,14 +46,14 @@ _BOARD_POSE_HINT = ("check the board's origin, row_direction and col_direction i
                     "manifest and this pair's pose")
 
 
-def _opencv_failure(err: Exception, stage: str, hint: str = _BOARD_POSE_HINT) -> _Reject:
+def opencv_failure(err: Exception, stage: str, hint: str = _BOARD_POSE_HINT) -> PairRejected:
     """An OpenCV error inside one pair's processing, as that pair's rejection: OpenCV
     asserts on degenerate input (corners predicted far from the detected ones, as with a
     wrong board origin or direction in the manifest), which concerns this pair only."""
     lines = str(err).strip().splitlines() or [type(err).__name__]
     what = getattr(err, "err", "") or lines[-1]
     func = getattr(err, "func", "")
-    return _Reject(f"{stage}: OpenCV failed ({func + ': ' if func else ''}{what})"
+    return PairRejected(f"{stage}: OpenCV failed ({func + ': ' if func else ''}{what})"
                    + (f"; {hint}" if hint else ""))
 
 
@@ -65,7 +65,7 @@ def _load(item: Any, folder: Any, what: str) -> tuple[np.ndarray, str]:
     if isinstance(item, np.ndarray):
         return item, "<array>"
     if not isinstance(item, (str, Path)):
-        raise _Reject(f"the {what} image must be a file name or an array, got "
+        raise PairRejected(f"the {what} image must be a file name or an array, got "
                       f"{type(item).__name__}")
     path = Path(item)
     if folder is not None and not path.is_absolute():
@@ -73,21 +73,21 @@ def _load(item: Any, folder: Any, what: str) -> tuple[np.ndarray, str]:
     try:
         os.fsencode(path)  # before is_file, which says False for a name no file can have
         if not path.is_file():
-            raise _Reject(f"the {what} image file {path} does not exist")
+            raise PairRejected(f"the {what} image file {path} does not exist")
         img = read_image(path)  # by bytes: cv2.imread crashes on a name that is not UTF-8
     except UnicodeError:
-        raise _Reject(f"the {what} image file {str(path)!r}: its name holds a character no "
+        raise PairRejected(f"the {what} image file {str(path)!r}: its name holds a character no "
                       "file name can (an unpaired surrogate); rename it") from None
     except ValueError as e:
-        raise _Reject(str(e)) from None
+        raise PairRejected(str(e)) from None
     except OSError as e:
-        raise _Reject(f"the {what} image file {path} cannot be read ({e.strerror})") from None
+        raise PairRejected(f"the {what} image file {path} cannot be read ({e.strerror})") from None
     if img is None:
-        raise _Reject(f"the {what} image file {path.name} cannot be read as an image")
+        raise PairRejected(f"the {what} image file {path.name} cannot be read as an image")
     return img, path.name
 
 
-def _read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Any]:
+def read_session_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Any]:
     from ..data.manifest import read_manifest
 
     return read_manifest(source)
@@ -152,7 +152,7 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
         if unit is None:
             unit = "rad"
     else:
-        records, doc, folder = _read_manifest(source)
+        records, doc, folder = read_session_manifest(source)
         unit = doc.get("joint_unit", "rad") if unit is None else unit
         if board is None and doc.get("board") is not None:
             from ..data.manifest import checkerboard_of
@@ -179,12 +179,12 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     # The stripe on the board is one straight line (a curve of the lens's distortion):
     # Steger's line detector may smooth along it over more than across it.
     stripe_options = dict(stripe_options)
-    stripe_options["smooth_along"] = _smooth_along(stripe_options.get("smooth_along",
+    stripe_options["smooth_along"] = smooth_along_of(stripe_options.get("smooth_along",
                                                                       BOARD_SMOOTH_ALONG))
     # The camera's blur, for the correction of the centres at the squares' edges: given, or
     # fitted to the whole session once every stripe is in (session_blur_var).
     fit_blur = stripe_options.get("blur_var") is None
-    stripe_options["blur_var"] = _blur_var(stripe_options.get("blur_var"))
+    stripe_options["blur_var"] = checked_blur_var(stripe_options.get("blur_var"))
 
     # First every pair's stripe and corners; then, in homography mode, the lens distortion
     # fitted to the corners of all views (one lens: views with few corners need it), and the
@@ -195,18 +195,18 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                ) -> tuple[Any, ...]:
         if not _pending(pair):
             if fit_blur:
-                info["edge"] = _edge_shift(pair, normalize, stripe_options)
+                info["edge"] = edge_shift(pair, normalize, stripe_options)
             pair = replace(pair, on=None, off=None)  # the images are no longer needed
         return (pid, index, pair, corners, info)
 
     # pairs whose board the prediction could not number: (place in found, pair, info, error)
     unnumbered: list[tuple[int, _Pair, dict[str, Any], str]] = []
     for index, rec in enumerate(records):
-        pid = _record_id(rec, index)
-        on_name, off_name = _record_names(rec)
+        pid = record_id(rec, index)
+        on_name, off_name = record_names(rec)
         info: dict[str, Any] = {}
         try:
-            pair = _read_pair(rec, index, folder, unit, robot, size, channel, normalize,
+            pair = read_pair(rec, index, folder, unit, robot, size, channel, normalize,
                               stripe_options, min_stripe, defer=True)
             on_name, off_name, size = pair.on_name, pair.off_name, pair.size
             info["stripe"] = pair.stripe.counts()
@@ -214,7 +214,7 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                 corners = find_corners(pair.board_image, board, expected=predicted_corners(
                     approx, pair.pose, board))
             except BoardNotFoundError as e:
-                raise _Reject(f"checkerboard: {e}") from None
+                raise PairRejected(f"checkerboard: {e}") from None
             except ValueError as e:
                 # numbered again once the views' agreement fixes the hand-eye (below)
                 unnumbered.append((len(found), pair, info, f"checkerboard: {e}"))
@@ -222,8 +222,8 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                                          f"checkerboard: {e}", info["stripe"], 0))
                 continue
             except cv2.error as e:
-                raise _opencv_failure(e, "checkerboard") from None
-        except _Reject as e:
+                raise opencv_failure(e, "checkerboard") from None
+        except PairRejected as e:
             found.append(ImageReport(pid, index, str(on_name), str(off_name), False, str(e),
                                      info.get("stripe", {}), info.get("corners", 0)))
             continue
@@ -247,14 +247,14 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                 pair = _restripe(pair, session_offset, normalize, stripe_options, min_stripe)
             else:
                 _check_stripe(pair, min_stripe)
-        except _Reject as e:
+        except PairRejected as e:
             found[n] = ImageReport(pid, index, pair.on_name, pair.off_name, False, str(e),
                                    pair.stripe.counts(), 0)
             continue
         if offsets:
             taken.add(index)
         if fit_blur:
-            info["edge"] = _edge_shift(pair, normalize, dict(stripe_options,
+            info["edge"] = edge_shift(pair, normalize, dict(stripe_options,
                                                              albedo_offset=session_offset)
                                        if offsets else stripe_options)
         info["stripe"] = pair.stripe.counts()
@@ -266,7 +266,7 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
         for n, item in enumerate(found):
             if not isinstance(item, ImageReport):
                 pid, index, pair, corners, info = item
-                found[n] = (pid, index, replace(pair, stripe=_with_blur_var(
+                found[n] = (pid, index, replace(pair, stripe=with_blur_var(
                     pair.stripe, info["edge"], blur_var)), corners, info)
     distortion = None
     if mode == "homography":
@@ -288,14 +288,14 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                 cp = calibration_points(pair.stripe, corners, board, mode=mode,
                                         tolerance=tolerance, step=step, distortion=distortion)
             except cv2.error as e:
-                raise _opencv_failure(e, "calibration points") from None
+                raise opencv_failure(e, "calibration points") from None
             info["rejected"] = dict(cp.rejected)
             if len(cp) == 0:
-                raise _Reject("no calibration points: " + (
+                raise PairRejected("no calibration points: " + (
                     "; ".join(f"{k}: {v}" for k, v in cp.rejected.items()) or
                     ("no corner lies on the stripe" if mode == "corners" else
                      "the stripe does not cross a square with four found corners")))
-        except _Reject as e:
+        except PairRejected as e:
             reports.append(ImageReport(pid, index, str(on_name), str(off_name), False, str(e),
                                        info.get("stripe", {}), info.get("corners", 0), 0,
                                        info.get("rejected", {})))
@@ -438,11 +438,11 @@ def _point_quality(stripe: StripeResult, cp: Any) -> dict[str, np.ndarray]:
             "peak": stripe.intensity[line], "residual": residual[line]}
 
 
-def _record_id(rec: Any, index: int) -> str:
+def record_id(rec: Any, index: int) -> str:
     return str(rec.get("id", f"p{index:03d}")) if isinstance(rec, dict) else f"p{index:03d}"
 
 
-def _record_names(rec: Any) -> tuple[str, str]:
+def record_names(rec: Any) -> tuple[str, str]:
     if not isinstance(rec, dict):
         return "?", "?"
     return tuple(str(rec.get(k, "?")) if not isinstance(rec.get(k), np.ndarray) else "<array>"
@@ -479,7 +479,7 @@ def iter_stripes_from_images(source: Any, *, robot: Any = None,
         records = list(source)
         unit = "rad" if unit is None else unit
     else:
-        records, doc, folder = _read_manifest(source)
+        records, doc, folder = read_session_manifest(source)
         unit = doc.get("joint_unit", "rad") if unit is None else unit
         robot = _manifest_robot(doc, robot, source)
         if isinstance(doc.get("image_size"), list) and len(doc["image_size"]) == 2:
@@ -498,7 +498,7 @@ def iter_stripes_from_images(source: Any, *, robot: Any = None,
     robot = Robot.scorbot_er7() if robot is None else robot
     # option typos fail here
     extract_stripe(np.zeros((4, 4), np.uint8), **_core_options(stripe_options))
-    _blur_var(stripe_options.get("blur_var"))
+    checked_blur_var(stripe_options.get("blur_var"))
     return _iter_pairs(records, folder, source, unit, robot, channel, normalize, min_stripe,
                        image_size, image_size_of, manifest_size, stripe_options)
 
@@ -511,27 +511,27 @@ def _iter_pairs(records: list[Any], folder: Any, source: Any, unit: str, robot: 
     """The pairs of :func:`iter_stripes_from_images`, once its checks have passed."""
     from ..data.manifest import read_stripe_list
 
-    blur_var = _blur_var(stripe_options.get("blur_var"))
+    blur_var = checked_blur_var(stripe_options.get("blur_var"))
     size = manifest_size
     for index, rec in enumerate(records):
-        pid = _record_id(rec, index)
-        on_name, off_name = _record_names(rec)
+        pid = record_id(rec, index)
+        on_name, off_name = record_names(rec)
         try:
             if isinstance(rec, dict) and "stripe" in rec:
                 _, pose = _record_pose(rec, robot, unit)
                 path = Path(rec["stripe"])
                 path = path if folder is None or path.is_absolute() else Path(folder) / path
                 if not path.is_file():
-                    raise _Reject(f"the stripe list {path} does not exist")
+                    raise PairRejected(f"the stripe list {path} does not exist")
                 try:
                     px, inten = read_stripe_list(path)
                 except ValueError as e:
-                    raise _Reject(str(e)) from None
+                    raise PairRejected(str(e)) from None
                 item: Any = StripeList(px, inten)
                 on_name = off_name = path.name
                 found = len(px)
             else:
-                pair = _read_pair(rec, index, folder, unit, robot, size, channel, normalize,
+                pair = read_pair(rec, index, folder, unit, robot, size, channel, normalize,
                                   stripe_options, min_stripe)
                 size, pose, item = pair.size, pair.pose, pair.stripe
                 on_name, off_name = pair.on_name, pair.off_name
@@ -543,7 +543,7 @@ def _iter_pairs(records: list[Any], folder: Any, source: Any, unit: str, robot: 
                                      f"{image_size[0]} x {image_size[1]} pixel images: "
                                      "measure with a calibration of this camera at this "
                                      "resolution")
-        except _Reject as e:
+        except PairRejected as e:
             yield (ImageReport(pid, index, on_name, off_name, False, str(e), {}, 0, 0, {}),
                    None, None)
             continue
@@ -590,11 +590,11 @@ class _Pair:
         return self.board if self.board is not None else self.off
 
 
-def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
+def read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
                size: tuple[int, int] | None, channel: int | None, normalize: bool,
                stripe_options: dict[str, Any], min_stripe: int,
                defer: bool = False) -> _Pair:
-    """Load, check and extract the stripe of one manifest record; raises _Reject.
+    """Load, check and extract the stripe of one manifest record; raises PairRejected.
 
     A record without ``off`` is a laser-on image alone: its background (the board under
     ambient light) is estimated from it (:func:`estimate_background`) and stands in for the
@@ -603,9 +603,9 @@ def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
     ``min_stripe``: its stripe is to be extracted again with the session's offset
     (:func:`_restripe`)."""
     if not isinstance(rec, dict):
-        raise _Reject(f"record {index} is not a mapping with on, off and joints")
+        raise PairRejected(f"record {index} is not a mapping with on, off and joints")
     if "on" not in rec:
-        raise _Reject("the record lacks 'on'")
+        raise PairRejected("the record lacks 'on'")
     joints, pose = _record_pose(rec, robot, unit)
     on, on_name = _load(rec["on"], folder, "laser-on")
     off = None
@@ -620,30 +620,30 @@ def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
         try:
             channel = laser_channel(on, off)
         except ValueError as e:
-            raise _Reject(str(e)) from None
+            raise PairRejected(str(e)) from None
     try:
         on_g = as_gray(on, "the laser-on image", channel)
         off_g = None if off is None else as_gray(off, "the laser-off image", channel)
     except ValueError as e:
-        raise _Reject(str(e)) from None
+        raise PairRejected(str(e)) from None
     if off_g is not None and (on_g.shape != off_g.shape or on_g.dtype != off_g.dtype):
-        raise _Reject(f"the laser-on image ({on_g.shape[1]} x {on_g.shape[0]}, "
+        raise PairRejected(f"the laser-on image ({on_g.shape[1]} x {on_g.shape[0]}, "
                       f"{on_g.dtype}) and the laser-off image ({off_g.shape[1]} x "
                       f"{off_g.shape[0]}, {off_g.dtype}) differ in size or depth")
     if size is None:
         size = (on_g.shape[1], on_g.shape[0])
     if (on_g.shape[1], on_g.shape[0]) != size:
-        raise _Reject(f"the images are {on_g.shape[1]} x {on_g.shape[0]} pixels but the "
+        raise PairRejected(f"the images are {on_g.shape[1]} x {on_g.shape[0]} pixels but the "
                       f"session's are {size[0]} x {size[1]}")
     top = float(np.iinfo(on_g.dtype).max)
     if off_g is not None and int(off_g.max()) == 0:
-        raise _Reject("the laser-off image is all black")
+        raise PairRejected("the laser-off image is all black")
     if int(on_g.max()) == 0:
-        raise _Reject("the laser-on image is all black")
+        raise PairRejected("the laser-on image is all black")
     if off_g is not None:
         diff_big = np.abs(on_g.astype(np.int32) - off_g.astype(np.int32)) > 0.1 * top
         if diff_big.mean() > 0.05:
-            raise _Reject(f"the laser-on and laser-off images differ in "
+            raise PairRejected(f"the laser-on and laser-off images differ in "
                           f"{100 * diff_big.mean():.0f}% of the pixels, far more than a "
                           "stripe: they are not a pair taken at the same pose")
     try:
@@ -654,7 +654,7 @@ def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
             stripe, off_g, offset = _stripe_and_background(on_g, off_g, normalize,
                                                            stripe_options)
     except ValueError as e:  # the threshold leaves no pixel
-        raise _Reject(f"no laser stripe found in {on_name}: {e}") from None
+        raise PairRejected(f"no laser stripe found in {on_name}: {e}") from None
     pair = _Pair(str(on_name), str(off_name), joints, pose, on_g, off_g, stripe, size, offset,
                  board)
     if not (defer and _pending(pair)):
@@ -663,25 +663,25 @@ def _read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
 
 
 def _pending(pair: _Pair) -> bool:
-    """Whether the pair's stripe waits for the session's albedo offset (see _read_pair)."""
+    """Whether the pair's stripe waits for the session's albedo offset (see read_pair)."""
     return pair.offset is not None and bool(np.isnan(pair.offset))
 
 
 def _check_stripe(pair: _Pair, min_stripe: int) -> None:
     if pair.stripe.found.sum() < min_stripe:
-        raise _Reject(f"no laser stripe found in {pair.on_name}: only "
+        raise PairRejected(f"no laser stripe found in {pair.on_name}: only "
                       f"{int(pair.stripe.found.sum())} scan lines have one "
                       f"({_counts_text(pair.stripe.counts())})")
 
 
 def _restripe(pair: _Pair, offset: float, normalize: bool, stripe_options: dict[str, Any],
               min_stripe: int) -> _Pair:
-    """The pair's stripe extracted again with the albedo offset ``offset``; raises _Reject."""
+    """The pair's stripe extracted again with the albedo offset ``offset``; raises PairRejected."""
     try:
         stripe = _stripe_and_background(pair.on, pair.off, normalize,
                                         dict(stripe_options, albedo_offset=offset))[0]
     except ValueError as e:
-        raise _Reject(f"no laser stripe found in {pair.on_name}: {e}") from None
+        raise PairRejected(f"no laser stripe found in {pair.on_name}: {e}") from None
     pair = replace(pair, stripe=stripe)
     _check_stripe(pair, min_stripe)
     return pair
@@ -767,8 +767,8 @@ def frames_options(*, normalize: bool = True, **stripe_options: Any) -> Any:
     assess = o.pop("assess", True)
     albedo_step = o.pop("albedo_step", None)
     albedo_offset_ = o.pop("albedo_offset", None)
-    blur_var = _blur_var(o.pop("blur_var", None))
-    along = _smooth_along(o.pop("smooth_along", None))
+    blur_var = checked_blur_var(o.pop("blur_var", None))
+    along = smooth_along_of(o.pop("smooth_along", None))
     opts = StripeOptions(**{k: v for k, v in o.items() if not (k in _CHOSEN and v is None)
                             and k != "channel"})
     fo = _core._FrameStripeOptions()
@@ -786,7 +786,7 @@ def frames_options(*, normalize: bool = True, **stripe_options: Any) -> Any:
         fo.albedo_offset = a
     fo.assess = bool(assess)
     if albedo_step is not None:
-        fo.albedo_step = _finite(albedo_step, "albedo_step")
+        fo.albedo_step = finite_number(albedo_step, "albedo_step")
     fo.blur_var = blur_var
     fo.smooth_along = along
     return fo
@@ -845,7 +845,7 @@ def _in_range(value: Any, lo: float, hi: float) -> float | None:
     return v if np.isfinite(v) and lo <= v <= hi else None
 
 
-def _blur_var(value: Any) -> float:
+def checked_blur_var(value: Any) -> float:
     """The ``blur_var`` stripe option, checked (None: 0, no correction at albedo steps)."""
     if value is None:
         return 0.0
@@ -864,7 +864,7 @@ MAX_BLUR_VAR = 4.0
 _EDGE_REF = 0.5
 
 
-def _edge_shift(pair: _Pair, normalize: bool, stripe_options: dict[str, Any]) -> np.ndarray:
+def edge_shift(pair: _Pair, normalize: bool, stripe_options: dict[str, Any]) -> np.ndarray:
     """Per scan line, how far the pair's stripe centre moves per px^2 of assumed blur
     variance (the correction at albedo steps, :func:`stripe_from_pair` ``blur_var``): the
     centres extracted again at a reference variance, against the pair's. 0 where either
@@ -874,7 +874,7 @@ def _edge_shift(pair: _Pair, normalize: bool, stripe_options: dict[str, Any]) ->
     k = np.zeros(pair.stripe.centre.shape)
     if not normalize or pair.off_name == ESTIMATED_OFF or pair.on is None:
         return k
-    base = _blur_var(stripe_options.get("blur_var"))
+    base = checked_blur_var(stripe_options.get("blur_var"))
     ref = _stripe_and_background(pair.on, pair.off, normalize,
                                  dict(stripe_options, blur_var=base + _EDGE_REF))[0]
     ok = _centred(pair.stripe) & _centred(ref)
@@ -896,7 +896,7 @@ def _detrend(values: np.ndarray, ok: np.ndarray, scale: float = 15.0) -> np.ndar
 
 def session_blur_var(stripes: list[tuple[StripeResult, np.ndarray]]) -> float:
     """The camera's blur variance (px^2) that best removes the bumps albedo steps leave on
-    a session's stripes: each (stripe, :func:`_edge_shift`) pair's centres, less their
+    a session's stripes: each (stripe, :func:`edge_shift`) pair's centres, less their
     local mean along the stripe (a smooth curve on the board), regressed on the shift's,
     pooled over the session; clipped to [0, MAX_BLUR_VAR]. 0 when no stripe crosses a
     step. Measured on independent renders with 0.5 px of optical blur (0.33 px^2 with the
@@ -915,7 +915,7 @@ def session_blur_var(stripes: list[tuple[StripeResult, np.ndarray]]) -> float:
     return float(np.clip(num / den, 0.0, MAX_BLUR_VAR))
 
 
-def _with_blur_var(stripe: StripeResult, k: np.ndarray, var: float) -> StripeResult:
+def with_blur_var(stripe: StripeResult, k: np.ndarray, var: float) -> StripeResult:
     """The stripe's centres moved by ``var`` px^2 of blur variance along their shifts ``k``
     (first order; exact at the reference variance)."""
     if var == 0.0 or not np.any(k):
@@ -932,7 +932,7 @@ def _centred(stripe: StripeResult) -> np.ndarray:
         np.isfinite(stripe.centre)
 
 
-def _smooth_along(value: Any) -> float:
+def smooth_along_of(value: Any) -> float:
     """The ``smooth_along`` stripe option, checked (None: 1, the same scale as across)."""
     if value is None:
         return 1.0
@@ -963,7 +963,7 @@ def _require_poses(records: list[Any], why: str) -> None:
 def _record_pose(rec: dict[str, Any], robot: Any, unit: str
                  ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """(joints in rad or None, base_from_hand pose in mm) of a record, (None, None) for a
-    bench session's record (neither ``pose`` nor ``joints``); raises _Reject.
+    bench session's record (neither ``pose`` nor ``joints``); raises PairRejected.
 
     A ``pose`` is a 4x4 matrix (mm) or a mapping ``{position, quaternion | rotation_vector}``
     (see :func:`hmlvs.data.poses.pose_from_entry`; records from a manifest come with their
@@ -975,12 +975,12 @@ def _record_pose(rec: dict[str, Any], robot: Any, unit: str
         try:
             return None, pose_from_entry(rec["pose"], PoseFormat())
         except ValueError as e:
-            raise _Reject(str(e)) from None
+            raise PairRejected(str(e)) from None
     if "joints" not in rec:
         return None, None  # a bench session's record: no robot pose
     joints = np.asarray(rec["joints"], dtype=float).reshape(-1)
     if joints.shape != (robot.dof,) or not np.all(np.isfinite(joints)):
-        raise _Reject(f"joint readings must be {robot.dof} finite numbers, got "
+        raise PairRejected(f"joint readings must be {robot.dof} finite numbers, got "
                       f"{np.asarray(rec['joints']).tolist()}")
     if unit == "deg":
         joints = np.radians(joints)

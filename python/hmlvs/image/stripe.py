@@ -242,7 +242,7 @@ class StripeOptions:
                 object.__setattr__(self, name, _nonneg(v, name))
         for name in ("min_width", "max_width", "steger_sigma", "dominance",
                      "detect_sigma_along"):
-            object.__setattr__(self, name, _finite(getattr(self, name), name))
+            object.__setattr__(self, name, finite_number(getattr(self, name), name))
         c = self.channel
         if c is not None and (isinstance(c, bool) or not isinstance(c, Integral) or c < 0):
             raise ValueError(f"stripe.channel must be None or an integer >= 0, got {c!r}")
@@ -364,11 +364,11 @@ def assess_stripe(stripe: StripeResult, image: np.ndarray, on: np.ndarray | None
     frames = [None if x is None else as_gray(x, name, None)
               for x, name in ((on, "the laser-on image"), (off, "the laser-off image"))]
     o = _core._StripeQualityOptions()
-    o.albedo_step = _finite(albedo_step, "albedo_step")
-    o.albedo_offset = _finite(albedo_offset, "albedo_offset")
+    o.albedo_step = finite_number(albedo_step, "albedo_step")
+    o.albedo_offset = finite_number(albedo_offset, "albedo_offset")
     if o.albedo_offset < 0:
         raise ValueError(f"albedo_offset must be >= 0, got {albedo_offset!r}")
-    o.hump, o.dip = _finite(hump, "hump"), _finite(dip, "dip")
+    o.hump, o.dip = finite_number(hump, "hump"), finite_number(dip, "dip")
     status = _core._assess_stripe(img, frames[0], frames[1], _DIRECTIONS[stripe.direction], o,
                                   np.asarray(stripe.centre, float), np.asarray(stripe.width, float),
                                   np.asarray(stripe.status, np.uint8), float(stripe.threshold))
@@ -470,7 +470,7 @@ def real_number(x: Any, name: str) -> float:
     return float(x)
 
 
-def _finite(x: Any, name: str) -> float:
+def finite_number(x: Any, name: str) -> float:
     v = real_number(x, name)
     if not np.isfinite(v):
         raise ValueError(f"stripe.{name} must be a finite number, got {x!r}")
@@ -495,10 +495,10 @@ def smoothing_noise_gain(sigma: float) -> float:
     """The factor by which :func:`extract_stripe`'s ``detect_sigma_along`` smoothing at
     ``sigma`` (px, in [0.5, 40]) lowers independent per-pixel noise: sqrt(sum g^2) of its
     sampled Gaussian (about 1 / sqrt(2 sqrt(pi) sigma); 0.376 at 2 px)."""
-    return float(_core._smoothing_noise_gain(_finite(sigma, "sigma")))
+    return float(_core._smoothing_noise_gain(finite_number(sigma, "sigma")))
 
 
-def _normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray,
+def normalized_threshold(on: np.ndarray, off: np.ndarray, d: np.ndarray,
                           offset: float = 0.0, sigma: float | None = None,
                           along: float | tuple[float, ...] = 0.0) -> Any:
     """Automatic threshold for an albedo-normalised difference image.

@@ -108,11 +108,11 @@ def locate_stripe_end(on: np.ndarray, off: np.ndarray, near: Sequence[float], *,
     Raises ``ValueError`` when no segment of at least ``min_columns`` columns ends near, or an
     edge cannot be found.
     """
-    from .stripe import _normalized_threshold, difference_image, extract_stripe
+    from .stripe import difference_image, extract_stripe, normalized_threshold
 
     near = np.asarray(near, float)
     d = difference_image(on, off, normalize=True)
-    stripe = extract_stripe(d, threshold=_normalized_threshold(on, off, d))
+    stripe = extract_stripe(d, threshold=normalized_threshold(on, off, d))
     px = stripe.pixels
     if px.shape[0] < min_columns:
         raise ValueError(f"no laser stripe in the image ({px.shape[0]} columns found)")

@@ -19,16 +19,16 @@ from .corners import BoardNotFoundError, detect_board, detect_charuco, prefer_de
 from .partial import PartialView, add_partial_views, partial_view
 from .session import (
     ImageReport,
-    _blur_var,
-    _edge_shift,
-    _opencv_failure,
-    _read_manifest,
-    _read_pair,
-    _record_id,
-    _record_names,
-    _Reject,
-    _with_blur_var,
+    PairRejected,
+    checked_blur_var,
+    edge_shift,
+    opencv_failure,
+    read_pair,
+    read_session_manifest,
+    record_id,
+    record_names,
     session_blur_var,
+    with_blur_var,
 )
 
 MIN_CORNERS = 6  # a view needs this many numbered corners (calibrate_joint's minimum)
@@ -94,7 +94,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
 
     from ..geometry.robot import Robot
 
-    records, doc, folder = _read_manifest(source)
+    records, doc, folder = read_session_manifest(source)
     board_spec, board_pose = board_of(doc, board, source)
     unit = doc.get("joint_unit", "rad") if joint_unit is None else joint_unit
     if robot is None:
@@ -117,7 +117,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         else None
     stripe_options = dict(stripe_options)
     fit_blur = stripe_options.get("blur_var") is None
-    stripe_options["blur_var"] = _blur_var(stripe_options.get("blur_var"))
+    stripe_options["blur_var"] = checked_blur_var(stripe_options.get("blur_var"))
     edges: dict[str, tuple[Any, np.ndarray]] = {}
     whole: dict[str, Any] = {}  # the whole boards' Corners, by view id
     board_images: dict[str, np.ndarray] = {}  # and their images
@@ -126,27 +126,27 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         """One view's pair and board (or why not): (pid, names, pair, corners or the
         PartialView of a board not wholly seen, edge shifts, reject reason)."""
         index, rec = item
-        pid = _record_id(rec, index)
-        names = _record_names(rec)
+        pid = record_id(rec, index)
+        names = record_names(rec)
         try:
-            pair = _read_pair(rec, index, folder, unit, robot, given, channel, normalize,
+            pair = read_pair(rec, index, folder, unit, robot, given, channel, normalize,
                               stripe_options, min_stripe)
-            edge = _edge_shift(pair, normalize, stripe_options) if fit_blur else None
+            edge = edge_shift(pair, normalize, stripe_options) if fit_blur else None
             try:
                 found: Any = detect_corners(pair.board_image, detector_board)
             except BoardNotFoundError as e:
                 if board_spec.unambiguous:
-                    raise _Reject(str(e)) from None
+                    raise PairRejected(str(e)) from None
                 # a partly visible board: numbered below from a first calibration
                 found = partial_view(pid, pair, detector_board, e)
             except ValueError as e:
-                raise _Reject(str(e)) from None
+                raise PairRejected(str(e)) from None
             except cv2.error as e:
-                raise _opencv_failure(e, "board", hint="") from None
+                raise opencv_failure(e, "board", hint="") from None
             if not isinstance(found, PartialView) and len(found) < MIN_CORNERS:
-                raise _Reject(f"only {len(found)} board corners found and numbered; a view "
+                raise PairRejected(f"only {len(found)} board corners found and numbered; a view "
                               f"needs at least {MIN_CORNERS}")
-        except _Reject as e:
+        except PairRejected as e:
             return pid, index, names, None, None, None, None, str(e)
         image = None
         if not isinstance(found, PartialView):
@@ -186,7 +186,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     var = stripe_options["blur_var"]
     if edges:
         var = session_blur_var(list(edges.values()))
-        fixed = {pid: _with_blur_var(st, k, var).pixels for pid, (st, k) in edges.items()}
+        fixed = {pid: with_blur_var(st, k, var).pixels for pid, (st, k) in edges.items()}
         views = [replace(v, laser_pixels=fixed.get(v.id, v.laser_pixels)) for v in views]
         partial = [(slot, replace(p, stripe=fixed.get(p.id, p.stripe)), pair)
                    for slot, p, pair in partial]

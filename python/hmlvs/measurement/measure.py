@@ -160,7 +160,7 @@ def read_ply(path: str | os.PathLike) -> dict[str, np.ndarray]:
     return {name: rec[name].copy() for name, _ in fields}
 
 
-def _require_hand_eye(calibration: Any) -> None:
+def require_hand_eye(calibration: Any) -> None:
     """Refuse to measure in the base frame with a bench session's calibration (camera mode:
     the camera and laser plane only, its hand_from_camera not calibrated)."""
     method = getattr(calibration, "method", None) or ""
@@ -215,7 +215,7 @@ def measure(calibration: Any, stripes: Sequence[Any] | np.ndarray, poses: Any = 
     """
     if isinstance(calibration, (str, os.PathLike)):
         calibration = Calibration.load(calibration)
-    _require_hand_eye(calibration)
+    require_hand_eye(calibration)
     model = sensor_model(calibration)
     stripes = list(stripes) if not isinstance(stripes, np.ndarray) or stripes.ndim != 2 \
         else [stripes]
@@ -375,7 +375,7 @@ def measure_images_to(calibration: Any, source: Any, out: str | os.PathLike, *,
     calibration, robot, options = _prepared(calibration, source, robot, options)
     pairs = iter_stripes_from_images(source, robot=robot, **options)  # checks the session
     total = len(source) if isinstance(source, (list, tuple)) else len(read_manifest(source)[0])
-    _require_hand_eye(calibration)
+    require_hand_eye(calibration)
     model = sensor_model(calibration)
     ids: list[str] = []
     rejected: list[RejectedPair] = []

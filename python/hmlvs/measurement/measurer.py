@@ -21,7 +21,7 @@ import numpy as np
 from .._arrays import as_matrix
 from ..data.calibration_file import Calibration
 from ..image.stripe import StripeStatus
-from .measure import _require_hand_eye, sensor_model
+from .measure import require_hand_eye, sensor_model
 
 
 class PointStatus(enum.IntEnum):
@@ -75,7 +75,7 @@ class Measurer:
     def __init__(self, calibration: Any, **stripe_options: Any) -> None:
         if isinstance(calibration, (str, os.PathLike)):
             calibration = Calibration.load(calibration)
-        _require_hand_eye(calibration)
+        require_hand_eye(calibration)
         self._model = sensor_model(calibration)
         size = getattr(self._model, "image_size", None)
         if size is None:
