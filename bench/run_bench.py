@@ -84,7 +84,7 @@ def render_times(reps: int) -> tuple[float, float, int, int]:
     # the tests' NumPy reference of the shading
     from reference_render import board_exposures_of_plane as numpy_shading
 
-    native = R._board_exposures
+    native = R.board_exposures
 
     options = R.RenderOptions(noise=1.0, speckle=0.1)
     session = hmlvs.simulate.session(num_poses=4, seed=0)
@@ -93,13 +93,13 @@ def render_times(reps: int) -> tuple[float, float, int, int]:
     try:
         for _ in range(reps):
             for name, shade in (("c++", native), ("numpy", numpy_shading)):
-                R._board_exposures = shade
+                R.board_exposures = shade
                 t = time.perf_counter()
                 r = R.render_session(session, options=options)
                 times[name].append(time.perf_counter() - t)
                 frames[name] = [*r.on, *r.off]
     finally:
-        R._board_exposures = native
+        R.board_exposures = native
     differ = sum(int(np.count_nonzero(a != b)) for a, b in zip(frames["c++"], frames["numpy"]))
     pixels = sum(a.size for a in frames["c++"])
     return statistics.median(times["c++"]), statistics.median(times["numpy"]), differ, pixels
