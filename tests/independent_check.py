@@ -151,7 +151,7 @@ def measure(seed: int = 0, method: str = "pso+lm", folder: str | Path | None = N
     """Render a session (16 views + 4 held out), run the pipeline (with ``stripe_options``
     for its stripe extraction, if given), the baseline and, with ``ideal_draws``, the ideal
     pipeline's map errors (:func:`ideal`)."""
-    from hmlvs.image.session import dataset_from_images
+    from hmlvs.image.paper_session import dataset_from_images
 
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp if folder is None else folder)
@@ -175,7 +175,7 @@ def redraws(seed: int, method: str, draws: int, stripe_options: dict | None = No
             **render_options) -> np.ndarray:
     """Map errors (mm RMS) of the pipeline on ``draws`` more takes of scene ``seed``: the same
     poses, the images' noise and speckle drawn again (``render_session``'s ``noise_seed``)."""
-    from hmlvs.image.session import dataset_from_images
+    from hmlvs.image.paper_session import dataset_from_images
 
     errs = []
     for d in range(draws):

@@ -9,9 +9,9 @@ from pathlib import Path
 import sys
 
 import cv2
+from hmlvs.image.paper_session import dataset_from_images
 from hmlvs.image.session import (
-    _Pair,
-    dataset_from_images,
+    Pair,
     edge_shift,
     session_blur_var,
     stripe_from_pair,
@@ -71,7 +71,7 @@ def _fitted(pairs) -> float:
     items = []
     for on, off in pairs:
         s = stripe_from_pair(on, off, smooth_along=2.0)
-        pair = _Pair("on", "off", None, np.eye(4), on, off, s, (on.shape[1], on.shape[0]))
+        pair = Pair("on", "off", None, np.eye(4), on, off, s, (on.shape[1], on.shape[0]))
         items.append((s, edge_shift(pair, True, {"smooth_along": 2.0})))
     return session_blur_var(items)
 

@@ -8,7 +8,7 @@ import json
 
 from hmlvs.cli import main
 from hmlvs.data.calibration_file import load_calibration
-from hmlvs.image.session import stripes_from_images
+from hmlvs.image.scan import stripes_from_images
 from hmlvs.sim.general import general_session, render_general_session
 import numpy as np
 import pytest

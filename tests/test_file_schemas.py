@@ -68,7 +68,7 @@ def test_a_valid_file_with_unknown_keys_still_loads(tmp_path, cal_doc):
      "numbers"),
 ])
 def test_manifest_board_with_a_wrong_value_is_named(tmp_path, board, message):
-    from hmlvs.image.session import dataset_from_images
+    from hmlvs.image.paper_session import dataset_from_images
 
     doc = {"format": "hmlvs-images", "version": 1, "board": board,
            "poses": [{"id": "p0", "on": "a.png", "off": "b.png", "joints": [0, 0, 0, 0, 0]}]}

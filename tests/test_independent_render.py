@@ -233,7 +233,8 @@ def test_a_stripe_on_one_level_takes_the_sessions_albedo_offset(tmp_path):
     (measured)."""
     import json
 
-    from hmlvs.image.session import dataset_from_images, stripe_from_pair
+    from hmlvs.image.paper_session import dataset_from_images
+    from hmlvs.image.session import stripe_from_pair
 
     rng = np.random.default_rng(7)
     poses = [R.random_pose(rng) for _ in range(20)]
@@ -284,7 +285,7 @@ def test_a_noisy_camera_keeps_the_stripe(tmp_path, seed):
     views: the peaks it takes must clear 5 sigmas of their 5-pixel mean, not of a pixel."""
     import json
 
-    from hmlvs.image.session import dataset_from_images
+    from hmlvs.image.paper_session import dataset_from_images
 
     rng = np.random.default_rng(seed)
     poses = [R.random_pose(rng) for _ in range(5)]

@@ -13,7 +13,7 @@ from hmlvs.calibration.solvers import calibrate, evaluate
 from hmlvs.geometry.board import Checkerboard
 from hmlvs.image.consensus import consensus_hand_eye
 from hmlvs.image.corners import NumberingError, predicted_corners
-from hmlvs.image.session import dataset_from_images
+from hmlvs.image.paper_session import dataset_from_images
 from hmlvs.models.paper import hand_from_camera, project
 from hmlvs.models.params import Parameters
 from hmlvs.paper.scenarios import PAPER_SENSOR

@@ -5,7 +5,7 @@ import math
 
 from hmlvs.data.manifest import read_manifest
 from hmlvs.data.poses import read_poses, rotation_from_vector, write_poses
-from hmlvs.image.session import stripes_from_images
+from hmlvs.image.scan import stripes_from_images
 import numpy as np
 import pytest
 

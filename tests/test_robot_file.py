@@ -6,7 +6,7 @@ import hmlvs
 from hmlvs.cli import main as cli_main
 from hmlvs.data.calibration_file import Calibration
 from hmlvs.data.robot_file import load_robot, save_robot
-from hmlvs.image.session import stripes_from_images
+from hmlvs.image.scan import stripes_from_images
 from hmlvs.measurement.measure import measure, measure_images
 import numpy as np
 import pytest

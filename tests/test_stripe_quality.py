@@ -9,13 +9,13 @@ from dataclasses import replace
 
 import cv2
 import hmlvs
+from hmlvs.image.scan import stripes_from_images
 from hmlvs.image.session import (
     ESTIMATED_OFF,
     _load,
     estimate_background,
     laser_channel,
     stripe_from_pair,
-    stripes_from_images,
 )
 from hmlvs.image.stripe import StripeStatus, assess_stripe
 from hmlvs.sim.general import default_options, general_session, render_general_view

@@ -311,7 +311,7 @@ def _paper_data(o: _PaperRun, arm: Any, guess: Any, board_pose: Any) -> tuple[An
 
     image_reports: list = []
     if is_manifest(o.data):
-        from ..image.session import dataset_from_images
+        from ..image.paper_session import dataset_from_images
 
         # the corners are numbered with the given initial guess, else the nominal values;
         # a board the manifest does not place sits where an opencv initial guess put it

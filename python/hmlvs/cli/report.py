@@ -70,7 +70,7 @@ def report(
     with guard(as_json), collect_warnings() as caught:
         image_reports = None
         if is_manifest(data):
-            from ..image.session import dataset_from_images
+            from ..image.paper_session import dataset_from_images
 
             ds, image_reports = dataset_from_images(data, mode=mode, robot=load_robot(robot))
         else:

@@ -184,7 +184,7 @@ class Calibration:
         """The calibration file of a general-model (opencv) joint calibration
         (:class:`hmlvs.calibration.joint.JointCalibration`); ``blur_var``: the camera blur
         variance its image session was extracted with (the reports'
-        :attr:`~hmlvs.image.session.ImageReport.blur_var`), if any."""
+        :attr:`~hmlvs.image.accounts.ImageReport.blur_var`), if any."""
         from .. import __version__
 
         return cls(params=None, sensor=result.sensor, model="opencv", std=dict(result.std),

@@ -8,7 +8,7 @@ from typing import Any
 
 @dataclass(frozen=True)
 class ImageReport:
-    """What :func:`~hmlvs.image.session.dataset_from_images` found in one image pair, and what
+    """What :func:`~hmlvs.image.paper_session.dataset_from_images` found in one image pair, and what
     it rejected.
 
     Attributes

@@ -132,7 +132,7 @@ def number_partial_views(full: Sequence[ViewData], partial: Sequence[PartialView
 
 
 def partial_view(pid: str, pair: Any, board: Any, whole_error: Exception) -> PartialView:
-    """The :class:`PartialView` of an image pair (``hmlvs.image.session._Pair``) in which
+    """The :class:`PartialView` of an image pair (``hmlvs.image.session.Pair``) in which
     no whole board was found (``whole_error`` says so): its corner grid, or the reason why
     there is none."""
     try:

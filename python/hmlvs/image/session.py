@@ -4,13 +4,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
 from .. import _core
-from ..data.views import ViewData
-from .accounts import ImageReport
 from .colour import (  # noqa: F401 (laser_channel, estimate_background re-exported)
     board_gray,
     colour_stripe,
@@ -19,14 +17,11 @@ from .colour import (  # noqa: F401 (laser_channel, estimate_background re-expor
     is_colour,
     laser_channel,
 )
-from .corners import BoardNotFoundError, find_corners
-from .points import Mode, calibration_points, fit_division_distortion
 from .stripe import (
     StripeOptions,
     StripeResult,
     StripeStatus,
     as_gray,
-    extract_stripe,
     finite_number,
     real_number,
 )
@@ -59,7 +54,6 @@ def opencv_failure(err: Exception, stage: str, hint: str = _BOARD_POSE_HINT) -> 
 
 def _load(item: Any, folder: Any, what: str) -> tuple[np.ndarray, str]:
     import os
-    from pathlib import Path
 
     from .._io import read_image
     if isinstance(item, np.ndarray):
@@ -93,351 +87,6 @@ def read_session_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, 
     return read_manifest(source)
 
 
-def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
-                        params: Any = None, mode: Mode = "corners", normalize: bool = True,
-                        channel: int | None = None, tolerance: float = 0.5, step: int = 8,
-                        min_stripe: int = 20, joint_unit: str | None = None,
-                        base_from_board: np.ndarray | None = None,
-                        **stripe_options: Any) -> tuple[Any, list[ImageReport]]:
-    """Laser on/off image pairs + joint readings -> a calibration :class:`~hmlvs.Dataset`.
-
-    For every pair: difference image (albedo-normalised unless ``normalize=False``), stripe
-    centres (:func:`extract_stripe` with ``stripe_options``), corners of the laser-off image
-    numbered with the corners predicted from ``params`` and the pose
-    (:func:`find_corners`), then :func:`calibration_points` in ``mode`` (in "homography"
-    mode with the lens distortion fitted to the corners of all views,
-    :func:`~hmlvs.image.points.fit_division_distortion`, and recorded in the data set's
-    ``meta``). A pair that fails is reported and skipped; the rest of the session goes
-    through.
-
-    Parameters
-    ----------
-    source : a folder (or its ``manifest.json``) written by
-        :func:`hmlvs.simulate.render_session` or in that format, or a list of records
-        ``{"id": "p000", "on": file or array, "off": file or array, "joints": [...]}``
-    robot : the arm (default: SCORBOT ER-VII); poses are ``robot.poses(joints)``
-    board : the board (default: the manifest's, else the paper's)
-    params : approximate sensor parameters, to predict where the corners are (default: the
-        nominal Table 2 values). They need to place the corners within about a quarter of
-        a square (:func:`find_corners`); a view predicted farther off is reported, not
-        numbered wrong.
-    mode : "corners" or "homography", see :func:`calibration_points`
-    tolerance, step : passed to :func:`calibration_points`
-    min_stripe : fewest scan lines with a stripe for a usable pair
-    joint_unit : "rad" or "deg" for records (a manifest says its unit)
-    base_from_board : where the manifest's board lies in the base (4 x 4), when the manifest
-        does not say (e.g. estimated by an opencv calibration of the same session)
-    stripe_options : options of :func:`stripe_from_pair`. Without ``blur_var`` the camera's
-        blur variance for the correction at the squares' edges is fitted to the session
-        (:func:`session_blur_var`); ``meta["blur_var"]`` records the value used.
-
-    Returns
-    -------
-    (dataset, report) : the data set (ids ``"<pose id>:<point id>"``, ``pose_index`` = pair
-        index, joints in rad) and one :class:`ImageReport` per pair.
-    """
-    import cv2
-
-    from ..data.dataset import Dataset
-    from ..geometry.board import Checkerboard
-    from ..geometry.robot import Robot
-    from ..models.params import Parameters
-    from .corners import predicted_corners
-
-    folder = None
-    unit = joint_unit
-    size = None
-    if isinstance(source, (list, tuple)):
-        records = list(source)
-        if unit is None:
-            unit = "rad"
-    else:
-        records, doc, folder = read_session_manifest(source)
-        unit = doc.get("joint_unit", "rad") if unit is None else unit
-        if board is None and doc.get("board") is not None:
-            from ..data.manifest import checkerboard_of
-
-            board = checkerboard_of(doc["board"], source)
-            if base_from_board is not None and isinstance(doc["board"], dict) and \
-                    "origin" not in doc["board"]:
-                board = _placed(board, base_from_board)
-        robot = _manifest_robot(doc, robot, source)
-        if isinstance(doc.get("image_size"), list) and len(doc["image_size"]) == 2:
-            size = (int(doc["image_size"][0]), int(doc["image_size"][1]))
-    if unit not in ("rad", "deg"):
-        raise ValueError(f"joint_unit must be 'rad' or 'deg', got {unit!r}")
-    if not records:
-        raise ValueError("the session has no image pairs")
-    _require_poses(records, "the paper model's calibration points need the robot pose of "
-                   "every view: calibrate a bench session with the opencv model (--model "
-                   "opencv)")
-    robot = Robot.scorbot_er7() if robot is None else robot
-    board = Checkerboard() if board is None else board
-    approx = Parameters.nominal() if params is None else params
-    # Check the stripe options once, up front: a typo is the caller's error, not the image's.
-    extract_stripe(np.zeros((4, 4), np.uint8), **_core_options(stripe_options))
-    # The stripe on the board is one straight line (a curve of the lens's distortion):
-    # Steger's line detector may smooth along it over more than across it.
-    stripe_options = dict(stripe_options)
-    stripe_options["smooth_along"] = smooth_along_of(stripe_options.get("smooth_along",
-                                                                      BOARD_SMOOTH_ALONG))
-    # The camera's blur, for the correction of the centres at the squares' edges: given, or
-    # fitted to the whole session once every stripe is in (session_blur_var).
-    fit_blur = stripe_options.get("blur_var") is None
-    stripe_options["blur_var"] = checked_blur_var(stripe_options.get("blur_var"))
-
-    # First every pair's stripe and corners; then, in homography mode, the lens distortion
-    # fitted to the corners of all views (one lens: views with few corners need it), and the
-    # calibration points.
-    found: list[ImageReport | tuple[Any, ...]] = []
-
-    def accept(pid: str, index: int, pair: _Pair, corners: Any, info: dict[str, Any]
-               ) -> tuple[Any, ...]:
-        if not _pending(pair):
-            if fit_blur:
-                info["edge"] = edge_shift(pair, normalize, stripe_options)
-            pair = replace(pair, on=None, off=None)  # the images are no longer needed
-        return (pid, index, pair, corners, info)
-
-    # pairs whose board the prediction could not number: (place in found, pair, info, error)
-    unnumbered: list[tuple[int, _Pair, dict[str, Any], str]] = []
-    for index, rec in enumerate(records):
-        pid = record_id(rec, index)
-        on_name, off_name = record_names(rec)
-        info: dict[str, Any] = {}
-        try:
-            pair = read_pair(rec, index, folder, unit, robot, size, channel, normalize,
-                              stripe_options, min_stripe, defer=True)
-            on_name, off_name, size = pair.on_name, pair.off_name, pair.size
-            info["stripe"] = pair.stripe.counts()
-            try:
-                corners = find_corners(pair.board_image, board, expected=predicted_corners(
-                    approx, pair.pose, board))
-            except BoardNotFoundError as e:
-                raise PairRejected(f"checkerboard: {e}") from None
-            except ValueError as e:
-                # numbered again once the views' agreement fixes the hand-eye (below)
-                unnumbered.append((len(found), pair, info, f"checkerboard: {e}"))
-                found.append(ImageReport(pid, index, str(on_name), str(off_name), False,
-                                         f"checkerboard: {e}", info["stripe"], 0))
-                continue
-            except cv2.error as e:
-                raise opencv_failure(e, "checkerboard") from None
-        except PairRejected as e:
-            found.append(ImageReport(pid, index, str(on_name), str(off_name), False, str(e),
-                                     info.get("stripe", {}), info.get("corners", 0)))
-            continue
-        found.append(accept(pid, index, pair, corners, info))
-    if unnumbered:
-        _number_by_agreement(found, unnumbered, board, approx, accept)
-    # One board print and one laser: a pair whose stripe lies on one level of the board only
-    # (along a row of light squares) cannot fit the albedo offset; it takes the session's,
-    # the median of the other pairs' (with 0 instead, its stripe would be lost on the
-    # light squares and pulled towards the dark ones where it touches them).
-    offsets = [f[2].offset for f in found if not isinstance(f, ImageReport)
-               and f[2].offset is not None and np.isfinite(f[2].offset)]
-    session_offset = float(np.median(offsets)) if offsets else 0.0
-    taken: set[int] = set()
-    for n, item in enumerate(found):
-        if isinstance(item, ImageReport) or not _pending(item[2]):
-            continue
-        pid, index, pair, corners, info = item
-        try:
-            if offsets:
-                pair = _restripe(pair, session_offset, normalize, stripe_options, min_stripe)
-            else:
-                _check_stripe(pair, min_stripe)
-        except PairRejected as e:
-            found[n] = ImageReport(pid, index, pair.on_name, pair.off_name, False, str(e),
-                                   pair.stripe.counts(), 0)
-            continue
-        if offsets:
-            taken.add(index)
-        if fit_blur:
-            info["edge"] = edge_shift(pair, normalize, dict(stripe_options,
-                                                             albedo_offset=session_offset)
-                                       if offsets else stripe_options)
-        info["stripe"] = pair.stripe.counts()
-        found[n] = (pid, index, replace(pair, on=None, off=None), corners, info)
-    blur_var = stripe_options["blur_var"]
-    if fit_blur:
-        kept = [f for f in found if not isinstance(f, ImageReport)]
-        blur_var = session_blur_var([(f[2].stripe, f[4]["edge"]) for f in kept])
-        for n, item in enumerate(found):
-            if not isinstance(item, ImageReport):
-                pid, index, pair, corners, info = item
-                found[n] = (pid, index, replace(pair, stripe=with_blur_var(
-                    pair.stripe, info["edge"], blur_var)), corners, info)
-    distortion = None
-    if mode == "homography":
-        views = [f[3] for f in found if not isinstance(f, ImageReport)]
-        distortion = fit_division_distortion(views) if views else None
-
-    reports: list[ImageReport] = []
-    px_all, pt_all, ids_all, joints_all, pidx_all, poses_all = [], [], [], [], [], []
-    quality_all: list[dict[str, np.ndarray]] = []
-    for item in found:
-        if isinstance(item, ImageReport):
-            reports.append(item)
-            continue
-        pid, index, pair, corners, info = item
-        on_name, off_name, joints, pose = pair.on_name, pair.off_name, pair.joints, pair.pose
-        info["corners"] = len(corners)
-        try:
-            try:
-                cp = calibration_points(pair.stripe, corners, board, mode=mode,
-                                        tolerance=tolerance, step=step, distortion=distortion)
-            except cv2.error as e:
-                raise opencv_failure(e, "calibration points") from None
-            info["rejected"] = dict(cp.rejected)
-            if len(cp) == 0:
-                raise PairRejected("no calibration points: " + (
-                    "; ".join(f"{k}: {v}" for k, v in cp.rejected.items()) or
-                    ("no corner lies on the stripe" if mode == "corners" else
-                     "the stripe does not cross a square with four found corners")))
-        except PairRejected as e:
-            reports.append(ImageReport(pid, index, str(on_name), str(off_name), False, str(e),
-                                       info.get("stripe", {}), info.get("corners", 0), 0,
-                                       info.get("rejected", {})))
-            continue
-        reports.append(ImageReport(pid, index, str(on_name), str(off_name), True, "",
-                                   info["stripe"], info["corners"], len(cp), info["rejected"],
-                                   blur_var, ViewData(pid, np.asarray(corners.pixels, float),
-                                                      np.asarray(corners.index, int),
-                                                      pair.stripe.pixels, pose)))
-        px_all.append(cp.pixels)
-        pt_all.append(cp.points)
-        ids_all += [f"{pid}:{k}" for k in cp.ids]
-        joints_all.append(None if joints is None else np.repeat(joints[None], len(cp), axis=0))
-        poses_all.append(np.repeat(pose[None], len(cp), axis=0))
-        pidx_all.append(np.full(len(cp), index, dtype=np.int64))
-        quality_all.append(_point_quality(pair.stripe, cp))
-    if not px_all:
-        raise ValueError("no image pair gave a calibration point:\n" +
-                         "\n".join(str(r) for r in reports))
-    joints_arr = None if any(j is None for j in joints_all) else np.vstack(joints_all)
-    ds = Dataset(np.vstack(px_all), np.concatenate(poses_all), np.vstack(pt_all),
-                 ids=np.array(ids_all), joints=joints_arr, pose_index=np.concatenate(pidx_all),
-                 quality={k: np.concatenate([q[k] for q in quality_all])
-                          for k in quality_all[0]},
-                 meta={"source": "images", "mode": mode, "normalize": normalize,
-                       **_board_meta(board),
-                       "smooth_along": stripe_options["smooth_along"],
-                       **({"albedo_step": stripe_options["albedo_step"]}
-                          if stripe_options.get("albedo_step") is not None else {}),
-                       "blur_var": blur_var, "blur_var_fitted": fit_blur,
-                       "pairs": len(records),
-                       "pairs_used": sum(r.ok for r in reports),
-                       "image_size": list(size) if size else None,
-                       **({"albedo_offset_session": session_offset,
-                           "albedo_offset_taken_by": [r.id for r in reports if r.index in
-                                                      taken]} if taken else {}),
-                       **({} if distortion is None else {"division_distortion": {
-                           "centre_px": [float(x) for x in distortion[0]],
-                           "k_per_px2": float(distortion[1])}})})
-    return ds, reports
-
-
-def _board_meta(board: Any) -> dict[str, Any]:
-    """The data set's record of the board its reference points lie on (rows, cols, square,
-    its pose in the base), for the verdict's chain checks."""
-    try:
-        pose = np.asarray(board.base_from_board(), float)
-    except (AttributeError, ValueError):
-        return {}
-    return {"board": {"rows": int(board.rows), "cols": int(board.cols),
-                      "square": float(board.square), "base_from_board": pose.tolist()}}
-
-
-def _placed(board: Any, base_from_board: np.ndarray) -> Any:
-    """``board`` (rows, cols, square) placed at the pose ``base_from_board``."""
-    from ..geometry.board import Checkerboard
-
-    r = np.asarray(base_from_board, float)[:3, :3]
-    u, _, vt = np.linalg.svd(r)  # the nearest rotation: unit, orthogonal directions
-    r = u @ vt
-    return Checkerboard(rows=board.rows, cols=board.cols, square=board.square,
-                        origin=tuple(float(x) for x in np.asarray(base_from_board)[:3, 3]),
-                        row_direction=tuple(float(x) for x in r[:, 0]),
-                        col_direction=tuple(float(x) for x in r[:, 1]))
-
-
-def _number_by_agreement(found: list[Any], unnumbered: list[tuple[int, Any, dict, str]],
-                         board: Any, approx: Any, accept: Any) -> None:
-    """Number again the boards the approximate parameters could not (partly visible ones,
-    predicted a third of a square or more off): with the camera and hand-eye on which all
-    views' corners agree (:mod:`hmlvs.image.consensus`), the board is predicted within a few
-    pixels. ``found`` entries are replaced in place (by ``accept``'s tuple, or by a report
-    saying why the view stays unnumbered)."""
-    import cv2
-
-    from .._arrays import as_params
-    from .consensus import MIN_VIEWS, consensus_hand_eye, grid_intrinsics
-    from .corners import detect_grid
-
-    grids: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-    for item in found:
-        if not isinstance(item, ImageReport):
-            c = item[3]
-            grids.append((c.pixels, np.c_[c.index // board.cols, c.index % board.cols],
-                          item[2].pose))
-    for _, pair, _, _ in unnumbered:
-        try:
-            g = detect_grid(pair.board_image, board)
-        except ValueError:
-            continue
-        m, n = g.shape
-        ij = np.stack([a.ravel() for a in np.meshgrid(np.arange(m), np.arange(n),
-                                                      indexing="ij")], axis=1)
-        grids.append((g.pixels.reshape(-1, 2), ij, pair.pose))
-    q = as_params(approx)
-    why = ""
-    if len(grids) < MIN_VIEWS:
-        why = (f"only {len(grids)} views show a grid of corners, too few to number partly "
-               "visible boards by their agreement")
-    else:
-        try:
-            k0 = np.array([[q[0] / q[1], 0.0, q[3]], [0.0, q[0] / q[2], q[4]], [0, 0, 1.0]])
-            size = unnumbered[0][1].size
-            k, d = grid_intrinsics([(px, ij) for px, ij, _ in grids], board.square, size, k0)
-            hand_eye = consensus_hand_eye(grids, board, k, d)
-        except (ValueError, cv2.error) as e:
-            why = str(e)
-    if not why:
-        from types import SimpleNamespace
-
-        from .partial import predicted_board_pixels
-
-        # the camera, hand-eye and board the views agree on, as predicted_board_pixels reads
-        agreed = SimpleNamespace(camera_matrix=k, dist_coeffs=d, hand_from_camera=hand_eye,
-                                 base_from_board=board.base_from_board())
-    for place, pair, info, error in unnumbered:
-        old = found[place]
-        if not why:
-            expected = predicted_board_pixels(agreed, pair.pose, board)
-            try:
-                corners = find_corners(pair.board_image, board, expected=expected)
-            except (ValueError, cv2.error) as e:
-                found[place] = replace(old, reason=f"checkerboard: {e} (predicted with the "
-                                       "hand-eye the views agree on)")
-                continue
-            found[place] = accept(old.id, old.index, pair, corners, info)
-        else:
-            found[place] = replace(old, reason=f"{error}; {why}")
-
-
-def _point_quality(stripe: StripeResult, cp: Any) -> dict[str, np.ndarray]:
-    """The stripe's quality at calibration points ``cp`` (:attr:`Dataset.quality`): the
-    points' own centre uncertainty, and width, peak and residual of the scan line each lies
-    on (nearest it, for a corner mode point's foot on the fitted centre line)."""
-    scan = cp.pixels[:, 0] if stripe.direction == "columns" else cp.pixels[:, 1]
-    line = np.clip(np.rint(scan).astype(int), 0, stripe.position.size - 1)
-    residual = stripe.residual if stripe.residual is not None else \
-        np.full(stripe.position.size, np.nan)
-    return {"sigma": np.asarray(cp.sigma, float), "width": stripe.width[line],
-            "peak": stripe.intensity[line], "residual": residual[line]}
-
-
 def record_id(rec: Any, index: int) -> str:
     return str(rec.get("id", f"p{index:03d}")) if isinstance(rec, dict) else f"p{index:03d}"
 
@@ -449,126 +98,8 @@ def record_names(rec: Any) -> tuple[str, str]:
                  for k in ("on", "off"))  # type: ignore[return-value]
 
 
-def iter_stripes_from_images(source: Any, *, robot: Any = None,
-                             joint_unit: str | None = None, channel: int | None = None,
-                             normalize: bool = True, min_stripe: int = 20,
-                             image_size: tuple[int, int] | None = None,
-                             image_size_of: str = "the calibration", **stripe_options: Any
-                             ) -> Iterator[tuple[ImageReport, Any, np.ndarray | None]]:
-    """Laser on/off pairs + joint readings (a manifest or a list of records) -> stripes.
-
-    The measurement counterpart of :func:`dataset_from_images` (no checkerboard needed): for
-    each pair the same checks, difference image and stripe extraction. A pair that fails is
-    reported and skipped. Entries may give a stripe list (``stripe``: CSV of u, v[, intensity])
-    instead of an image pair, and a ``pose`` instead of joint readings. Returns (ids, stripes,
-    base_from_hand poses (n, 4, 4), reports). With ``image_size`` (width, height: that of
-    ``image_size_of``, the calibration) images of another size are refused, a ValueError
-    naming both sizes: a calibration holds for one camera at one resolution.
-
-    One pair at a time, in the session's order: (its report, its stripe or None when it was
-    rejected, its base_from_hand pose or None); the frames are read as the iteration asks, so
-    a scan of any length needs the memory of one frame. The manifest and the options are
-    checked before the first pair is read. :func:`stripes_from_images` collects them.
-    """
-    from ..geometry.robot import Robot
-
-    folder = None
-    unit = joint_unit
-    manifest_size = None
-    if isinstance(source, (list, tuple)):
-        records = list(source)
-        unit = "rad" if unit is None else unit
-    else:
-        records, doc, folder = read_session_manifest(source)
-        unit = doc.get("joint_unit", "rad") if unit is None else unit
-        robot = _manifest_robot(doc, robot, source)
-        if isinstance(doc.get("image_size"), list) and len(doc["image_size"]) == 2:
-            manifest_size = (int(doc["image_size"][0]), int(doc["image_size"][1]))
-            if image_size is not None and tuple(image_size) != manifest_size:
-                raise ValueError(f"{source}: the manifest's image_size is {manifest_size[0]} x "
-                                 f"{manifest_size[1]} pixels but {image_size_of} is for "
-                                 f"{image_size[0]} x {image_size[1]} pixel images: measure "
-                                 "with a calibration of this camera at this resolution")
-    if unit not in ("rad", "deg"):
-        raise ValueError(f"joint_unit must be 'rad' or 'deg', got {unit!r}")
-    if not records:
-        raise ValueError("the scan has no image pairs")
-    _require_poses(records, "measuring in the robot's base frame needs the robot pose of "
-                   "every frame")
-    robot = Robot.scorbot_er7() if robot is None else robot
-    # option typos fail here
-    extract_stripe(np.zeros((4, 4), np.uint8), **_core_options(stripe_options))
-    checked_blur_var(stripe_options.get("blur_var"))
-    return _iter_pairs(records, folder, source, unit, robot, channel, normalize, min_stripe,
-                       image_size, image_size_of, manifest_size, stripe_options)
-
-
-def _iter_pairs(records: list[Any], folder: Any, source: Any, unit: str, robot: Any,
-                channel: int | None, normalize: bool, min_stripe: int,
-                image_size: tuple[int, int] | None, image_size_of: str,
-                manifest_size: tuple[int, int] | None, stripe_options: dict[str, Any]
-                ) -> Iterator[tuple[ImageReport, Any, np.ndarray | None]]:
-    """The pairs of :func:`iter_stripes_from_images`, once its checks have passed."""
-    from ..data.manifest import read_stripe_list
-
-    blur_var = checked_blur_var(stripe_options.get("blur_var"))
-    size = manifest_size
-    for index, rec in enumerate(records):
-        pid = record_id(rec, index)
-        on_name, off_name = record_names(rec)
-        try:
-            if isinstance(rec, dict) and "stripe" in rec:
-                _, pose = _record_pose(rec, robot, unit)
-                path = Path(rec["stripe"])
-                path = path if folder is None or path.is_absolute() else Path(folder) / path
-                if not path.is_file():
-                    raise PairRejected(f"the stripe list {path} does not exist")
-                try:
-                    px, inten = read_stripe_list(path)
-                except ValueError as e:
-                    raise PairRejected(str(e)) from None
-                item: Any = StripeList(px, inten)
-                on_name = off_name = path.name
-                found = len(px)
-            else:
-                pair = read_pair(rec, index, folder, unit, robot, size, channel, normalize,
-                                  stripe_options, min_stripe)
-                size, pose, item = pair.size, pair.pose, pair.stripe
-                on_name, off_name = pair.on_name, pair.off_name
-                found = int(pair.stripe.found.sum())
-                if image_size is not None and tuple(size) != tuple(image_size):
-                    where = pid if folder is None else f"{source}: entry {pid}"
-                    raise ValueError(f"{where}: the images {on_name} and {off_name} are "
-                                     f"{size[0]} x {size[1]} pixels but {image_size_of} is for "
-                                     f"{image_size[0]} x {image_size[1]} pixel images: "
-                                     "measure with a calibration of this camera at this "
-                                     "resolution")
-        except PairRejected as e:
-            yield (ImageReport(pid, index, on_name, off_name, False, str(e), {}, 0, 0, {}),
-                   None, None)
-            continue
-        yield (ImageReport(pid, index, on_name, off_name, True, "",
-                           getattr(item, "counts", lambda: {})(), 0, found, {},
-                           None if isinstance(item, StripeList) else blur_var), item, pose)
-
-
-def stripes_from_images(source: Any, **options: Any
-                        ) -> tuple[list[str], list[Any], np.ndarray, list[ImageReport]]:
-    """:func:`iter_stripes_from_images` (same arguments) collected: (ids, stripes,
-    base_from_hand poses (n, 4, 4), reports) of the pairs that gave a stripe, and every
-    pair's report."""
-    ids, stripes, poses, reports = [], [], [], []
-    for report, item, pose in iter_stripes_from_images(source, **options):
-        reports.append(report)
-        if item is not None:
-            ids.append(report.id)
-            stripes.append(item)
-            poses.append(pose)
-    return ids, stripes, np.array(poses).reshape(-1, 4, 4), reports
-
-
 @dataclass
-class _Pair:
+class Pair:
     """One laser on/off pair after the checks shared by calibration and measurement."""
 
     on_name: str
@@ -593,7 +124,7 @@ class _Pair:
 def read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
                size: tuple[int, int] | None, channel: int | None, normalize: bool,
                stripe_options: dict[str, Any], min_stripe: int,
-               defer: bool = False) -> _Pair:
+               defer: bool = False) -> Pair:
     """Load, check and extract the stripe of one manifest record; raises PairRejected.
 
     A record without ``off`` is a laser-on image alone: its background (the board under
@@ -601,12 +132,12 @@ def read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
     laser-off frame, and the report's laser-off name says so. With ``defer``, a pair whose
     albedo offset could not be fitted (``offset`` NaN) is returned without the check of
     ``min_stripe``: its stripe is to be extracted again with the session's offset
-    (:func:`_restripe`)."""
+    (:func:`restripe`)."""
     if not isinstance(rec, dict):
         raise PairRejected(f"record {index} is not a mapping with on, off and joints")
     if "on" not in rec:
         raise PairRejected("the record lacks 'on'")
-    joints, pose = _record_pose(rec, robot, unit)
+    joints, pose = record_pose(rec, robot, unit)
     on, on_name = _load(rec["on"], folder, "laser-on")
     off = None
     off_name = ESTIMATED_OFF
@@ -655,27 +186,27 @@ def read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
                                                            stripe_options)
     except ValueError as e:  # the threshold leaves no pixel
         raise PairRejected(f"no laser stripe found in {on_name}: {e}") from None
-    pair = _Pair(str(on_name), str(off_name), joints, pose, on_g, off_g, stripe, size, offset,
+    pair = Pair(str(on_name), str(off_name), joints, pose, on_g, off_g, stripe, size, offset,
                  board)
-    if not (defer and _pending(pair)):
-        _check_stripe(pair, min_stripe)
+    if not (defer and stripe_pending(pair)):
+        check_stripe(pair, min_stripe)
     return pair
 
 
-def _pending(pair: _Pair) -> bool:
+def stripe_pending(pair: Pair) -> bool:
     """Whether the pair's stripe waits for the session's albedo offset (see read_pair)."""
     return pair.offset is not None and bool(np.isnan(pair.offset))
 
 
-def _check_stripe(pair: _Pair, min_stripe: int) -> None:
+def check_stripe(pair: Pair, min_stripe: int) -> None:
     if pair.stripe.found.sum() < min_stripe:
         raise PairRejected(f"no laser stripe found in {pair.on_name}: only "
                       f"{int(pair.stripe.found.sum())} scan lines have one "
                       f"({_counts_text(pair.stripe.counts())})")
 
 
-def _restripe(pair: _Pair, offset: float, normalize: bool, stripe_options: dict[str, Any],
-              min_stripe: int) -> _Pair:
+def restripe(pair: Pair, offset: float, normalize: bool, stripe_options: dict[str, Any],
+              min_stripe: int) -> Pair:
     """The pair's stripe extracted again with the albedo offset ``offset``; raises PairRejected."""
     try:
         stripe = _stripe_and_background(pair.on, pair.off, normalize,
@@ -683,7 +214,7 @@ def _restripe(pair: _Pair, offset: float, normalize: bool, stripe_options: dict[
     except ValueError as e:
         raise PairRejected(f"no laser stripe found in {pair.on_name}: {e}") from None
     pair = replace(pair, stripe=stripe)
-    _check_stripe(pair, min_stripe)
+    check_stripe(pair, min_stripe)
     return pair
 
 
@@ -864,7 +395,7 @@ MAX_BLUR_VAR = 4.0
 _EDGE_REF = 0.5
 
 
-def edge_shift(pair: _Pair, normalize: bool, stripe_options: dict[str, Any]) -> np.ndarray:
+def edge_shift(pair: Pair, normalize: bool, stripe_options: dict[str, Any]) -> np.ndarray:
     """Per scan line, how far the pair's stripe centre moves per px^2 of assumed blur
     variance (the correction at albedo steps, :func:`stripe_from_pair` ``blur_var``): the
     centres extracted again at a reference variance, against the pair's. 0 where either
@@ -943,7 +474,7 @@ def smooth_along_of(value: Any) -> float:
     return v
 
 
-def _manifest_robot(doc: dict[str, Any], robot: Any, source: Any) -> Any:
+def manifest_robot(doc: dict[str, Any], robot: Any, source: Any) -> Any:
     """The arm of a manifest: ``robot`` when given; else the manifest's ``robot:``, a built-in
     arm's name or a mapping in the :meth:`hmlvs.Robot.to_dict` form; else None (the default,
     SCORBOT ER-VII)."""
@@ -954,13 +485,13 @@ def _manifest_robot(doc: dict[str, Any], robot: Any, source: Any) -> Any:
     return robot_from_description(doc["robot"], str(source))
 
 
-def _require_poses(records: list[Any], why: str) -> None:
+def require_poses(records: list[Any], why: str) -> None:
     """Refuse a bench session (records without a robot pose) where poses are needed."""
     if any(isinstance(r, dict) and "pose" not in r and "joints" not in r for r in records):
         raise ValueError(f"the session has no robot poses (a bench session): {why}")
 
 
-def _record_pose(rec: dict[str, Any], robot: Any, unit: str
+def record_pose(rec: dict[str, Any], robot: Any, unit: str
                  ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """(joints in rad or None, base_from_hand pose in mm) of a record, (None, None) for a
     bench session's record (neither ``pose`` nor ``joints``); raises PairRejected.
@@ -987,20 +518,12 @@ def _record_pose(rec: dict[str, Any], robot: Any, unit: str
     return joints, robot.poses(joints[None])[0]
 
 
-@dataclass(frozen=True)
-class StripeList:
-    """Stripe pixels given as a list (a manifest's ``stripe`` CSV) instead of an image."""
-
-    pixels: np.ndarray
-    intensity: np.ndarray
-
-
 def _counts_text(counts: dict[str, int]) -> str:
     return ", ".join(f"{k.lower()} {v}" for k, v in counts.items() if v)
 
 
 
-def _core_options(stripe_options: dict[str, Any]) -> dict[str, Any]:
+def core_options(stripe_options: dict[str, Any]) -> dict[str, Any]:
     """The options of :func:`extract_stripe` among the pipeline's stripe options."""
     return {k: v for k, v in stripe_options.items()
             if k not in ("albedo_step", "albedo_offset", "smooth_along", "blur_var")}

@@ -83,7 +83,7 @@ def locate_stripe_end(on: np.ndarray, off: np.ndarray, near: Sequence[float], *,
     Method (for a roughly horizontal stripe, one centre per image column):
 
     1. stripe centres from the albedo-normalised difference image (as
-       :func:`hmlvs.image.session.stripes_from_images` extracts them), split into segments where
+       :func:`hmlvs.image.scan.stripes_from_images` extracts them), split into segments where
        consecutive columns' centres jump by more than 2 px;
     2. the segment end nearest ``near`` (within ``search_radius`` px) is the candidate;
     3. a straight line is fitted to that segment's centres from 4 to ``4 + fit_length``

@@ -370,7 +370,7 @@ def measure_images_to(calibration: Any, source: Any, out: str | os.PathLike, *,
     whole, or not at all when the run fails. ``progress``: a callable (done, total) after
     each frame."""
     from ..data.manifest import read_manifest
-    from ..image.session import iter_stripes_from_images
+    from ..image.scan import iter_stripes_from_images
 
     calibration, robot, options = _prepared(calibration, source, robot, options)
     pairs = iter_stripes_from_images(source, robot=robot, **options)  # checks the session
@@ -410,7 +410,7 @@ def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
     or a list of records) -> a point cloud, one stripe profile per pair.
 
     Pairs that fail (no stripe, bad image, mismatched pair) are skipped and named in the
-    result's ``rejected``; ``options`` go to :func:`hmlvs.image.session.stripes_from_images`.
+    result's ``rejected``; ``options`` go to :func:`hmlvs.image.scan.stripes_from_images`.
     Without a ``blur_var`` option, that of the calibration (the camera blur its image session
     fitted, :attr:`hmlvs.Calibration.blur_var`) corrects the stripes at albedo steps.
 
@@ -418,7 +418,7 @@ def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
     -------
     MeasureResult
     """
-    from ..image.session import stripes_from_images
+    from ..image.scan import stripes_from_images
 
     calibration, robot, options = _prepared(calibration, source, robot, options)
     ids, stripes, poses, reports = stripes_from_images(source, robot=robot, **options)

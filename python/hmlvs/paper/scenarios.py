@@ -375,7 +375,7 @@ def cylinder_scan(calibration: Any = None, truth: Any = None, *, seed: int = 0,
     import time
 
     from ..geometry.robot import Robot
-    from ..image.session import stripes_from_images
+    from ..image.scan import stripes_from_images
     from ..measurement.measure import measure_images
     from ..models.paper import points_in_base
     from ..models.params import Parameters
