@@ -67,7 +67,7 @@ def test_a_wrong_board_origin_rejects_the_pair_not_the_session(rendered, tmp_pat
 
 def test_an_opencv_error_in_one_pair_leaves_the_others_used(rendered, tmp_path, monkeypatch):
     import cv2
-    from hmlvs.image import session
+    from hmlvs.image import paper_session as session
 
     folder, _ = _copy(rendered, tmp_path)
     ds, reports = hmlvs.dataset_from_images(folder)

@@ -113,61 +113,81 @@ def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None
         raise ValueError(f"tolerance must be > 0 px, got {tolerance}")
     if int(window) < 1 or int(step) < 1:
         raise ValueError(f"window and step must be >= 1, got {window} and {step}")
-    found = stripe.found
-    if not found.any():
+    if not stripe.found.any():
         return _empty_points(mode, {"stripe": "no scan line with a found centre"})
+    if mode == "corners":
+        return _corner_points(stripe, corners, tolerance, int(window))
+    return _homography_points(stripe, corners, board, int(step), distortion)
+
+
+def _corner_points(stripe: StripeResult, corners: Corners, tolerance: float, window: int
+                   ) -> CalibrationPoints:
+    """:func:`calibration_points` in "corners" mode: the corners the stripe's centre line
+    passes within ``tolerance`` px of, at the foot of the perpendicular onto it."""
+    found = stripe.found
     pos = stripe.position[found].astype(float)
     cen = stripe.centre[found]
     sig = stripe.sigma[found]
     rejected: dict[str, str] = {}
-    if mode == "corners":
-        rows = []
-        cs = _scan_coords(stripe, corners.pixels)
-        all_lines = stripe.position.astype(float)
-        for k, cid in enumerate(corners.ids):
-            s0, a0 = cs[k]
-            near = np.abs(pos - s0) <= window
-            # is the stripe near this corner at all? use any line within the window
-            lines = np.abs(all_lines - s0) <= window
-            if not lines.any():
-                continue
-            if near.sum() < 3 or not ((pos[near] < s0).any() and (pos[near] > s0).any()):
-                c_near = stripe.centre[lines & found] if (lines & found).any() else None
-                if c_near is not None and np.nanmin(np.abs(c_near - a0)) <= tolerance + 2:
-                    rejected[cid] = "stripe not found on both sides of the corner"
-                continue
-            x = pos[near] - s0
-            wts = 1.0 / np.maximum(sig[near], 1e-3) ** 2
-            A = np.stack([np.ones_like(x), x], axis=1)
-            cov = np.linalg.inv(A.T @ (A * wts[:, None]))
-            a, b = cov @ (A.T @ (wts * cen[near]))
-            dist = (a0 - a) / np.hypot(1.0, b)
-            if abs(dist) > tolerance:
-                if abs(dist) <= 3 * tolerance:
-                    rejected[cid] = f"stripe passes {dist:+.2f} px from the corner (tolerance " \
-                                    f"{tolerance:g})"
-                continue
-            foot_s = s0 + (a0 - a) * b / (1.0 + b * b)
-            foot_a = a + b * (foot_s - s0)
-            rows.append((k, cid, foot_s, foot_a, float(np.sqrt(cov[0, 0])), dist))
-        if not rows:
-            return _empty_points(mode, rejected)
-        k_idx = np.array([r[0] for r in rows])
-        sa = np.array([[r[2], r[3]] for r in rows])
-        px = sa if stripe.direction == "columns" else sa[:, ::-1]
-        xy = corners.board_xy[k_idx]
-        return CalibrationPoints(px, corners.points[k_idx], xy, np.array([r[1] for r in rows]),
-                                 np.array([r[4] for r in rows]), np.array([r[5] for r in rows]),
-                                 mode, rejected)
+    mode = "corners"
+    rows = []
+    cs = _scan_coords(stripe, corners.pixels)
+    all_lines = stripe.position.astype(float)
+    for k, cid in enumerate(corners.ids):
+        s0, a0 = cs[k]
+        near = np.abs(pos - s0) <= window
+        # is the stripe near this corner at all? use any line within the window
+        lines = np.abs(all_lines - s0) <= window
+        if not lines.any():
+            continue
+        if near.sum() < 3 or not ((pos[near] < s0).any() and (pos[near] > s0).any()):
+            c_near = stripe.centre[lines & found] if (lines & found).any() else None
+            if c_near is not None and np.nanmin(np.abs(c_near - a0)) <= tolerance + 2:
+                rejected[cid] = "stripe not found on both sides of the corner"
+            continue
+        x = pos[near] - s0
+        wts = 1.0 / np.maximum(sig[near], 1e-3) ** 2
+        A = np.stack([np.ones_like(x), x], axis=1)
+        cov = np.linalg.inv(A.T @ (A * wts[:, None]))
+        a, b = cov @ (A.T @ (wts * cen[near]))
+        dist = (a0 - a) / np.hypot(1.0, b)
+        if abs(dist) > tolerance:
+            if abs(dist) <= 3 * tolerance:
+                rejected[cid] = f"stripe passes {dist:+.2f} px from the corner (tolerance " \
+                                f"{tolerance:g})"
+            continue
+        foot_s = s0 + (a0 - a) * b / (1.0 + b * b)
+        foot_a = a + b * (foot_s - s0)
+        rows.append((k, cid, foot_s, foot_a, float(np.sqrt(cov[0, 0])), dist))
+    if not rows:
+        return _empty_points(mode, rejected)
+    k_idx = np.array([r[0] for r in rows])
+    sa = np.array([[r[2], r[3]] for r in rows])
+    px = sa if stripe.direction == "columns" else sa[:, ::-1]
+    xy = corners.board_xy[k_idx]
+    return CalibrationPoints(px, corners.points[k_idx], xy, np.array([r[1] for r in rows]),
+                             np.array([r[4] for r in rows]), np.array([r[5] for r in rows]),
+                             mode, rejected)
 
+
+def _homography_points(stripe: StripeResult, corners: Corners, board: Any, step: int,
+                       distortion: Distortion | None) -> CalibrationPoints:
+    """:func:`calibration_points` in "homography" mode: every ``step``-th found stripe
+    centre placed on the board by the corners' homography (one for the board, or each
+    square's own)."""
     import cv2
+
+    mode = "homography"
+    found = stripe.found
+    pos = stripe.position[found].astype(float)
+    cen = stripe.centre[found]
+    sig = stripe.sigma[found]
     if len(corners) < 4:
         return _empty_points(mode, {"board": "fewer than 4 corners"})
     sel = np.arange(0, pos.size, int(step))
     spx = np.stack([pos[sel], cen[sel]], axis=1) if stripe.direction == "columns" else \
         np.stack([cen[sel], pos[sel]], axis=1)
     ssig = sig[sel]
-    sq = board.square
     # Radial distortion bends the board's lines, which a homography cannot follow. Fit the
     # model's division distortion p_u = c + (p - c) / (1 + k |p - c|^2) about the image
     # centre so that the corners best fit one homography, and map undistorted pixels.
@@ -196,6 +216,20 @@ def calibration_points(stripe: StripeResult, corners: Corners, board: Any = None
                                     np.linalg.inv(hmat)).reshape(-1, 2)
     use_global = len(corners) >= min_global and \
         float(np.sqrt(np.mean(np.sum((back - cpx) ** 2, axis=1)))) <= GLOBAL_RESIDUAL
+    return _placed_points(stripe, board, spx, spx_u, rough, ssig, lookup, use_global)
+
+
+def _placed_points(stripe: StripeResult, board: Any, spx: np.ndarray, spx_u: np.ndarray,
+                   rough: np.ndarray, ssig: np.ndarray, lookup: dict[int, np.ndarray],
+                   use_global: bool) -> CalibrationPoints:
+    """The stripe pixels ``spx`` (undistorted ``spx_u``, on the board by the one homography
+    at ``rough``) placed in their squares: by the one homography (``use_global``) or by
+    each square's own from its four corners (``lookup``: corner id -> undistorted pixel)."""
+    import cv2
+
+    sq = board.square
+    mode = "homography"
+    rejected: dict[str, str] = {}
     out_px, out_xy, out_ids, out_sig = [], [], [], []
     cache: dict[tuple[int, int], np.ndarray | None] = {}
 

@@ -8,6 +8,7 @@ the board is decided by the calibration itself, once the board's pose in each vi
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -15,10 +16,10 @@ import numpy as np
 from ..data.manifest import checkerboard_of
 from ..data.views import ViewData
 from ..geometry.board import BoardSpec, CharucoSpec
+from .accounts import ImageReport
 from .corners import BoardNotFoundError, detect_board, detect_charuco, prefer_detected
 from .partial import PartialView, add_partial_views, partial_view
 from .session import (
-    ImageReport,
     PairRejected,
     checked_blur_var,
     edge_shift,
@@ -88,64 +89,106 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     ``threads`` threads (default: one per core); the result does not depend on the number.
     """
     from concurrent.futures import ThreadPoolExecutor
-    from dataclasses import replace
 
-    import cv2
-
-    from ..geometry.robot import Robot
+    from ..geometry.board import Checkerboard
 
     records, doc, folder = read_session_manifest(source)
     board_spec, board_pose = board_of(doc, board, source)
-    unit = doc.get("joint_unit", "rad") if joint_unit is None else joint_unit
-    if robot is None:
-        name = doc.get("robot")
-        needs_robot = any(isinstance(r, dict) and "joints" in r for r in records)
-        if needs_robot and name not in (None, Robot.scorbot_er7().name):
-            raise ValueError(f"the images were taken with robot {name!r}; pass its DH table "
-                             "(robot=hmlvs.Robot(...) or --robot FILE)")
-        robot = Robot.scorbot_er7()
-    from ..geometry.board import Checkerboard
-
-    detector_board = board_spec if board_spec.unambiguous else Checkerboard(
-        rows=board_spec.rows, cols=board_spec.cols, square=board_spec.square)
-    views: list[ViewData] = []
-    reports: list[ImageReport] = []
-    partial: list[tuple[int, PartialView, Any]] = []
-    size = None
     given = doc.get("image_size")  # the manifest's: every pair must have it
-    given = (int(given[0]), int(given[1])) if isinstance(given, list) and len(given) == 2 \
-        else None
-    stripe_options = dict(stripe_options)
-    fit_blur = stripe_options.get("blur_var") is None
-    stripe_options["blur_var"] = checked_blur_var(stripe_options.get("blur_var"))
-    edges: dict[str, tuple[Any, np.ndarray]] = {}
-    whole: dict[str, Any] = {}  # the whole boards' Corners, by view id
-    board_images: dict[str, np.ndarray] = {}  # and their images
+    options = dict(stripe_options)
+    fit_blur = options.get("blur_var") is None
+    options["blur_var"] = checked_blur_var(options.get("blur_var"))
+    reader = _ViewReader(
+        board_spec, board_spec if board_spec.unambiguous else Checkerboard(
+            rows=board_spec.rows, cols=board_spec.cols, square=board_spec.square),
+        folder, doc.get("joint_unit", "rad") if joint_unit is None else joint_unit,
+        _session_robot(doc, records, robot),
+        (int(given[0]), int(given[1])) if isinstance(given, list) and len(given) == 2
+        else None, channel, normalize, min_stripe, options, fit_blur)
+    # The views one per core (each view's work depends on its own images alone, OpenCV's
+    # random samples included: the same result whatever the number of threads); then in
+    # the session's order.
+    with ThreadPoolExecutor(max_workers=_threads(threads, len(records))) as pool:
+        done = list(pool.map(reader.read, enumerate(records)))
+    got = _Gathered()
+    for item in done:
+        got.add(*item)
+    if got.size is None:
+        where = "" if isinstance(source, (list, tuple)) else f"{source}: "
+        if not got.reports:
+            raise ValueError(f"{where}the session lists no image pairs (its poses list is "
+                             "empty)")
+        raise ValueError(f"{where}no image pair could be read: " +
+                         "; ".join(f"{r.id}: {r.reason}" for r in got.reports))
+    var = got.fit_blur(options["blur_var"])
+    got.prefer_detected()
+    if got.partial:
+        add_partial_views(got.partial, got.views, got.reports, board_spec, got.size,
+                          reader.detector_board, board_pose, MIN_CORNERS)
+    views, reports = _stripes_on_one_line(got.views, got.reports, var)
+    return views, board_spec, got.size, board_pose, reports
 
-    def read(item: tuple[int, Any]) -> tuple[Any, ...]:
-        """One view's pair and board (or why not): (pid, names, pair, corners or the
-        PartialView of a board not wholly seen, edge shifts, reject reason)."""
+
+def _session_robot(doc: dict[str, Any], records: list[Any], robot: Any) -> Any:
+    """The arm of an image session: ``robot``, else SCORBOT ER-VII, which a session whose
+    manifest names another arm with joint readings refuses (its DH table is needed)."""
+    from ..geometry.robot import Robot
+
+    if robot is not None:
+        return robot
+    name = doc.get("robot")
+    needs_robot = any(isinstance(r, dict) and "joints" in r for r in records)
+    if needs_robot and name not in (None, Robot.scorbot_er7().name):
+        raise ValueError(f"the images were taken with robot {name!r}; pass its DH table "
+                         "(robot=hmlvs.Robot(...) or --robot FILE)")
+    return Robot.scorbot_er7()
+
+
+@dataclass
+class _ViewReader:
+    """Reads one view of a session (:meth:`read`), on any thread."""
+
+    board_spec: BoardSpec
+    detector_board: Any  # the board the detector looks for
+    folder: Any
+    unit: str
+    robot: Any
+    size: tuple[int, int] | None  # the manifest's image size, if it gives one
+    channel: int | None
+    normalize: bool
+    min_stripe: int
+    stripe_options: dict[str, Any]
+    fit_blur: bool
+
+    def read(self, item: tuple[int, Any]) -> tuple[Any, ...]:
+        """One view's pair and board (or why not): (pid, index, names, pair, corners or the
+        PartialView of a board not wholly seen, edge shifts, the whole board's image or
+        None, reject reason)."""
+        import cv2
+
         index, rec = item
         pid = record_id(rec, index)
         names = record_names(rec)
         try:
-            pair = read_pair(rec, index, folder, unit, robot, given, channel, normalize,
-                              stripe_options, min_stripe)
-            edge = edge_shift(pair, normalize, stripe_options) if fit_blur else None
+            pair = read_pair(rec, index, self.folder, self.unit, self.robot, self.size,
+                             self.channel, self.normalize, self.stripe_options,
+                             self.min_stripe)
+            edge = edge_shift(pair, self.normalize, self.stripe_options) \
+                if self.fit_blur else None
             try:
-                found: Any = detect_corners(pair.board_image, detector_board)
+                found: Any = detect_corners(pair.board_image, self.detector_board)
             except BoardNotFoundError as e:
-                if board_spec.unambiguous:
+                if self.board_spec.unambiguous:
                     raise PairRejected(str(e)) from None
-                # a partly visible board: numbered below from a first calibration
-                found = partial_view(pid, pair, detector_board, e)
+                # a partly visible board: numbered later from a first calibration
+                found = partial_view(pid, pair, self.detector_board, e)
             except ValueError as e:
                 raise PairRejected(str(e)) from None
             except cv2.error as e:
                 raise opencv_failure(e, "board", hint="") from None
             if not isinstance(found, PartialView) and len(found) < MIN_CORNERS:
-                raise PairRejected(f"only {len(found)} board corners found and numbered; a view "
-                              f"needs at least {MIN_CORNERS}")
+                raise PairRejected(f"only {len(found)} board corners found and numbered; a "
+                                   f"view needs at least {MIN_CORNERS}")
         except PairRejected as e:
             return pid, index, names, None, None, None, None, str(e)
         image = None
@@ -155,73 +198,90 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
             pair = replace(pair, on=None, off=None, board=None)
         return pid, index, names, pair, found, edge, image, ""
 
-    # The views one per core (each view's work depends on its own images alone, OpenCV's
-    # random samples included: the same result whatever the number of threads); then in
-    # the session's order.
-    with ThreadPoolExecutor(max_workers=_threads(threads, len(records))) as pool:
-        done = list(pool.map(read, enumerate(records)))
-    for pid, index, (on_name, off_name), pair, found, edge, image, why in done:
-        if not why and size is not None and pair.size != size:
+
+@dataclass
+class _Gathered:
+    """The views read, in the session's order, with a report for each."""
+
+    views: list[ViewData] = field(default_factory=list)
+    reports: list[Any] = field(default_factory=list)  # None: a partial view's, for now
+    partial: list[tuple[int, PartialView, Any]] = field(default_factory=list)
+    size: tuple[int, int] | None = None
+    edges: dict[str, tuple[Any, np.ndarray]] = field(default_factory=dict)
+    whole: dict[str, Any] = field(default_factory=dict)  # the whole boards' Corners
+    board_images: dict[str, np.ndarray] = field(default_factory=dict)  # and their images
+
+    def add(self, pid: str, index: int, names: tuple[str, str], pair: Any, found: Any,
+            edge: Any, image: Any, why: str) -> None:
+        """One view as :meth:`_ViewReader.read` returned it."""
+        if not why and self.size is not None and pair.size != self.size:
             why = (f"the images are {pair.size[0]} x {pair.size[1]} pixels but the "
-                   f"session's are {size[0]} x {size[1]}")
+                   f"session's are {self.size[0]} x {self.size[1]}")
         if why:
-            reports.append(ImageReport(pid, index, on_name, off_name, False, why))
-            continue
-        size = pair.size
-        if fit_blur:
-            edges[pid] = (pair.stripe, edge)
+            self.reports.append(ImageReport(pid, index, names[0], names[1], False, why))
+            return
+        self.size = pair.size
+        if edge is not None:
+            self.edges[pid] = (pair.stripe, edge)
         if isinstance(found, PartialView):
-            partial.append((len(reports), found, pair))
-            reports.append(None)  # type: ignore[arg-type]
-            continue
-        corners = found
-        whole[pid] = corners
+            self.partial.append((len(self.reports), found, pair))
+            self.reports.append(None)
+            return
+        self.whole[pid] = found
         if image is not None:
-            board_images[pid] = image  # for prefer_detected, if it asks
-        views.append(ViewData(pid, np.asarray(corners.pixels, float),
-                              np.asarray(corners.index, int), pair.stripe.pixels, pair.pose))
-        reports.append(ImageReport(pid, index, pair.on_name, pair.off_name, True, "",
-                                   pair.stripe.counts(), len(corners.index),
-                                   int(pair.stripe.found.sum())))
-    var = stripe_options["blur_var"]
-    if edges:
-        var = session_blur_var(list(edges.values()))
-        fixed = {pid: with_blur_var(st, k, var).pixels for pid, (st, k) in edges.items()}
-        views = [replace(v, laser_pixels=fixed.get(v.id, v.laser_pixels)) for v in views]
-        partial = [(slot, replace(p, stripe=fixed.get(p.id, p.stripe)), pair)
-                   for slot, p, pair in partial]
-    ids = list(whole)
-    prefer, _, _, with_detected = prefer_detected(
-        [whole[k] for k in ids], size, {n: board_images.get(k) for n, k in enumerate(ids)}
-    ) if size is not None else (False, 0.0, 0.0, [])
-    board_images.clear()
-    if prefer:
+            self.board_images[pid] = image  # for prefer_detected, if it asks
+        self.views.append(ViewData(pid, np.asarray(found.pixels, float),
+                                   np.asarray(found.index, int), pair.stripe.pixels,
+                                   pair.pose))
+        self.reports.append(ImageReport(pid, index, pair.on_name, pair.off_name, True, "",
+                                        pair.stripe.counts(), len(found.index),
+                                        int(pair.stripe.found.sum())))
+
+    def fit_blur(self, var: float) -> float:
+        """The session's blur variance fitted to the stripes' edge shifts (when they were
+        measured; else ``var``), applied to every view's stripe."""
+        if not self.edges:
+            return var
+        var = session_blur_var(list(self.edges.values()))
+        fixed = {pid: with_blur_var(st, k, var).pixels for pid, (st, k) in self.edges.items()}
+        self.views = [replace(v, laser_pixels=fixed.get(v.id, v.laser_pixels))
+                      for v in self.views]
+        self.partial = [(slot, replace(p, stripe=fixed.get(p.id, p.stripe)), pair)
+                        for slot, p, pair in self.partial]
+        return var
+
+    def prefer_detected(self) -> None:
+        """The whole boards' corners as the detector gave them, when
+        :func:`~hmlvs.image.corners.prefer_detected` says they are better."""
+        ids = list(self.whole)
+        prefer, _, _, with_detected = prefer_detected(
+            [self.whole[k] for k in ids], self.size,
+            {n: self.board_images.get(k) for n, k in enumerate(ids)})
+        self.board_images.clear()
+        if not prefer:
+            return
         raw = {k: c.as_detected() for k, c in zip(ids, with_detected)}
-        views = [replace(v, corner_pixels=np.asarray(raw[v.id].pixels, float),
-                         corner_index=np.asarray(raw[v.id].index, int)) if v.id in raw else v
-                 for v in views]
-        reports = [replace(r, corners=len(raw[r.id])) if r is not None and r.id in raw else r
-                   for r in reports]
-    if partial:
-        add_partial_views(partial, views, reports, board_spec, size, detector_board,
-                          board_pose, MIN_CORNERS)
-    # the stripe on one line (stripe_on_one_line): light off it is left out and counted
+        self.views = [replace(v, corner_pixels=np.asarray(raw[v.id].pixels, float),
+                              corner_index=np.asarray(raw[v.id].index, int))
+                      if v.id in raw else v for v in self.views]
+        self.reports = [replace(r, corners=len(raw[r.id])) if r is not None and r.id in raw
+                        else r for r in self.reports]
+
+
+def _stripes_on_one_line(views: list[ViewData], reports: list[ImageReport], var: float
+                         ) -> tuple[list[ViewData], list[ImageReport]]:
+    """The views with the light off their stripe's line left out
+    (:func:`stripe_on_one_line`), and the reports counting it, with the blur variance."""
     off_line: dict[str, int] = {}
     for k, v in enumerate(views):
         on_line = stripe_on_one_line(v.laser_pixels)
         if not on_line.all():
             off_line[v.id] = int((~on_line).sum())
             views[k] = replace(v, laser_pixels=np.asarray(v.laser_pixels)[on_line])
-    reports = [replace(r, blur_var=var, stripe=_off_line_counts(r.stripe, off_line.get(r.id, 0)))
+    reports = [replace(r, blur_var=var, stripe=_off_line_counts(r.stripe,
+                                                                off_line.get(r.id, 0)))
                if r.ok else r for r in reports]
-    if size is None:
-        where = "" if isinstance(source, (list, tuple)) else f"{source}: "
-        if not reports:
-            raise ValueError(f"{where}the session lists no image pairs (its poses list is "
-                             "empty)")
-        raise ValueError(f"{where}no image pair could be read: " +
-                         "; ".join(f"{r.id}: {r.reason}" for r in reports))
-    return views, board_spec, size, board_pose, reports
+    return views, reports
 
 
 def _threads(threads: int | None, jobs: int) -> int:
