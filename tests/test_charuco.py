@@ -9,7 +9,8 @@ import json
 import cv2
 from hmlvs.calibration.joint import calibrate_joint
 from hmlvs.geometry.board import BoardSpec, CharucoSpec
-from hmlvs.image.corners import BoardNotFoundError, detect_charuco
+from hmlvs.image.charuco import detect_charuco
+from hmlvs.image.corners import BoardNotFoundError
 from hmlvs.image.views import views_from_images
 from hmlvs.report.inspect import inspect_session
 import numpy as np

@@ -1,10 +1,11 @@
-"""The saddle-point corner refinement (``hmlvs.image.corners.saddle_refine``) on synthetic
+"""The saddle-point corner refinement (``hmlvs.image.saddle.saddle_refine``) on synthetic
 X-junctions whose corner is known exactly."""
 
 from __future__ import annotations
 
 import cv2
-from hmlvs.image.corners import _refine, saddle_refine
+from hmlvs.image.corner_base import refine_subpix
+from hmlvs.image.saddle import saddle_refine
 import numpy as np
 import pytest
 
@@ -45,7 +46,7 @@ def test_the_saddle_of_a_skewed_junction_is_its_corner(angles):
         img = _junction(tuple(c), angles)
         start = c + rng.uniform(-0.6, 0.6, 2)
         got = saddle_refine(img, start[None], spacing=40.0)[0]
-        classic = _refine(img, start[None], 8)[0]
+        classic = refine_subpix(img, start[None], 8)[0]
         assert np.linalg.norm(got - c) < 0.015, (got, c)
         assert np.linalg.norm(got - c) < 0.6 * np.linalg.norm(classic - c)
 
@@ -78,7 +79,7 @@ def test_a_small_board_gets_a_small_window():
         start = c + rng.uniform(-0.5, 0.5, 2)
         got = saddle_refine(img, start[None], spacing=12.0)[0]
         assert np.linalg.norm(got - c) < 0.05, (got, c)
-        assert np.linalg.norm(got - c) < np.linalg.norm(_refine(img, start[None], 2)[0] - c)
+        assert np.linalg.norm(got - c) < np.linalg.norm(refine_subpix(img, start[None], 2)[0] - c)
 
 
 def _grid(centre: np.ndarray, angles: tuple[float, float], period: float, size: int,

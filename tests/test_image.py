@@ -862,7 +862,7 @@ def test_a_view_with_few_corners_is_mapped_with_the_session_distortion(distorted
     session's only the squares with all four corners give points; with it, the one
     homography of the 8 corners maps the stripe in the squares around them too, as
     accurately."""
-    from hmlvs.image.corners import Corners
+    from hmlvs.image.corner_base import Corners
     from hmlvs.image.points import fit_division_distortion
 
     q, s, r = distorted
@@ -898,7 +898,7 @@ def test_a_view_with_few_corners_is_mapped_with_the_session_distortion(distorted
 
 
 def test_session_distortion_bad_input(distorted):
-    from hmlvs.image.corners import Corners
+    from hmlvs.image.corner_base import Corners
     from hmlvs.image.points import fit_division_distortion
 
     q, s, r = distorted

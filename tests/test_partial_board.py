@@ -1,4 +1,4 @@
-"""Partly visible plain checkerboards (hmlvs.image.corners.detect_grid / number_grid,
+"""Partly visible plain checkerboards (hmlvs.image.grid.detect_grid / number_grid,
 hmlvs.image.partial): rendered general-sensor sessions with views in which part of the board
 lies outside the image. Those views are numbered from the robot pose and a first calibration
 on the whole-board views; a placement that is not clearly the best is refused."""
@@ -11,7 +11,9 @@ import math
 from hmlvs.calibration.joint import calibrate_joint
 from hmlvs.cli import main as cli_main
 from hmlvs.geometry.board import Checkerboard
-from hmlvs.image.corners import CornerOptions, NumberingError, detect_grid, number_grid
+from hmlvs.image.corner_base import CornerOptions
+from hmlvs.image.corners import NumberingError
+from hmlvs.image.grid import detect_grid, number_grid
 from hmlvs.image.partial import PartialView, number_partial_views, predicted_board_pixels
 from hmlvs.image.views import views_from_images
 from hmlvs.sim.general import (

@@ -17,7 +17,9 @@ from pathlib import Path
 import sys
 
 import hmlvs
-from hmlvs.image.corners import CornerOptions, _junction_corners, find_corners, predicted_corners
+from hmlvs.image.corner_base import CornerOptions
+from hmlvs.image.corners import find_corners, predicted_corners
+from hmlvs.image.junctions import junction_corners, on_grid
 from hmlvs.models.params import Parameters
 import numpy as np
 import pytest
@@ -92,7 +94,7 @@ def test_close_views_are_found_and_numbered_right(views):
         expected = predicted_corners(Parameters.nominal(), pose, BOARD)
         _check(find_corners(off, BOARD, expected=expected), truth)
         # the X-junction path alone, also on the views OpenCV's detector finds
-        _check(_junction_corners(off, BOARD, expected, CornerOptions()), truth)
+        _check(junction_corners(off, BOARD, expected, CornerOptions()), truth)
 
 
 def test_a_prediction_a_sixth_of_a_square_off_is_still_numbered_right(views):
@@ -100,7 +102,7 @@ def test_a_prediction_a_sixth_of_a_square_off_is_still_numbered_right(views):
         for along in (0, 1):
             expected = predicted_corners(Parameters.nominal(), _moved(pose, 1 / 6, along),
                                          BOARD)
-            _check(_junction_corners(off, BOARD, expected, CornerOptions()), truth)
+            _check(junction_corners(off, BOARD, expected, CornerOptions()), truth)
 
 
 @pytest.mark.parametrize("squares", [0.5, -0.5, 0.6])
@@ -116,7 +118,7 @@ def test_a_prediction_half_a_square_off_is_refused_not_numbered_wrong(views, squ
             with pytest.raises(ValueError):
                 find_corners(off, BOARD, expected=expected)
             with pytest.raises(ValueError):
-                _junction_corners(off, BOARD, expected, CornerOptions())
+                junction_corners(off, BOARD, expected, CornerOptions())
 
 
 @pytest.mark.parametrize("squares", [0.15, 0.5, 0.6])
@@ -181,18 +183,17 @@ def test_a_corner_off_the_grid_is_dropped_not_the_view(k):
 
 
 def test_off_grid_corners_beyond_a_quarter_refuse_the_view():
-    """``_on_grid`` drops a corner far from the others' homography, and refuses a set in which
+    """``on_grid`` drops a corner far from the others' homography, and refuses a set in which
     more than a quarter are off (then the grid itself is in doubt): here 5 of 16."""
-    from hmlvs.image.corners import _on_grid
     bxy = BOARD.board_coordinates()
     idx = np.arange(16)
     px = 3.0 * bxy[idx] + [100.0, 50.0]  # an affine view: an exact homography
     bad = px.copy()
     bad[5] += [14.0, -9.0]
-    kept_px, kept_idx = _on_grid(bad, idx, bxy, 2.0)
+    kept_px, kept_idx = on_grid(bad, idx, bxy, 2.0)
     assert 5 not in kept_idx and len(kept_idx) == 15
     np.testing.assert_allclose(kept_px, px[kept_idx])
     worse = px.copy()
     worse[[1, 4, 6, 9, 14]] += [[9.0, 3.0], [-4.0, 11.0], [7.0, -8.0], [-12.0, -5.0], [6.0, 10.0]]
     with pytest.raises(ValueError, match="do not form a board grid"):
-        _on_grid(worse, idx, bxy, 2.0)
+        on_grid(worse, idx, bxy, 2.0)

@@ -10,12 +10,7 @@ import math
 import cv2
 from hmlvs.calibration.joint import calibrate_joint
 from hmlvs.image.colour import colour_stripe, laser_feature
-from hmlvs.image.corners import (
-    detect_board,
-    flip_board_numbering,
-    prefer_detected,
-    sb_positions,
-)
+from hmlvs.image.corners import detect_board, flip_board_numbering, prefer_detected, sb_positions
 from hmlvs.image.session import laser_channel, stripe_from_pair
 from hmlvs.image.views import stripe_on_one_line
 from hmlvs.sim.features import synthetic_views, transform

@@ -11,13 +11,8 @@ from pathlib import Path
 
 import cv2
 from hmlvs.geometry.board import Checkerboard
-from hmlvs.image.corners import (
-    BoardNotFoundError,
-    CornerOptions,
-    detect_board,
-    find_corners,
-    flip_board_numbering,
-)
+from hmlvs.image.corner_base import CornerOptions
+from hmlvs.image.corners import BoardNotFoundError, detect_board, find_corners, flip_board_numbering
 import numpy as np
 import pytest
 

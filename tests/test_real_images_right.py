@@ -14,7 +14,8 @@ from pathlib import Path
 import cv2
 from hmlvs.calibration.joint import consistent_numbering
 from hmlvs.geometry.board import BoardSpec, Checkerboard
-from hmlvs.image.corners import CornerOptions, detect_board, flip_board_numbering
+from hmlvs.image.corner_base import CornerOptions
+from hmlvs.image.corners import detect_board, flip_board_numbering
 import numpy as np
 import pytest
 
@@ -215,7 +216,8 @@ def test_partly_visible_real_boards_are_numbered_right_or_rejected():
     0.12 px of the whole image's corner of the same number (the refinement starts from
     another point); right13's cut shows findChessboardCornersSB no regular grid and is
     rejected. With the prediction off by half a square every view is refused."""
-    from hmlvs.image.corners import NumberingError, detect_grid, number_grid
+    from hmlvs.image.corners import NumberingError
+    from hmlvs.image.grid import detect_grid, number_grid
 
     numbered = 0
     for name, crop, whole in _crops():

@@ -2,12 +2,12 @@
 those views is numbered.
 
 A partly visible plain checkerboard is numbered only up to whole-square shifts and turns
-(:func:`hmlvs.image.corners.grid_placements`). With the board's pose in the base known, each
+(:func:`hmlvs.image.grid_place.grid_placements`). With the board's pose in the base known, each
 placement of a view's corners implies a hand-eye (hand_from_camera = base_from_hand^-1
 base_from_board camera_from_board^-1); under the right placements every view implies the same
 one, under a wrong one the view's board lands a whole square (or a turn) away. So the hand-eye
 is the one most views agree on (:func:`consensus_hand_eye`), and each view's numbering then
-follows from it (:func:`hmlvs.image.corners.place_by_pose`), whatever the approximate
+follows from it (:func:`hmlvs.image.grid_place.place_by_pose`), whatever the approximate
 parameters predicted. The camera's intrinsics come from the same corners first
 (:func:`grid_intrinsics`): a calibration from corners with an arbitrary numbering per view
 is as good as with the true one, since each view has its own board pose."""
@@ -20,7 +20,8 @@ import numpy as np
 
 from .. import _core
 from .._opencv import calibrate_camera
-from .corners import NumberingError, grid_placements
+from .corners import NumberingError
+from .grid_place import grid_placements
 
 #: fewest views with corners for the intrinsics and the consensus
 MIN_VIEWS = 3

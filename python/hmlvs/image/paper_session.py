@@ -409,7 +409,7 @@ def _number_by_agreement(found: list[Any], unnumbered: list[tuple[int, Any, dict
 
     from .._arrays import as_params
     from .consensus import MIN_VIEWS, consensus_hand_eye, grid_intrinsics
-    from .corners import detect_grid
+    from .grid import detect_grid
 
     grids: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     for item in found:

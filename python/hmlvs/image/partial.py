@@ -1,12 +1,12 @@
 """Views of a partly visible plain checkerboard, numbered from the robot's pose.
 
 A plain checkerboard cut by the image border shows the same pattern wherever it is cut: its
-corners (:func:`hmlvs.image.corners.detect_grid`) could be any rows and columns of the board,
+corners (:func:`hmlvs.image.grid.detect_grid`) could be any rows and columns of the board,
 and turned by half a turn. The views of the whole board give a first calibration
 (:func:`calibrate_joint`); under each placement of a partial view's grid its corners give the
 board's pose, and through the view's robot pose and that calibration's hand-eye transform the
 board's pose in the base, where the other views put it: the placement that agrees, clearly
-better than every other, is taken (:func:`hmlvs.image.corners.number_grid_by_pose`). A view
+better than every other, is taken (:func:`hmlvs.image.grid.number_grid_by_pose`). A view
 without a grid (a few X-junctions at the board's edge) is numbered by the pixels the first
 calibration predicts. A view that cannot be numbered so is rejected with the reason, never
 guessed."""
@@ -20,14 +20,9 @@ import numpy as np
 
 from ..data.views import ViewData
 from .accounts import ImageReport
-from .corners import (
-    BoardNotFoundError,
-    CornerGrid,
-    Corners,
-    detect_grid,
-    find_corners,
-    number_grid_by_pose,
-)
+from .corner_base import Corners
+from .corners import BoardNotFoundError, find_corners
+from .grid import CornerGrid, detect_grid, number_grid_by_pose
 
 
 @dataclass(frozen=True)

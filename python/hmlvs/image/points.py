@@ -8,7 +8,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from .corners import Corners
+from .corner_base import Corners
 from .stripe import StripeResult
 
 # ------------------------------------------------------------------------------------------

@@ -17,7 +17,8 @@ from ..data.manifest import checkerboard_of
 from ..data.views import ViewData
 from ..geometry.board import BoardSpec, CharucoSpec
 from .accounts import ImageReport
-from .corners import BoardNotFoundError, detect_board, detect_charuco, prefer_detected
+from .charuco import detect_charuco
+from .corners import BoardNotFoundError, detect_board, prefer_detected
 from .partial import PartialView, add_partial_views, partial_view
 from .session import (
     PairRejected,
