@@ -66,89 +66,98 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
     Raises ``ValueError`` if the image is not an 8- or 16-bit image or the corners cannot be
     numbered, and :class:`BoardNotFoundError` (a ``ValueError``) if no board is found.
     """
-    import cv2
 
     from ..geometry.board import Checkerboard
     if options is None:
         options = CornerOptions(extend=extend, max_error=max_error)
     elif not isinstance(options, CornerOptions):
         raise ValueError(f"options must be a CornerOptions, got {options!r}")
-    extend, max_error = options.extend, options.max_error
     board = Checkerboard() if board is None else board
     gray = to_8bit(as_gray(image, "the image", None))
-    h, w = gray.shape
+    if expected is None:
+        return _numbered_top_left(gray, board, options)
+    expected = np.asarray(expected, dtype=float)
     n_board = board.rows * board.cols
+    if expected.shape != (n_board, 2):
+        raise ValueError(f"expected must hold the ({n_board}, 2) predicted pixels of the "
+                         f"board's corners, got shape {expected.shape}")
+    return _numbered_by_expected(gray, board, expected, options)
+
+
+def _numbered_by_expected(gray: np.ndarray, board: Any, expected: np.ndarray,
+                          options: CornerOptions) -> Corners:
+    """:func:`find_corners` with the expected pixels of the board's corners."""
+    import cv2
+
+    max_error = options.max_error
     bxy = board.board_coordinates()
     flags = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
-    if expected is not None:
-        expected = np.asarray(expected, dtype=float)
-        if expected.shape != (n_board, 2):
-            raise ValueError(f"expected must hold the ({n_board}, 2) predicted pixels of the "
-                             f"board's corners, got shape {expected.shape}")
-        cv2.setRNGSeed(0)  # its random samples: the result depends on the image alone
-        ok, found, _ = cv2.findChessboardCornersSBWithMeta(gray, (3, 3),
-                                                           flags | cv2.CALIB_CB_LARGER)
-        if not ok or found is None or len(found) < 4:
-            # a close view of the board's edge can show fewer than 3 x 3 corners, or corners
-            # OpenCV does not follow: find its X-junctions where the prediction expects them
-            return junction_corners(gray, board, expected, options)
-        det = found.reshape(-1, 2).astype(float)
-        spacing = corner_spacing(det)
-        radius = max_error * spacing
-        vis = np.isfinite(expected).all(axis=1)
-        shift = np.median(det - expected[np.argmin(np.linalg.norm(
-            det[:, None] - np.where(vis[:, None], expected, np.inf)[None], axis=2), axis=1)],
-            axis=0) if vis.any() else np.zeros(2)
-        i_det, idx = match_nearest(det, expected + shift, radius)
-        if len(idx) >= 4:
-            hmat, _ = cv2.findHomography(bxy[idx], det[i_det], 0)
-            if hmat is not None:
-                pred = cv2.perspectiveTransform(bxy.reshape(-1, 1, 2), hmat).reshape(-1, 2)
-                i_det, idx = match_nearest(det, pred, radius)
-        if len(idx) < 4:
-            raise ValueError(f"the detected corners do not match the expected ones (fewer than "
-                             f"4 within {radius:.0f} px after removing the median offset "
-                             f"{np.round(shift, 1).tolist()} px): the approximate parameters "
-                             "or pose are too far off")
-        px, idx = on_grid(det[i_det], idx, bxy, 0.1 * spacing)
-        # A mirror image of the board is a homography too, so a mirrored expectation can match
-        # every corner with every label wrong (a small view of a symmetric grid): only the
-        # board's handedness, as the camera sees it, tells.
-        if orientation(px, idx, board) != handedness(board):
-            raise ValueError("the expected corner pixels are a mirror image of the board as "
-                             "the camera sees it (its rows and columns swapped or one of "
-                             "them reversed): numbering them would label every corner wrong")
-        # The median offset taken out above makes any common error of the prediction look
-        # small: a prediction off by more than half a square would number every corner one
-        # square off. Placed on the board without it, the numbering must be clearly the best.
-        if np.ptp(idx // board.cols) > 0 and np.ptp(idx % board.cols) > 0:
-            idx = place_grid(px, idx // board.cols, idx % board.cols, board, expected, spacing,
+    cv2.setRNGSeed(0)  # its random samples: the result depends on the image alone
+    ok, found, _ = cv2.findChessboardCornersSBWithMeta(gray, (3, 3),
+                                                       flags | cv2.CALIB_CB_LARGER)
+    if not ok or found is None or len(found) < 4:
+        # a close view of the board's edge can show fewer than 3 x 3 corners, or corners
+        # OpenCV does not follow: find its X-junctions where the prediction expects them
+        return junction_corners(gray, board, expected, options)
+    det = found.reshape(-1, 2).astype(float)
+    spacing = corner_spacing(det)
+    radius = max_error * spacing
+    vis = np.isfinite(expected).all(axis=1)
+    shift = np.median(det - expected[np.argmin(np.linalg.norm(
+        det[:, None] - np.where(vis[:, None], expected, np.inf)[None], axis=2), axis=1)],
+        axis=0) if vis.any() else np.zeros(2)
+    i_det, idx = match_nearest(det, expected + shift, radius)
+    if len(idx) >= 4:
+        hmat, _ = cv2.findHomography(bxy[idx], det[i_det], 0)
+        if hmat is not None:
+            pred = cv2.perspectiveTransform(bxy.reshape(-1, 1, 2), hmat).reshape(-1, 2)
+            i_det, idx = match_nearest(det, pred, radius)
+    if len(idx) < 4:
+        raise ValueError(f"the detected corners do not match the expected ones (fewer than "
+                         f"4 within {radius:.0f} px after removing the median offset "
+                         f"{np.round(shift, 1).tolist()} px): the approximate parameters "
+                         "or pose are too far off")
+    px, idx = on_grid(det[i_det], idx, bxy, 0.1 * spacing)
+    # A mirror image of the board is a homography too, so a mirrored expectation can match
+    # every corner with every label wrong (a small view of a symmetric grid): only the
+    # board's handedness, as the camera sees it, tells.
+    if orientation(px, idx, board) != handedness(board):
+        raise ValueError("the expected corner pixels are a mirror image of the board as "
+                         "the camera sees it (its rows and columns swapped or one of "
+                         "them reversed): numbering them would label every corner wrong")
+    # The median offset taken out above makes any common error of the prediction look
+    # small: a prediction off by more than half a square would number every corner one
+    # square off. Placed on the board without it, the numbering must be clearly the best.
+    if np.ptp(idx // board.cols) > 0 and np.ptp(idx % board.cols) > 0:
+        idx = place_grid(px, idx // board.cols, idx % board.cols, board, expected, spacing,
                          JUNCTION_RATIO, 1.0, f"the {len(idx)} corners found")
-        rule = "expected"
-    else:
-        grid, by_sb = _whole_board(gray, board, options.fallback)
-        spacing = corner_spacing(grid.reshape(-1, 2))
-        base = np.arange(n_board).reshape(board.rows, board.cols)
-        cands = [base, base[::-1, ::-1], base[::-1, :], base[:, ::-1]]
-        if board.rows == board.cols:
-            cands += [c.T for c in cands]
-        sign = handedness(board)
-        cands = [c for c in cands if orientation(grid, c, board) == sign]
-        # placement c says grid point (i, j) is board corner c[i, j]; r0c0 sits where c == 0
-        first = [grid.reshape(-1, 2)[int(np.argmin(c.ravel()))] for c in cands]
-        c = cands[int(np.argmin([p.sum() for p in first]))]
-        idx = c.ravel()
-        px = grid.reshape(-1, 2)
-        rule = "top-left"
-        corners = refine_and_extend(gray, px, idx, board, spacing, extend, rule,
-                                     refine=options.refine)
-        if not by_sb:
-            return corners
-        detected = np.full((n_board, 2), np.nan)
-        detected[idx] = px
-        return replace(corners, detected=detected)
-    return refine_and_extend(gray, px, idx, board, spacing, extend, rule,
-                              refine=options.refine)
+    return refine_and_extend(gray, px, idx, board, spacing, options.extend, "expected",
+                             refine=options.refine)
+
+
+def _numbered_top_left(gray: np.ndarray, board: Any, options: CornerOptions) -> Corners:
+    """:func:`find_corners` of a whole board, numbered by the top-left rule."""
+    n_board = board.rows * board.cols
+    grid, by_sb = _whole_board(gray, board, options.fallback)
+    spacing = corner_spacing(grid.reshape(-1, 2))
+    base = np.arange(n_board).reshape(board.rows, board.cols)
+    cands = [base, base[::-1, ::-1], base[::-1, :], base[:, ::-1]]
+    if board.rows == board.cols:
+        cands += [c.T for c in cands]
+    sign = handedness(board)
+    cands = [c for c in cands if orientation(grid, c, board) == sign]
+    # placement c says grid point (i, j) is board corner c[i, j]; r0c0 sits where c == 0
+    first = [grid.reshape(-1, 2)[int(np.argmin(c.ravel()))] for c in cands]
+    c = cands[int(np.argmin([p.sum() for p in first]))]
+    idx = c.ravel()
+    px = grid.reshape(-1, 2)
+    corners = refine_and_extend(gray, px, idx, board, spacing, options.extend, "top-left",
+                                refine=options.refine)
+    if not by_sb:
+        return corners
+    detected = np.full((n_board, 2), np.nan)
+    detected[idx] = px
+    return replace(corners, detected=detected)
 
 
 def _whole_board(gray: np.ndarray, board: Any, fallback: bool) -> tuple[np.ndarray, bool]:

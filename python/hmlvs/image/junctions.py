@@ -86,6 +86,29 @@ def junction_corners(gray: np.ndarray, board: Any, expected: np.ndarray,
         # a prediction whose squares are larger than the image (a board predicted at the
         # camera) or degenerate: no junction lattice to look for (and no kernel that size)
         raise none
+    cand = _x_junctions(gray, spacing, h_exp, board, none)
+    cand, lab = _on_lattice(cand, h_exp, board, spacing, none)
+    if len(cand) < 4 or np.ptp(lab[:, 0]) == 0 or np.ptp(lab[:, 1]) == 0:
+        raise BoardNotFoundError(
+            f"no checkerboard found in the image (findChessboardCornersSB found no 3 x 3 "
+            f"grid of corners, and only {len(cand)} X-junctions in one row lie on a board "
+            "lattice)")
+    spacing = corner_spacing(cand)
+    idx = place_grid(cand, lab[:, 0] - lab[:, 0].min(), lab[:, 1] - lab[:, 1].min(), board,
+                     expected, spacing, JUNCTION_RATIO, options.max_error,
+                     f"the {len(cand)} X-junctions found")
+    return refine_and_extend(gray, cand, idx, board, spacing, options.extend, "predicted",
+                             x_check=True, refine=options.refine)
+
+
+def _x_junctions(gray: np.ndarray, spacing: float, h_exp: np.ndarray, board: Any,
+                 none: Exception) -> np.ndarray:
+    """The image's X-junctions at the scale of squares ``spacing`` px wide (at most 400, at
+    least 4, else ``none`` is raised): saddle maxima refined with ``cornerSubPix``, kept
+    where the two quadrant pairs differ clearly (:func:`_x_gap`), one per corner."""
+    import cv2
+
+    h, w = gray.shape
     g = gray.astype(np.float32)
     sm = cv2.GaussianBlur(g, (0, 0), max(1.0, 0.05 * spacing))
     ixx = cv2.Sobel(sm, cv2.CV_32F, 2, 0, ksize=3)
@@ -114,7 +137,18 @@ def junction_corners(gray: np.ndarray, board: Any, expected: np.ndarray,
             keep.append(c)
     if len(keep) < 4:
         raise none
-    cand = np.array(keep)
+    return np.array(keep)
+
+
+def _on_lattice(cand: np.ndarray, h_exp: np.ndarray, board: Any, spacing: float,
+                none: Exception) -> tuple[np.ndarray, np.ndarray]:
+    """The junctions ``cand`` on the board's lattice: labelled by the nearest corner of the
+    predicted board (homography ``h_exp``), then of the board fitted to the junctions
+    themselves (a prediction off by a fraction of a square loses no junction); those off
+    it dropped, one per lattice point. Returns (junctions, their lattice labels)."""
+    import cv2
+
+    inv = np.linalg.inv(h_exp)
     # the lattice: nearest corner of the predicted board, then of the board fitted to the
     # junctions themselves (a prediction off by a fraction of a square loses no junction)
     lab = np.rint(cv2.perspectiveTransform(cand.reshape(-1, 1, 2), inv).reshape(-1, 2)
@@ -130,17 +164,7 @@ def junction_corners(gray: np.ndarray, board: Any, expected: np.ndarray,
     cand, lab = cand[ok], lab[ok].astype(int)
     _, first = np.unique(lab, axis=0, return_index=True)
     cand, lab = cand[np.sort(first)], lab[np.sort(first)]
-    if len(cand) < 4 or np.ptp(lab[:, 0]) == 0 or np.ptp(lab[:, 1]) == 0:
-        raise BoardNotFoundError(
-            f"no checkerboard found in the image (findChessboardCornersSB found no 3 x 3 "
-            f"grid of corners, and only {len(cand)} X-junctions in one row lie on a board "
-            "lattice)")
-    spacing = corner_spacing(cand)
-    idx = place_grid(cand, lab[:, 0] - lab[:, 0].min(), lab[:, 1] - lab[:, 1].min(), board,
-                 expected, spacing, JUNCTION_RATIO, options.max_error,
-                 f"the {len(cand)} X-junctions found")
-    return refine_and_extend(gray, cand, idx, board, spacing, options.extend, "predicted",
-                              x_check=True, refine=options.refine)
+    return cand, lab
 
 
 def refine_and_extend(gray: np.ndarray, px: np.ndarray, idx: np.ndarray, board: Any,

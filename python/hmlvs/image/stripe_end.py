@@ -110,10 +110,59 @@ def locate_stripe_end(on: np.ndarray, off: np.ndarray, near: Sequence[float], *,
     """
     from .stripe import difference_image, extract_stripe, normalized_threshold
 
-    near = np.asarray(near, float)
     d = difference_image(on, off, normalize=True)
     stripe = extract_stripe(d, threshold=normalized_threshold(on, off, d))
-    px = stripe.pixels
+    line = _end_line(stripe.pixels, np.asarray(near, float), search_radius, fit_length,
+                     min_columns)
+    k_end, slope, plateau_k, ks, energy = _energy_drop(difference_image(on, off), line, band)
+    b, u_end = line.b, line.u_end
+    xe = line.inward * k_end
+    energy_end = np.array([u_end + xe, line.a + b * xe])
+    if not edges:
+        kk = ks[plateau_k]
+        trend = np.polyval(np.polyfit(kk, energy[plateau_k], 1), kk)
+        var_u = (float(np.std(energy[plateau_k] - trend, ddof=2)) / slope) ** 2
+        return StripeEnd(energy_end, line.cov(var_u, xe), line.params, line.n, "energy",
+                         energy_end)
+    pixel, var_u, spread = _edges_end(off, line, energy_end, edges)
+    return StripeEnd(pixel, line.cov(var_u, pixel[0] - u_end), line.params, line.n, "edges",
+                     energy_end, spread)
+
+
+@dataclass
+class _EndLine:
+    """The straight line fitted to a stripe segment's centres inside its end:
+    v = a + b (u - u_end), ``inward`` the direction of u into the segment."""
+
+    a: float
+    b: float
+    u_end: float
+    inward: int
+    xs: np.ndarray  # the fitted columns, u - u_end
+    s2: float  # the fit's residual variance (px^2)
+    reach: float  # how far the segment reaches inside the end (columns)
+
+    @property
+    def n(self) -> int:
+        return int(self.xs.size)
+
+    @property
+    def params(self) -> tuple[float, float, float]:
+        return (float(self.a), float(self.b), self.u_end)
+
+    def cov(self, var_u: float, xe: float) -> np.ndarray:
+        """The end's covariance: ``var_u`` along u, the line fit's uncertainty across it at
+        u_end + ``xe``."""
+        sxx = float(np.sum((self.xs - self.xs.mean()) ** 2))
+        across = self.s2 * (1.0 / self.xs.size + (xe - self.xs.mean()) ** 2 / sxx)
+        b = self.b
+        return np.array([[var_u, b * var_u], [b * var_u, b * b * var_u + across]])
+
+
+def _end_line(px: np.ndarray, near: np.ndarray, search_radius: float, fit_length: int,
+              min_columns: int) -> _EndLine:
+    """The segment end of the stripe ``px`` nearest ``near`` and its line (steps 1-3 of
+    :func:`locate_stripe_end`)."""
     if px.shape[0] < min_columns:
         raise ValueError(f"no laser stripe in the image ({px.shape[0]} columns found)")
     u, v = px[:, 0], px[:, 1]
@@ -138,14 +187,18 @@ def locate_stripe_end(on: np.ndarray, off: np.ndarray, near: Sequence[float], *,
     xs, vs = u[seg][sel] - u_end, v[seg][sel]
     b, a = np.polyfit(xs, vs, 1)
     res = vs - (a + b * xs)
-    s2 = float(np.sum(res ** 2) / max(xs.size - 2, 1))
-    sxx = float(np.sum((xs - xs.mean()) ** 2))
+    return _EndLine(float(a), float(b), u_end, int(inward), xs,
+                    float(np.sum(res ** 2) / max(xs.size - 2, 1)), float(x.max()))
 
-    def var_across(xe: float) -> float:
-        return s2 * (1.0 / xs.size + (xe - xs.mean()) ** 2 / sxx)
 
-    raw = difference_image(on, off).astype(float)
+def _energy_drop(raw: np.ndarray, line: _EndLine, band: int
+                 ) -> tuple[float, float, np.ndarray, np.ndarray, np.ndarray]:
+    """Step 4 of :func:`locate_stripe_end`: where the stripe's energy along ``line`` drops
+    to half its plateau. Returns (the end in columns inside u_end, the drop's slope, the
+    plateau's columns (mask), the columns, their energies)."""
+    raw = raw.astype(float)
     h, w = raw.shape
+    a, b, u_end, inward = line.a, line.b, line.u_end, line.inward
     ks = np.arange(-12, 26)
     cols = np.rint(u_end + inward * ks).astype(int)
     energy = np.full(ks.size, np.nan)
@@ -153,33 +206,27 @@ def locate_stripe_end(on: np.ndarray, off: np.ndarray, near: Sequence[float], *,
         if 0 <= c < w:
             vc = int(np.rint(a + b * (c - u_end)))
             energy[i] = raw[max(vc - band, 0):min(vc + band + 1, h), c].sum()
-    plateau_k = (ks >= 6) & (ks <= min(25.0, float(x.max()) - 2)) & np.isfinite(energy)
+    plateau_k = (ks >= 6) & (ks <= min(25.0, line.reach - 2)) & np.isfinite(energy)
     if plateau_k.sum() < 5:
         raise ValueError(f"the stripe end at u = {u_end:g} is too close to the image border")
-    plateau = float(np.median(energy[plateau_k]))
-    half = plateau / 2
-    k_end = None
+    half = float(np.median(energy[plateau_k])) / 2
     for i in range(int(np.nonzero(ks == 6)[0][0]), 0, -1):
         lo_e, hi_e = energy[i - 1], energy[i]
         if np.isfinite(lo_e) and lo_e < half <= hi_e:
-            k_end = ks[i - 1] + (half - lo_e) / (hi_e - lo_e)
-            slope = hi_e - lo_e
-            break
-    if k_end is None:
-        raise ValueError(f"the stripe near u = {u_end:g} does not end (its energy never drops "
-                         "to half the plateau)")
-    xe = inward * k_end
-    energy_end = np.array([u_end + xe, a + b * xe])
+            return (ks[i - 1] + (half - lo_e) / (hi_e - lo_e), hi_e - lo_e, plateau_k, ks,
+                    energy)
+    raise ValueError(f"the stripe near u = {u_end:g} does not end (its energy never drops "
+                     "to half the plateau)")
+
+
+def _edges_end(off: np.ndarray, line: _EndLine, energy_end: np.ndarray,
+               edges: Sequence[Sequence[float]]) -> tuple[np.ndarray, float, float]:
+    """Step 5 of :func:`locate_stripe_end`: the mean of the stripe line's crossings with the
+    surface's edges. Returns (the end, its variance along u, the crossings' spread)."""
+    b = line.b
     line_dir = np.array([1.0, b]) / np.hypot(1.0, b)
-    if not edges:
-        kk = ks[plateau_k]
-        trend = np.polyval(np.polyfit(kk, energy[plateau_k], 1), kk)
-        var_u = (float(np.std(energy[plateau_k] - trend, ddof=2)) / slope) ** 2
-        cov = np.array([[var_u, b * var_u], [b * var_u, b * b * var_u + var_across(xe)]])
-        return StripeEnd(energy_end, cov, (float(a), float(b), u_end), int(xs.size), "energy",
-                         energy_end)
     hits, var_along = [], []
-    p0 = np.array([u_end, a])
+    p0 = np.array([line.u_end, line.a])
     for e_dir in edges:
         found = _edge_line(off, energy_end, np.asarray(e_dir, float))
         if found is None:
@@ -196,10 +243,5 @@ def locate_stripe_end(on: np.ndarray, off: np.ndarray, near: Sequence[float], *,
         # the fit's points spread uniformly over 32 px
         var_off = scatter ** 2 * (1.0 / count + s_r[1] ** 2 / (count * 32.0 ** 2 / 12))
         var_along.append(var_off / max(sin, 1e-3) ** 2)
-    pixel = np.mean(hits, axis=0)
-    var_u = float(np.sum(var_along)) / len(var_along) ** 2
-    xe = pixel[0] - u_end
-    cov = np.array([[var_u, b * var_u], [b * var_u, b * b * var_u + var_across(xe)]])
-    spread = float(np.linalg.norm(hits[0] - hits[-1]))
-    return StripeEnd(pixel, cov, (float(a), float(b), u_end), int(xs.size), "edges",
-                     energy_end, spread)
+    return (np.mean(hits, axis=0), float(np.sum(var_along)) / len(var_along) ** 2,
+            float(np.linalg.norm(hits[0] - hits[-1])))
