@@ -449,19 +449,12 @@ def render_scene(params: Any, pose: np.ndarray, scene: Scene,
     if w < 8 or h < 8:
         raise ValueError(f"image_size must be at least 8 x 8 pixels, got {image_size}")
     s = o.supersample
-    rays = _sample_rays(q, (w, h), s)
-    ray_du, ray_dv = _sample_ray_jacobian(q, (w, h), s)
     bfc = np.asarray(pose, float) @ hand_from_camera(q)
-    rot, centre = bfc[:3, :3], bfc[:3, 3]
-    emitter = laser_origin(q, pose)
-    light = np.asarray(scene.light)
     th = q[7]
-    lvec = np.array([0.0, np.cos(th), np.sin(th)])  # gradient of the laser-plane distance
-    width = 1.5 / s
-    cut = 5.0 * o.stripe_sigma  # px: the profile is below 4e-6 beyond
-    # only samples this close to the laser plane (mm) get the pixel distance; a surface seen
-    # at more than near_mm / cut mm per px (grazing) loses the profile's far tails
-    near_mm = 12.0
+    r = _SceneRenderer(q, o, scene, s, w, _sample_rays(q, (w, h), s),
+                       *_sample_ray_jacobian(q, (w, h), s), bfc[:3, :3], bfc[:3, 3],
+                       laser_origin(q, pose), np.asarray(scene.light),
+                       np.array([0.0, np.cos(th), np.sin(th)]), laser_shadows)
     ambient = np.empty((h, w))
     laser = np.empty((h, w))
     surface = np.empty((h, w), np.int64)
@@ -470,64 +463,7 @@ def render_scene(params: Any, pose: np.ndarray, scene: Scene,
     for r0 in range(0, h, chunk):
         r1 = min(h, r0 + chunk)
         shape = ((r1 - r0) * s, w * s)
-        ray = rays[r0 * s:r1 * s].reshape(-1, 3)
-        dirs = ray @ rot.T
-        t, nrm, which = scene.intersect(centre, dirs)
-        hit = np.isfinite(t)
-        tt = np.where(hit, t, 0.0)
-        pb = centre + dirs * tt[:, None]  # base frame
-
-        def footprint(sel: np.ndarray, ray: np.ndarray = ray, r0: int = r0, r1: int = r1,
-                      nrm: np.ndarray = nrm, tt: np.ndarray = tt
-                      ) -> tuple[np.ndarray, np.ndarray]:
-            """Derivative per pixel (u, v) of the hit point on its tangent plane (camera
-            frame) for the samples ``sel``."""
-            rr = ray[sel]
-            du = ray_du[r0 * s:r1 * s].reshape(-1, 3)[sel]
-            dv = ray_dv[r0 * s:r1 * s].reshape(-1, 3)[sel]
-            nc = nrm[sel] @ rot
-            ndr = np.einsum("ij,ij->i", nc, rr)
-            ndr = np.where(np.abs(ndr) > TINY, ndr, TINY)
-            ts = tt[sel, None]
-            return (ts * (du - rr * (np.einsum("ij,ij->i", nc, du) / ndr)[:, None]),
-                    ts * (dv - rr * (np.einsum("ij,ij->i", nc, dv) / ndr)[:, None]))
-
-        alb = np.zeros(t.shape[0])
-        for i, prim in enumerate(scene.primitives):
-            sel = np.nonzero(which == i)[0]
-            if not sel.size:
-                continue
-            if isinstance(prim, Table) and prim.texture is not None:
-                gu, gv = footprint(sel)
-                gu, gv = gu @ rot.T, gv @ rot.T
-                alb[sel] = prim._albedo(pb[sel], np.hypot(gu[:, 0], gv[:, 0]),
-                                        np.hypot(gu[:, 1], gv[:, 1]), width)
-            else:
-                alb[sel] = prim._albedo(pb[sel], None, None, width)
-        shade = scene.ambient_fraction + (1 - scene.ambient_fraction) * np.maximum(
-            nrm @ light, 0.0)
-        amb = np.where(hit, o.ambient * alb * shade, 0.0)
-        lz = np.zeros(t.shape[0])
-        lit = np.zeros(t.shape[0], bool)
-        dist = _laser_distance(q, ray * tt[:, None])
-        near = np.nonzero(hit & (np.abs(dist) < near_mm))[0]
-        if near.size:
-            gu, gv = footprint(near)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                dpx = dist[near] / np.hypot(gu @ lvec, gv @ lvec)
-            bi = near[np.abs(dpx) < cut]
-            dpx = dpx[np.abs(dpx) < cut]
-            to_laser = emitter - pb[bi]
-            cos_inc = np.einsum("ij,ij->i", nrm[bi], to_laser) / np.linalg.norm(to_laser,
-                                                                                 axis=1)
-            ok = cos_inc > 0
-            if laser_shadows and ok.any():
-                oi = bi[ok]
-                ts, _, _ = scene.intersect(pb[oi] + 1e-4 * nrm[oi], emitter - pb[oi], 1e-9)
-                ok[ok] = ~(ts < 1.0 - 1e-6)
-            lit[bi] = ok
-            lz[bi] = np.where(ok, o.laser * alb[bi] * cos_inc *
-                              np.exp(-0.5 * (dpx / o.stripe_sigma) ** 2), 0.0)
+        amb, lz, which, lit = r.block(r0, r1)
         rows = r1 - r0
         ambient[r0:r1] = amb.reshape(shape).reshape(rows, s, w, s).mean(axis=(1, 3))
         laser[r0:r1] = lz.reshape(shape).reshape(rows, s, w, s).mean(axis=(1, 3))
@@ -535,5 +471,113 @@ def render_scene(params: Any, pose: np.ndarray, scene: Scene,
         lit_map[r0:r1] = lit.reshape(shape)[s // 2::s, s // 2::s]
     on, off = finish_frames(ambient, laser, o, rng)
     return RenderedScene(on, off, surface, lit_map)
+
+
+#: only samples this close to the laser plane (mm) get the pixel distance; a surface seen
+#: at more than _NEAR_MM / cut mm per px (grazing) loses the profile's far tails
+_NEAR_MM = 12.0
+
+
+@dataclass
+class _SceneRenderer:
+    """One view of :func:`render_scene`, rendered a block of pixel rows at a time."""
+
+    q: np.ndarray
+    o: RenderOptions
+    scene: Scene
+    s: int  # supersampling
+    w: int
+    rays: np.ndarray  # camera-frame rays of the samples
+    ray_du: np.ndarray  # and their derivatives per pixel
+    ray_dv: np.ndarray
+    rot: np.ndarray  # base_from_camera
+    centre: np.ndarray
+    emitter: np.ndarray  # the laser's origin in the base
+    light: np.ndarray
+    lvec: np.ndarray  # gradient of the laser-plane distance
+    laser_shadows: bool
+
+    def block(self, r0: int, r1: int) -> tuple[np.ndarray, ...]:
+        """Pixel rows r0:r1 at the samples: (ambient, laser, surface index, lit)."""
+        s = self.s
+        ray = self.rays[r0 * s:r1 * s].reshape(-1, 3)
+        dirs = ray @ self.rot.T
+        t, nrm, which = self.scene.intersect(self.centre, dirs)
+        hit = np.isfinite(t)
+        tt = np.where(hit, t, 0.0)
+        pb = self.centre + dirs * tt[:, None]  # base frame
+        du = self.ray_du[r0 * s:r1 * s].reshape(-1, 3)
+        dv = self.ray_dv[r0 * s:r1 * s].reshape(-1, 3)
+        geo = (ray, du, dv, nrm, tt)
+        alb = self._albedo(pb, which, geo)
+        shade = self.scene.ambient_fraction + (1 - self.scene.ambient_fraction) * np.maximum(
+            nrm @ self.light, 0.0)
+        amb = np.where(hit, self.o.ambient * alb * shade, 0.0)
+        lz, lit = self._laser(pb, hit, alb, geo)
+        return amb, lz, which, lit
+
+    def _footprint(self, sel: np.ndarray, geo: tuple[np.ndarray, ...]
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """Derivative per pixel (u, v) of the hit point on its tangent plane (camera frame)
+        for the samples ``sel``."""
+        ray, du_all, dv_all, nrm, tt = geo
+        rr = ray[sel]
+        du = du_all[sel]
+        dv = dv_all[sel]
+        nc = nrm[sel] @ self.rot
+        ndr = np.einsum("ij,ij->i", nc, rr)
+        ndr = np.where(np.abs(ndr) > TINY, ndr, TINY)
+        ts = tt[sel, None]
+        return (ts * (du - rr * (np.einsum("ij,ij->i", nc, du) / ndr)[:, None]),
+                ts * (dv - rr * (np.einsum("ij,ij->i", nc, dv) / ndr)[:, None]))
+
+    def _albedo(self, pb: np.ndarray, which: np.ndarray, geo: tuple[np.ndarray, ...]
+                ) -> np.ndarray:
+        """Each sample's albedo (a textured table's filtered over the pixel's footprint)."""
+        width = 1.5 / self.s
+        alb = np.zeros(pb.shape[0])
+        for i, prim in enumerate(self.scene.primitives):
+            sel = np.nonzero(which == i)[0]
+            if not sel.size:
+                continue
+            if isinstance(prim, Table) and prim.texture is not None:
+                gu, gv = self._footprint(sel, geo)
+                gu, gv = gu @ self.rot.T, gv @ self.rot.T
+                alb[sel] = prim._albedo(pb[sel], np.hypot(gu[:, 0], gv[:, 0]),
+                                        np.hypot(gu[:, 1], gv[:, 1]), width)
+            else:
+                alb[sel] = prim._albedo(pb[sel], None, None, width)
+        return alb
+
+    def _laser(self, pb: np.ndarray, hit: np.ndarray, alb: np.ndarray,
+               geo: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """Each sample's laser light (the stripe's profile at its distance in px from the
+        laser plane, unless shadowed) and whether the laser reaches it."""
+        ray, _, _, nrm, tt = geo
+        o = self.o
+        cut = 5.0 * o.stripe_sigma  # px: the profile is below 4e-6 beyond
+        lz = np.zeros(pb.shape[0])
+        lit = np.zeros(pb.shape[0], bool)
+        dist = _laser_distance(self.q, ray * tt[:, None])
+        near = np.nonzero(hit & (np.abs(dist) < _NEAR_MM))[0]
+        if not near.size:
+            return lz, lit
+        gu, gv = self._footprint(near, geo)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dpx = dist[near] / np.hypot(gu @ self.lvec, gv @ self.lvec)
+        bi = near[np.abs(dpx) < cut]
+        dpx = dpx[np.abs(dpx) < cut]
+        to_laser = self.emitter - pb[bi]
+        cos_inc = np.einsum("ij,ij->i", nrm[bi], to_laser) / np.linalg.norm(to_laser, axis=1)
+        ok = cos_inc > 0
+        if self.laser_shadows and ok.any():
+            oi = bi[ok]
+            ts, _, _ = self.scene.intersect(pb[oi] + 1e-4 * nrm[oi], self.emitter - pb[oi],
+                                            1e-9)
+            ok[ok] = ~(ts < 1.0 - 1e-6)
+        lit[bi] = ok
+        lz[bi] = np.where(ok, o.laser * alb[bi] * cos_inc *
+                          np.exp(-0.5 * (dpx / o.stripe_sigma) ** 2), 0.0)
+        return lz, lit
 
 

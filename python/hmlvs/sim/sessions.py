@@ -336,20 +336,8 @@ def session(params: Any = None, *, robot: Robot | None = None,
     # One stream for the noise, and one per pose attempt: a decision that went differently
     # on another machine could change only its own attempt, never the poses after it.
     noise_stream, attempt_streams = np.random.SeedSequence(seed).spawn(2)
-    hfc = hand_from_camera(q)
-    corners = board.corners()
+    place = _Placer.of(q, robot, board, image_size, standoff, max_tilt_deg, row_fraction)
     ids = board.corner_ids()
-    n_rc = np.array([(r, c) for r in range(board.rows) for c in range(board.cols)])
-    lo, hi = corners.min(axis=0), corners.max(axis=0)
-    normal = board.normal
-    w, h = image_size
-    dof = robot.dof
-    seed_joints = [np.zeros(dof), np.array([0.1, -0.8, 1.2, 0.0, 0.0][:dof] + [0.0] * (dof - 5)),
-                   np.array([0.1, -1.2, 1.6, 0.4, 0.0][:dof] + [0.0] * (dof - 5))]
-
-    e1 = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0])
-    e1 = e1 / math.sqrt(_sumsq(e1))
-    e2 = np.cross(normal, e1)
     all_joints, px_list, pt_list, id_list, pidx = [], [], [], [], []
     attempts = 0
     while len(all_joints) < num_poses:
@@ -358,53 +346,15 @@ def session(params: Any = None, *, robot: Robot | None = None,
         if attempts > 50 * num_poses:
             raise ValueError(f"could place only {len(all_joints)} of {num_poses} poses on the "
                              "board: is it within the robot's reach?")
-        target = rng.uniform(lo, hi)
-        tilt = np.radians(rng.uniform(0, max_tilt_deg))
-        az = rng.uniform(0, 2 * np.pi)
-        # math.sin/cos, not numpy's: numpy picks SIMD variants by CPU (e.g. AVX-512)
-        view = -(math.cos(tilt) * normal + math.sin(tilt) * (math.cos(az) * e1 +
-                                                             math.sin(az) * e2))
-        dist = rng.uniform(*standoff)
-        joints = ik_look_at(robot, hfc, target - dist * view, view, seed_joints)
-        if joints is None:
+        placed = place.attempt(rng)
+        if placed is None:
             continue
-        joints[-1] += rng.uniform(-np.pi, np.pi) if rng.random() < 0.5 else 0.0
-        pose = robot.poses(joints)
-        rep = np.repeat(pose, len(corners), axis=0)
-        pix, vis = project(q, corners, rep)
-        inside = vis & (pix[:, 0] >= 0) & (pix[:, 0] <= w - 1) & (pix[:, 1] >= 0) & \
-            (pix[:, 1] <= h - 1)
-        if inside.sum() < 2:
-            continue
-        d = np.abs(laser_plane_distance(q, corners, rep))
-        d[~inside] = np.inf
-        nearest = int(np.argmin(d))
-        if rng.random() < row_fraction:
-            # a whole row or column of corners on the stripe: two of them fix the line
-            r0, c0 = n_rc[nearest]
-            line = np.nonzero(inside & ((n_rc[:, 0] == r0) if rng.random() < 0.5 else
-                                        (n_rc[:, 1] == c0)))[0]
-            if line.size < 2:
-                continue
-            targets = corners[[line[0], line[-1]]]
-            new = snap_to_pose_grid(robot, q, joints, targets, free=[0, dof - 1])
-        else:
-            new = snap_to_pose_grid(robot, q, joints, corners[[nearest]], free=[dof - 1])
-        if new is None:
-            continue
-        pose = robot.poses(new)
-        rep = np.repeat(pose, len(corners), axis=0)
-        on = np.abs(laser_plane_distance(q, corners, rep)) < _ON_PLANE_MM
-        pix, vis = project(q, corners, rep)
-        keep = on & vis & (pix[:, 0] >= 0) & (pix[:, 0] <= w - 1) & (pix[:, 1] >= 0) & \
-            (pix[:, 1] <= h - 1)
-        if not keep.any():
-            continue
+        new, keep, pix = placed
         p = len(all_joints)
         all_joints.append(new)
-        for i in np.nonzero(keep)[0]:
+        for i in keep:
             px_list.append(pix[i])
-            pt_list.append(corners[i])
+            pt_list.append(place.corners[i])
             id_list.append(f"p{p:03d}:{ids[i]}")
             pidx.append(p)
 
@@ -425,3 +375,89 @@ def session(params: Any = None, *, robot: Robot | None = None,
                        "pixel_noise": pixel_noise, "point_noise": point_noise,
                        "image_size": list(image_size)})
     return Session(Parameters.from_array(q), ds, robot, board, joints_arr, tuple(image_size))
+
+
+@dataclass
+class _Placer:
+    """Places the robot for one view of :func:`session`: the camera looking at the board,
+    the stripe through board corners."""
+
+    q: np.ndarray
+    robot: Robot
+    corners: np.ndarray  # the board's corners in the base
+    n_rc: np.ndarray  # their (row, column)
+    normal: np.ndarray
+    e1: np.ndarray  # two directions in the board's plane
+    e2: np.ndarray
+    image_size: tuple[int, int]
+    standoff: tuple[float, float]
+    max_tilt_deg: float
+    row_fraction: float
+    seed_joints: list[np.ndarray]
+
+    @classmethod
+    def of(cls, q: np.ndarray, robot: Robot, board: Checkerboard,
+           image_size: tuple[int, int], standoff: tuple[float, float], max_tilt_deg: float,
+           row_fraction: float) -> "_Placer":
+        normal = board.normal
+        e1 = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0])
+        e1 = e1 / math.sqrt(_sumsq(e1))
+        dof = robot.dof
+        seeds = [np.zeros(dof), np.array([0.1, -0.8, 1.2, 0.0, 0.0][:dof] + [0.0] * (dof - 5)),
+                 np.array([0.1, -1.2, 1.6, 0.4, 0.0][:dof] + [0.0] * (dof - 5))]
+        return cls(q, robot, board.corners(),
+                   np.array([(r, c) for r in range(board.rows) for c in range(board.cols)]),
+                   normal, e1, np.cross(normal, e1), image_size, standoff, max_tilt_deg,
+                   row_fraction, seeds)
+
+    def _in_image(self, pix: np.ndarray, vis: np.ndarray) -> np.ndarray:
+        w, h = self.image_size
+        return vis & (pix[:, 0] >= 0) & (pix[:, 0] <= w - 1) & (pix[:, 1] >= 0) & \
+            (pix[:, 1] <= h - 1)
+
+    def attempt(self, rng: np.random.Generator
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """One try at a view: (joints, the corners on the stripe and in the image, all
+        corners' pixels), or None when it failed."""
+        q, robot, corners = self.q, self.robot, self.corners
+        lo, hi = corners.min(axis=0), corners.max(axis=0)
+        target = rng.uniform(lo, hi)
+        tilt = np.radians(rng.uniform(0, self.max_tilt_deg))
+        az = rng.uniform(0, 2 * np.pi)
+        # math.sin/cos, not numpy's: numpy picks SIMD variants by CPU (e.g. AVX-512)
+        view = -(math.cos(tilt) * self.normal + math.sin(tilt) * (
+            math.cos(az) * self.e1 + math.sin(az) * self.e2))
+        dist = rng.uniform(*self.standoff)
+        joints = ik_look_at(robot, hand_from_camera(q), target - dist * view, view,
+                            self.seed_joints)
+        if joints is None:
+            return None
+        joints[-1] += rng.uniform(-np.pi, np.pi) if rng.random() < 0.5 else 0.0
+        rep = np.repeat(robot.poses(joints), len(corners), axis=0)
+        inside = self._in_image(*project(q, corners, rep))
+        if inside.sum() < 2:
+            return None
+        d = np.abs(laser_plane_distance(q, corners, rep))
+        d[~inside] = np.inf
+        nearest = int(np.argmin(d))
+        dof = robot.dof
+        if rng.random() < self.row_fraction:
+            # a whole row or column of corners on the stripe: two of them fix the line
+            r0, c0 = self.n_rc[nearest]
+            line = np.nonzero(inside & ((self.n_rc[:, 0] == r0) if rng.random() < 0.5 else
+                                        (self.n_rc[:, 1] == c0)))[0]
+            if line.size < 2:
+                return None
+            new = snap_to_pose_grid(robot, q, joints, corners[[line[0], line[-1]]],
+                                    free=[0, dof - 1])
+        else:
+            new = snap_to_pose_grid(robot, q, joints, corners[[nearest]], free=[dof - 1])
+        if new is None:
+            return None
+        rep = np.repeat(robot.poses(new), len(corners), axis=0)
+        on = np.abs(laser_plane_distance(q, corners, rep)) < _ON_PLANE_MM
+        pix, vis = project(q, corners, rep)
+        keep = on & self._in_image(pix, vis)
+        if not keep.any():
+            return None
+        return new, np.nonzero(keep)[0], pix
