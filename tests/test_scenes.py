@@ -11,7 +11,7 @@ import hmlvs
 from hmlvs.cli import main as cli_main
 from hmlvs.measurement.measure import read_ply
 from hmlvs.paper import scenarios as scenes
-from hmlvs.sim.render import RenderOptions
+from hmlvs.sim.render import RenderOptions, render_scene
 from hmlvs.sim.scene import Box, Cylinder, Hole, Scene, Table
 from hmlvs.sim.sessions import ik_look_at
 import numpy as np
@@ -49,7 +49,7 @@ def test_table_stripe_extracts_onto_the_model_stripe(texture):
     laser_plane_distance and pixels_from_points, not the renderer)."""
     truth = scenes.default_truth()  # k = 4.8e-4 / mm^2: distortion included
     pose = look_down_pose(truth, (450.0, -100.0, 0.0), cam_x=(0.8, 0.6, 0.0))
-    frame = scenes.render_scene(truth, pose, Scene((Table(texture=texture),)),
+    frame = render_scene(truth, pose, Scene((Table(texture=texture),)),
                                 options=RenderOptions(noise=1.0))
     d = hmlvs.difference_image(frame.on, frame.off, normalize=True)
     stripe = hmlvs.extract_stripe(d)

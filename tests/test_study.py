@@ -186,7 +186,7 @@ def test_study_does_not_warn_about_the_parameters_it_frees_on_purpose():
 def test_progress_bar_counts_runs_of_the_whole_study_with_an_eta(monkeypatch):
     """The overall bar counts runs (each step's share of its runs, whatever unit the step
     reports in: runs, PSO generations or evaluations) and both bars show an ETA."""
-    from hmlvs.paper import study as study_module
+    from hmlvs.paper.study import run as study_module
 
     bars = []
     real = study_module._Reporter
