@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 import math
+from typing import Any
 
 import numpy as np
 
@@ -70,6 +71,24 @@ class JointCalibration:
     #: that count as one independent one, :func:`stripe_correlation`); the covariance takes
     #: the stripe pixels as that many times fewer
     stripe_correlation: float = 1.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """The result as plain JSON-ready values (the command line's --json): the sensor,
+        the fit, what the data determine, the termination."""
+        s = self.sensor
+        return {"model": "opencv", "mode": self.mode,
+                "camera_matrix": s.camera_matrix.tolist(),
+                "dist_coeffs": s.dist_coeffs.tolist(), "image_size": list(s.image_size),
+                "laser_plane": s.laser_plane.tolist(),
+                "hand_from_camera": s.hand_from_camera.tolist(),
+                "base_from_board": None if s.base_from_board is None
+                else s.base_from_board.tolist(),
+                "std": self.std, "corner_rms_px": self.corner_rms_px,
+                "laser_rms_mm": self.laser_rms_mm, "test_rms_mm": self.test_rms_mm,
+                "views": len(self.per_view), "determined": self.determined,
+                "rank": self.rank, "unknowns": self.num_unknowns, "dropped": self.dropped,
+                "flipped": self.flipped, "termination": self.termination,
+                "iterations": self.iterations, "seconds": self.seconds}
 
     @property
     def determined(self) -> bool:

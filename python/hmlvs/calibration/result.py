@@ -197,6 +197,30 @@ class CalibrationResult:
     def free(self) -> tuple[str, ...]:
         return tuple(n for n in NAMES if n not in self.fixed)
 
+    def determined_split(self) -> tuple[list[str], list[str]]:
+        """The free parameters the data determine, and those they do not (from the
+        uncertainty; all undetermined without it)."""
+        u = self.uncertainty
+        if u is None:
+            return [], list(self.free)
+        return ([n for n in self.free if u.determined.get(n, False)],
+                [n for n in self.free if not u.determined.get(n, False)])
+
+    def to_dict(self) -> dict[str, Any]:
+        """The result as plain JSON-ready values (the command line's --json): the
+        parameters, what was held and what the data determine, the fit, the termination."""
+        from ..geometry.transforms import rotation_to_vector
+        from ..models.paper import hand_from_camera
+
+        det, undet = self.determined_split()
+        return {"model": "paper", "method": self.method,
+                "parameters": self.params.to_dict(), "fixed": list(self.fixed),
+                "determined": det, "not_determined": undet,
+                "rotation_vector_rad": [float(x) for x in rotation_to_vector(
+                    hand_from_camera(self.params)[:3, :3])],
+                "fit_rms_mm": self.fit_rms, "test_rms_mm": self.test_rms,
+                "termination": str(self.termination), "seconds": self.seconds}
+
     def summary(self, truth: Parameters | None = None) -> str:
         lines = [f"method {self.method}: {self.termination_message}",
                  f"{self.iterations} iterations in {self.seconds:.3f} s ({self.threads} "

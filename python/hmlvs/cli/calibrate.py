@@ -15,11 +15,9 @@ from .common import (
     ROBOT_OPTION,
     app,
     check_suffix,
-    collect_warnings,
-    determined,
-    echo_json,
+    command,
     exit_untrusted,
-    gather,
+    finish,
     guard,
     inputs_of,
     is_manifest,
@@ -27,7 +25,6 @@ from .common import (
     outputs,
     resolve_fixed,
     rotation_text,
-    rotation_vector,
     show_warnings,
     solve_progress,
     without_warning_lines,
@@ -111,7 +108,7 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
     from ..diagnostics.verdict import judge_joint, require_check
     from ..image.views import views_from_images
 
-    with guard(as_json), collect_warnings() as caught:
+    with command(as_json) as caught:
         arm = load_robot(robot)
         camera = _held_camera(initial)
         terms = tuple(t.strip() for t in distortion.split(",") if t.strip())
@@ -146,9 +143,9 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
 
                 report_path = write_joint_report(result, report, image_reports=reports,
                                                  verdict=verdict)
-    warns = gather(caught, result.warnings)
-    if as_json:
-        echo_json(_opencv_json(result, path, report_path, verdict, warns, reports))
+    warns = finish(caught, as_json, _summary(path, report_path, verdict, result, reports),
+                   result.warnings, quiet=True)
+    if warns is None:
         exit_untrusted(verdict)
         return
     typer.echo(verdict.text())
@@ -156,28 +153,14 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
     _written(path, report_path, verdict, warns, quiet)
 
 
-def _opencv_json(result: Any, path: Path, report_path: Optional[Path], verdict: Any,
-                 warns: list, reports: list) -> dict[str, Any]:
-    """hmlvs calibrate --model opencv --json: the calibration, its verdict and accounts."""
-    s = result.sensor
-    return {"calibration": str(path), "model": "opencv", "mode": result.mode,
-            "verdict": verdict.to_dict(),
+def _summary(path: Path, report_path: Optional[Path], verdict: Any, result: Any,
+             reports: list) -> dict[str, Any]:
+    """hmlvs calibrate --json, either model: the files written, the verdict, the result and
+    the account of every image pair."""
+    return {"calibration": str(path),
             "report": None if report_path is None else str(report_path),
-            "camera_matrix": s.camera_matrix.tolist(),
-            "dist_coeffs": s.dist_coeffs.tolist(), "image_size": list(s.image_size),
-            "laser_plane": s.laser_plane.tolist(),
-            "hand_from_camera": s.hand_from_camera.tolist(),
-            "base_from_board": None if s.base_from_board is None
-            else s.base_from_board.tolist(),
-            "std": result.std, "corner_rms_px": result.corner_rms_px,
-            "laser_rms_mm": result.laser_rms_mm, "test_rms_mm": result.test_rms_mm,
-            "determined": result.determined, "rank": result.rank,
-            "unknowns": result.num_unknowns, "dropped": result.dropped,
-            "flipped": result.flipped, "termination": result.termination,
-            "iterations": result.iterations, "seconds": result.seconds,
-            "warnings": warns,
-            "images": [{"id": r.id, "ok": r.ok, "reason": r.reason,
-                        "corners": r.corners} for r in reports]}
+            "verdict": verdict.to_dict(), **result.to_dict(),
+            "images": [r.to_dict() for r in reports or ()]}
 
 
 @app.command()
@@ -352,7 +335,7 @@ def _calibrate_paper(o: _PaperRun) -> None:
     from ..data.calibration_file import Calibration
     from ..diagnostics.verdict import judge_paper, require_check
 
-    with guard(o.as_json), collect_warnings() as caught:
+    with command(o.as_json) as caught:
         fixed_names, why = resolve_fixed(o.fixed, o.free)
         arm = load_robot(o.robot)
         guess = board_pose = None
@@ -389,23 +372,13 @@ def _paper_output(o: _PaperRun, result: Any, caught: list, path: Path,
                   why: list[str], image_reports: list) -> None:
     """What hmlvs calibrate --model paper prints (text or --json)."""
     summary = result.summary()
-    warns = gather(caught, result.warnings, summary)
-    det, undet = determined(result)
-    if o.as_json:
-        echo_json({"calibration": str(path), "report": None if report_path is None
-                    else str(report_path), "verdict": verdict.to_dict(),
-                    "fit_rms_mm": result.fit_rms,
-                    "test_rms_mm": result.test_rms, "method": o.method,
-                    "parameters": result.params.to_dict(), "fixed": list(result.fixed),
-                    "determined": det, "not_determined": undet,
-                    "rotation_vector_rad": rotation_vector(result.params),
-                    "termination": result.termination, "seconds": result.seconds,
-                    "warnings": warns, "notes": widened,
-                    "images": [{"id": r.id, "ok": r.ok, "reason": r.reason,
-                                "points": r.points, "rejected": dict(r.rejected)}
-                               for r in image_reports]})
+    warns = finish(caught, o.as_json, {**_summary(path, report_path, verdict, result,
+                                                  image_reports), "notes": widened},
+                   result.warnings, summary, quiet=True)
+    if warns is None:
         exit_untrusted(verdict)
         return
+    det, undet = result.determined_split()
     typer.echo(verdict.text())
     typer.echo(without_warning_lines(summary))
     for note in widened:

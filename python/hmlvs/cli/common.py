@@ -264,6 +264,29 @@ def bar(description: str, quiet: bool):
     return update
 
 
+@contextmanager
+def command(as_json: bool = False) -> Iterator[list]:
+    """A command's body: its errors turned into messages and exit codes (:func:`guard`), its
+    warnings recorded (:func:`collect_warnings`); yields the warnings caught."""
+    with guard(as_json), collect_warnings() as caught:
+        yield caught
+
+
+def finish(caught: list, as_json: bool, summary: Any, *texts: object,
+           quiet: bool = False) -> list[dict] | None:
+    """The end of a command's output: the warnings caught (and those of ``texts``, see
+    :func:`gather`) with --json printed inside the JSON ``summary`` (a mapping, or a list
+    printed alone; None then: nothing else to print), else shown on stderr unless ``quiet``
+    and returned for the command's own text."""
+    warns = gather(caught, *texts)
+    if as_json:
+        echo_json({**summary, "warnings": warns} if isinstance(summary, dict) else summary)
+        return None
+    if not quiet:
+        show_warnings(warns)
+    return warns
+
+
 def echo_json(obj: object) -> None:
     """Valid JSON on stdout: a figure that is not available (NaN, inf) is ``null``."""
     typer.echo(json_text(obj))

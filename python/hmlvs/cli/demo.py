@@ -10,16 +10,12 @@ from .common import (
     GLOSSARY_URL,
     MOUNTING_DEG,
     app,
-    collect_warnings,
-    determined,
-    echo_json,
-    gather,
-    guard,
+    command,
+    finish,
     mounted_truth,
     resolve_fixed,
     rotation_text,
     rotation_vector,
-    show_warnings,
     solve_progress,
     without_warning_lines,
 )
@@ -27,7 +23,7 @@ from .common import (
 
 def _demo_verdict(result, truth, fixed_why: list[str]) -> tuple[str, dict]:
     """The demo's summary in words, and the same as JSON."""
-    det, undet = determined(result)
+    det, undet = result.determined_split()
     unc = result.uncertainty
     lines = ["", "What the numbers mean:",
              f"- fit RMS {result.fit_rms:.3g} mm: the 3D distance between the reference points "
@@ -79,7 +75,7 @@ def demo(
     from ..data.calibration_file import Calibration
     truth = mounted_truth(MOUNTING_DEG)
     fixed, why = resolve_fixed([], [])
-    with guard(as_json), collect_warnings() as caught:
+    with command(as_json) as caught:
         session = sim.session(truth, num_poses=poses, pixel_noise=pixel_noise, seed=seed)
         fit, test = session.dataset.split(0.5, seed=seed, by_pose=True)
         if not as_json:
@@ -91,20 +87,15 @@ def demo(
         path = Calibration.from_result(result, fit, robot=session.robot).save(
             out / "calibration.yaml")
     summary = result.summary(session.truth)
-    warns = gather(caught, result.warnings, summary)
     verdict, verdict_json = _demo_verdict(result, session.truth, why)
-    if as_json:
-        echo_json({"points": len(session.dataset), "poses": session.dataset.num_poses,
-                    "fit_rms_mm": result.fit_rms, "test_rms_mm": result.test_rms,
-                    "seconds": result.seconds, "calibration": str(path),
-                    "fixed": list(result.fixed), **verdict_json,
-                    "rotation_vector_rad": rotation_vector(result.params),
-                    "true_rotation_vector_rad": rotation_vector(session.truth),
-                    "warnings": warns})
+    warns = finish(caught, as_json, {
+        "points": len(session.dataset), "poses": session.dataset.num_poses,
+        "calibration": str(path), **result.to_dict(), **verdict_json,
+        "true_rotation_vector_rad": rotation_vector(session.truth)},
+        result.warnings, summary, quiet=quiet)
+    if warns is None:
         return
     typer.echo(without_warning_lines(summary))
     typer.echo(rotation_text(result.params, session.truth))
     typer.echo(verdict)
-    if not quiet:
-        show_warnings(warns)
     typer.echo(f"\ncalibration written to {path}")

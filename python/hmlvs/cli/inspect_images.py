@@ -7,17 +7,7 @@ from typing import Optional
 
 import typer
 
-from .common import (
-    ROBOT_OPTION,
-    app,
-    collect_warnings,
-    echo_json,
-    gather,
-    guard,
-    inputs_of,
-    load_robot,
-    show_warnings,
-)
+from .common import ROBOT_OPTION, app, command, finish, inputs_of, load_robot
 
 
 # -- hmlvs inspect ---------------------------------------------------------------------------
@@ -40,17 +30,12 @@ def inspect_images(
     """
     from ..report.inspect import inspect_session
 
-    with guard(as_json), collect_warnings() as caught:
+    with command(as_json) as caught:
         from ..guard import refuse_overwrite
 
         refuse_overwrite([*inputs_of(data), robot], [], [("--out", out)])
         views = inspect_session(data, out, robot=load_robot(robot))
-    if not as_json:
-        show_warnings(gather(caught))
-    if as_json:
-        echo_json([{"id": v.id, "used": v.used, "reason": v.reason, "corners": v.corners,
-                     "stripe": v.stripe, "image": None if v.image is None else str(v.image)}
-                    for v in views])
+    if finish(caught, as_json, [v.to_dict() for v in views]) is None:
         return
     for v in views:
         typer.echo(v.line())

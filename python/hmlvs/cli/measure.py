@@ -7,19 +7,7 @@ from typing import Optional
 
 import typer
 
-from .common import (
-    ROBOT_OPTION,
-    app,
-    bar,
-    collect_warnings,
-    echo_json,
-    gather,
-    guard,
-    inputs_of,
-    is_manifest,
-    load_robot,
-    show_warnings,
-)
+from .common import ROBOT_OPTION, app, bar, command, finish, inputs_of, is_manifest, load_robot
 
 
 @app.command()
@@ -48,7 +36,7 @@ def measure(
     from ..measurement.measure import measure as measure_points
     from ..measurement.measure import measure_images_to
 
-    with guard(as_json), collect_warnings() as caught:
+    with command(as_json) as caught:
         from ..guard import refuse_overwrite
 
         refuse_overwrite([calibration, *inputs_of(source), robot], [("--out", out)])
@@ -78,12 +66,9 @@ def measure(
                                  "calibration of the sensor that took these data?)")
             path = cloud.save(out)
             n_valid, n_invalid = cloud.num_valid, len(cloud) - cloud.num_valid
-    warns = gather(caught)
-    summary = {"cloud": str(path), "points": n_valid, "invalid": n_invalid, **info}
-    if as_json:
-        echo_json({**summary, "warnings": warns} if warns else summary)
+    if finish(caught, as_json, {"cloud": str(path), "points": n_valid, "invalid": n_invalid,
+                                **info}) is None:
         return
-    show_warnings(warns)
     typer.echo(f"{n_valid} points measured ({n_invalid} stripe "
                "pixels without a measurement: their rays miss the laser plane, meet it at a "
                "grazing angle or lie outside the image)")

@@ -7,18 +7,7 @@ from typing import Any, Optional
 
 import typer
 
-from .common import (
-    ROBOT_OPTION,
-    app,
-    collect_warnings,
-    echo_json,
-    gather,
-    guard,
-    inputs_of,
-    is_manifest,
-    load_robot,
-    show_warnings,
-)
+from .common import ROBOT_OPTION, app, command, finish, inputs_of, is_manifest, load_robot
 
 
 @app.command()
@@ -46,7 +35,7 @@ def report(
     from ..data.dataset import Dataset
     from ..report.html import write_report
 
-    with guard(as_json), collect_warnings() as caught:
+    with command(as_json) as caught:
         from ..guard import refuse_overwrite
 
         refuse_overwrite([calibration, *inputs_of(data), test, robot], [("--out", out)])
@@ -57,17 +46,14 @@ def report(
                                  "paper-model calibrations use; this calibration is opencv")
             path, ev = _report_opencv(cal, data, out, robot)
     if cal.model == "opencv":
-        if as_json:
-            echo_json({"report": str(path), "corner_rms_px": ev.corner_rms_px,
-                        "laser_rms_mm": ev.laser_rms_mm, "views": len(ev.per_view)})
+        if finish(caught, as_json, {"report": str(path), **ev.to_dict()}) is None:
             return
-        show_warnings(gather(caught))
         typer.echo(f"on {data.name}: corners {ev.corner_rms_px:.4g} px RMS, laser "
                    f"{ev.laser_rms_mm:.4g} mm RMS over {len(ev.per_view)} views (camera, "
                    "laser plane and hand-eye held; the board's pose estimated)")
         typer.echo(f"report written to {path}")
         return
-    with guard(as_json), collect_warnings() as caught:
+    with command(as_json) as caught:
         image_reports = None
         if is_manifest(data):
             from ..image.paper_session import dataset_from_images
@@ -83,11 +69,7 @@ def report(
                           fixed=cal.fixed)
         path = write_report(result, ds, out, test=test_ds, std=cal.std,
                             image_reports=image_reports)
-    if not as_json:
-        show_warnings(gather(caught))
-    if as_json:
-        echo_json({"report": str(path), "fit_rms_mm": result.fit_rms,
-                    "test_rms_mm": result.test_rms})
+    if finish(caught, as_json, {"report": str(path), **result.to_dict()}) is None:
         return
     typer.echo(f"RMS on {data.name}: {result.fit_rms:.4g} mm over {len(ds)} points")
     if result.test_rms is not None:

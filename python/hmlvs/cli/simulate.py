@@ -7,17 +7,7 @@ from typing import Optional
 
 import typer
 
-from .common import (
-    MOUNTING_DEG,
-    app,
-    bar,
-    collect_warnings,
-    echo_json,
-    gather,
-    guard,
-    mounted_truth,
-    show_warnings,
-)
+from .common import MOUNTING_DEG, app, bar, command, finish, mounted_truth
 
 
 @app.command()
@@ -50,7 +40,7 @@ def simulate(
     from .. import sim
     from ..sim.render import RenderOptions
 
-    with guard(as_json), collect_warnings() as caught:
+    with command(as_json) as caught:
         # every refusal before anything is written
         if out.suffix not in (".npz", ".json"):  # as Dataset.save, before any image is made
             raise ValueError(f"{out}: data sets are saved as .npz or .json, not "
@@ -74,13 +64,10 @@ def simulate(
 
                 shutil.rmtree(images, ignore_errors=True)
             raise
-    warns = gather(caught)
-    if as_json:
-        echo_json({"file": str(out), "points": len(s.dataset), "poses": s.dataset.num_poses,
-                    "manifest": None if manifest is None else str(manifest),
-                    "warnings": warns})
-    else:
-        typer.echo(s.summary())
-        if not quiet:
-            show_warnings(warns)
-        typer.echo(f"written to {out}" + (f" and {manifest}" if manifest else ""))
+    if finish(caught, as_json, {"file": str(out), "points": len(s.dataset),
+                                "poses": s.dataset.num_poses,
+                                "manifest": None if manifest is None else str(manifest)},
+              quiet=quiet) is None:
+        return
+    typer.echo(s.summary())
+    typer.echo(f"written to {out}" + (f" and {manifest}" if manifest else ""))

@@ -8,8 +8,9 @@ from typing import Any
 
 @dataclass(frozen=True)
 class ImageReport:
-    """What :func:`~hmlvs.image.paper_session.dataset_from_images` found in one image pair, and what
-    it rejected.
+    """What the image pipeline found in one image pair (the paper model's
+    :func:`~hmlvs.image.paper_session.dataset_from_images`, the opencv model's
+    :func:`~hmlvs.image.views.views_from_images`), and what it rejected.
 
     Attributes
     ----------
@@ -42,6 +43,13 @@ class ImageReport:
     rejected: dict[str, str] = field(default_factory=dict)
     blur_var: float | None = None
     view: Any = field(default=None, repr=False, compare=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The account as plain JSON-ready values (without the view itself)."""
+        return {"id": self.id, "index": self.index, "on": self.on, "off": self.off,
+                "ok": self.ok, "reason": self.reason, "stripe": dict(self.stripe),
+                "corners": self.corners, "points": self.points,
+                "rejected": dict(self.rejected), "blur_var": self.blur_var}
 
     def __str__(self) -> str:
         if not self.ok:

@@ -52,6 +52,12 @@ class ViewInspection:
     stripe: dict[str, int] = field(default_factory=dict)
     image: Path | None = None
 
+    def to_dict(self) -> dict[str, Any]:
+        """The view's inspection as plain JSON-ready values."""
+        return {"id": self.id, "used": self.used, "reason": self.reason,
+                "corners": self.corners, "stripe": dict(self.stripe),
+                "image": None if self.image is None else str(self.image)}
+
     def line(self) -> str:
         """The terminal line: ``v001: used, 63 corners, stripe FOUND 812, MULTIPLE 2``."""
         state = ("used" if self.corners else "used (laser only, no board seen)") if self.used \
