@@ -303,19 +303,8 @@ def main() -> None:
     t_lm /= len(starts)
 
     # SciPy's LM has no bounds and may step to parameters with no measurement (f < 0, a ray
-    # that misses the plane): give those a large residual so it backs off, as MINPACK expects.
-    def scipy_fun(q: np.ndarray) -> np.ndarray:
-        try:
-            return hmlvs.residuals(q, fit.pixels, fit.poses, fit.points).ravel()
-        except ValueError:
-            return np.full(3 * len(fit), 1e6)
-
-    def scipy_jac(q: np.ndarray) -> np.ndarray:
-        try:
-            return hmlvs.models.paper.residual_jacobian(q, fit.pixels, fit.poses,
-                                                 fit.points)[1].reshape(-1, 14)
-        except ValueError:
-            return np.zeros((3 * len(fit), 14))
+    # that misses the plane): those get a large residual so it backs off, as MINPACK expects.
+    scipy_fun, scipy_jac = hmlvs.models.paper.least_squares_functions(fit)
 
     t_sp, sp = median_time(lambda: [least_squares(scipy_fun, s, jac=scipy_jac, method="lm")
                                     for s in starts], args.reps)

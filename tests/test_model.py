@@ -92,6 +92,31 @@ def test_jacobian_matches_central_differences(rng):
         assert np.abs(jac[:, :, i] - num).max() < 1e-5 * scale, hmlvs.NAMES[i]
 
 
+def test_least_squares_functions_give_the_residuals_and_back_off_where_unmeasured(rng):
+    """The functions for a general least-squares solver: the flattened residuals and their
+    Jacobian where the model measures; where a ray misses the laser plane (f < 0) the large
+    residual and a zero Jacobian that make an unbounded solver back off."""
+    from types import SimpleNamespace
+
+    q = random_params(rng)
+    pixels = rng.uniform([50, 50], [590, 430], size=(12, 2))
+    poses = ref.random_poses(rng, 12)
+    points = ref.base_points(q, pixels, poses) + rng.normal(0, 0.1, (12, 3))
+    fun, jac = hmlvs.models.paper.least_squares_functions(
+        SimpleNamespace(pixels=pixels, poses=poses, points=points), unmeasured=1e5)
+    np.testing.assert_allclose(fun(q), (points - ref.base_points(q, pixels, poses)).ravel(),
+                               atol=1e-9)
+    assert jac(q).shape == (36, 14)
+    np.testing.assert_array_equal(
+        jac(q), hmlvs.models.paper.residual_jacobian(q, pixels, poses, points)[1].reshape(36, 14))
+    bad = q.copy()
+    bad[0] = -abs(bad[0])  # f < 0: no ray meets the plane in front of the camera
+    with pytest.raises(ValueError):
+        hmlvs.residuals(bad, pixels, poses, points)
+    np.testing.assert_array_equal(fun(bad), np.full(36, 1e5))
+    np.testing.assert_array_equal(jac(bad), np.zeros((36, 14)))
+
+
 def test_hand_from_camera_is_zyz_euler():
     q = hmlvs.Parameters.nominal().replace(omega=0.1, phi=-0.2, varphi=0.3, tx=1, ty=2, tz=3)
     t = hmlvs.hand_from_camera(q)

@@ -20,8 +20,9 @@ import time
 import warnings
 
 import hmlvs
-from hmlvs.calibration.solvers import _fitness_data
-from hmlvs.paper.study import SUCCESS_THRESHOLD, _seed
+from hmlvs.calibration.solvers import fitness_data
+from hmlvs.models.paper import least_squares_functions
+from hmlvs.paper.study import SUCCESS_THRESHOLD, run_seed
 import numpy as np
 from scipy.optimize import least_squares
 
@@ -29,25 +30,15 @@ from scipy.optimize import least_squares
 def main(n: int) -> None:
     sim = hmlvs.simulate(seed=0)
     fit = sim.fit
-    test = _fitness_data(sim.test)
+    test = fitness_data(sim.test)
     s = 0.2
-    starts = hmlvs.initial_candidates(sim.truth, s, n, seed=_seed(0, s, 1))
+    starts = hmlvs.initial_candidates(sim.truth, s, n, seed=run_seed(0, s, 1))
 
-    def components(q: np.ndarray) -> np.ndarray:
-        try:
-            return hmlvs.residuals(q, fit.pixels, fit.poses, fit.points).ravel()
-        except ValueError:  # a ray misses the laser plane: a large residual, MINPACK backs off
-            return np.full(3 * len(fit), 1e6)
+    # a ray that misses the laser plane: a large residual, MINPACK backs off
+    components, jacobian = least_squares_functions(fit)
 
     def norms(q: np.ndarray) -> np.ndarray:
         return np.linalg.norm(components(q).reshape(-1, 3), axis=1)
-
-    def jacobian(q: np.ndarray) -> np.ndarray:
-        try:
-            return hmlvs.models.paper.residual_jacobian(q, fit.pixels, fit.poses,
-                                                 fit.points)[1].reshape(-1, 14)
-        except ValueError:
-            return np.zeros((3 * len(fit), 14))
 
     def held_out(q: np.ndarray) -> float:
         e = np.asarray(test.point_errors(q))

@@ -12,7 +12,6 @@ from ..calibration.options import LmOptions, PsoOptions
 from ..models.opencv import DISTORTION_NAMES
 from .common import (
     GLOSSARY_URL,
-    ROBOT_OPTION,
     app,
     check_suffix,
     command,
@@ -29,6 +28,7 @@ from .common import (
     solve_progress,
     without_warning_lines,
 )
+from .options import JSON_OPTION, ROBOT_OPTION
 
 _INITIAL_OPTION = typer.Option(
     None, help="opencv model: a calibration whose camera and laser plane are held (e.g. a "
@@ -199,7 +199,7 @@ def calibrate(
     bounds: Optional[Path] = _BOUNDS_OPTION,
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, no per-image "
                                "lines and no warnings on the terminal (--json collects them)."),
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary, warnings included."),
+    as_json: bool = JSON_OPTION,
     require: Optional[float] = typer.Option(
         None, "--require", help="Also call the calibration untrustworthy (exit 3) when its "
         "predicted 95th-percentile 3D uncertainty exceeds this many mm."),

@@ -334,11 +334,6 @@ def exit_untrusted(verdict: Any) -> None:
         raise typer.Exit(EXIT_UNTRUSTED)
 
 
-ROBOT_OPTION = typer.Option(
-    None, "--robot", help="Robot description (YAML/JSON, what hmlvs.Robot.to_dict writes) "
-    "for joint readings; default: the manifest's robot, else SCORBOT ER-VII.")
-
-
 def load_robot(path: Optional[Path]):
     """The --robot file's Robot, or None."""
     if path is None:

@@ -19,6 +19,7 @@ from .common import (
     solve_progress,
     without_warning_lines,
 )
+from .options import JSON_OPTION
 
 
 def _demo_verdict(result, truth, fixed_why: list[str]) -> tuple[str, dict]:
@@ -60,7 +61,7 @@ def demo(
     out: Path = typer.Option(Path("demo-out"), help="Folder for the calibration file."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar and no warnings "
                                "on the terminal (use --json to get them)."),
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary, warnings included."),
+    as_json: bool = JSON_OPTION,
 ) -> None:
     """Simulate a SCORBOT ER-VII session, calibrate it (PSO + LM), compare with the truth.
 

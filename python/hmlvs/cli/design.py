@@ -9,6 +9,7 @@ import typer
 
 from .._io import atomic_write
 from .common import app, echo_json, interrupted
+from .options import JSON_OPTION
 
 
 @app.command()
@@ -28,7 +29,7 @@ def design(
         "theta - 2.5."),
     out: Optional[Path] = typer.Option(
         None, "--out", help="Folder for the PNG plots and design.md (a Markdown summary)."),
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+    as_json: bool = JSON_OPTION,
 ) -> None:
     """Sensor design analysis: measurement ranges, resolution, error from a wrong H or theta.
 

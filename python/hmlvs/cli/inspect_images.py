@@ -7,7 +7,8 @@ from typing import Optional
 
 import typer
 
-from .common import ROBOT_OPTION, app, command, finish, inputs_of, load_robot
+from .common import app, command, finish, inputs_of, load_robot
+from .options import JSON_OPTION, ROBOT_OPTION
 
 
 # -- hmlvs inspect ---------------------------------------------------------------------------
@@ -18,7 +19,7 @@ def inspect_images(
     out: Path = typer.Option(Path("inspect"), "--out", "-o",
                              help="Folder for the pictures: one PNG per view, named by its id."),
     robot: Optional[Path] = ROBOT_OPTION,
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+    as_json: bool = JSON_OPTION,
 ) -> None:
     """Draw what the image pipeline found in each view, and say why a view was dropped.
 

@@ -7,7 +7,8 @@ from typing import Optional
 
 import typer
 
-from .common import ROBOT_OPTION, app, bar, command, finish, inputs_of, is_manifest, load_robot
+from .common import app, bar, command, finish, inputs_of, is_manifest, load_robot
+from .options import JSON_OPTION, ROBOT_OPTION
 
 
 @app.command()
@@ -18,7 +19,7 @@ def measure(
     out: Path = typer.Option(Path("cloud.ply"), "--out", "-o",
                              help="Point cloud to write (.ply or .csv)."),
     robot: Optional[Path] = ROBOT_OPTION,
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+    as_json: bool = JSON_OPTION,
     accept_untrusted: bool = typer.Option(
         False, "--accept-untrusted", help="Measure even with a calibration whose verdict "
         "says not to trust it."),

@@ -7,7 +7,8 @@ from typing import Any, Optional
 
 import typer
 
-from .common import ROBOT_OPTION, app, command, finish, inputs_of, is_manifest, load_robot
+from .common import app, command, finish, inputs_of, is_manifest, load_robot
+from .options import JSON_OPTION, ROBOT_OPTION
 
 
 @app.command()
@@ -20,7 +21,7 @@ def report(
     mode: str = typer.Option("corners", help="Calibration points from images: corners or "
                              "homography (as for calibrate)."),
     robot: Optional[Path] = ROBOT_OPTION,
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+    as_json: bool = JSON_OPTION,
 ) -> None:
     """Write a self-contained HTML report for a calibration file on a data set or images.
 

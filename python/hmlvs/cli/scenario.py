@@ -8,6 +8,7 @@ from typing import Optional
 import typer
 
 from .common import app, echo_json, guard
+from .options import JSON_OPTION
 
 
 @app.command()
@@ -23,7 +24,7 @@ def scenario(
     calibration: Optional[Path] = typer.Option(
         None, help="Calibration file to measure with; default: calibrate a simulated noisy "
         "checkerboard session of the true sensor first."),
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+    as_json: bool = JSON_OPTION,
 ) -> None:
     """Simulate a measurement scenario of the paper end to end with rendered images.
 

@@ -8,6 +8,7 @@ from typing import Optional
 import typer
 
 from .common import MOUNTING_DEG, app, bar, command, finish, mounted_truth
+from .options import JSON_OPTION
 
 
 @app.command()
@@ -31,7 +32,7 @@ def simulate(
     seed: int = typer.Option(0, help="Random seed."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar and no warnings "
                                "on the terminal (--json collects them)."),
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary, warnings included."),
+    as_json: bool = JSON_OPTION,
 ) -> None:
     """Simulate a checkerboard calibration session (SCORBOT ER-VII, paper set-up).
 

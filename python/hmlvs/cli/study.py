@@ -8,6 +8,7 @@ from typing import Optional
 import typer
 
 from .common import app, echo_json, interrupted
+from .options import JSON_OPTION
 
 
 @app.command()
@@ -32,7 +33,7 @@ def study(
         None, help="Worker threads (default: all cores); results do not depend on it."),
     out: Optional[Path] = typer.Option(
         None, "--out", help="Folder for study.md (the tables) and the PNG plots."),
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+    as_json: bool = JSON_OPTION,
     progress: bool = typer.Option(
         True, "--progress/--no-progress", help="Show a progress bar on stderr."),
 ) -> None:

@@ -7,7 +7,7 @@ as (m, 2) arrays of (u = column, v = row), and base_from_hand poses as (m, 4, 4)
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -142,6 +142,31 @@ def residual_jacobian(params: Any, pixels: Any, poses: Any, references: Any
     r, j = _core._residual_jacobian(as_params(params), px, ps, ref)
     m = px.shape[0]
     return np.asarray(r).reshape(m, 3), np.asarray(j).reshape(m, 3, -1)
+
+
+def least_squares_functions(data: Any, unmeasured: float = 1e6
+                            ) -> tuple[Callable[[Any], np.ndarray], Callable[[Any], np.ndarray]]:
+    """The residual components E (flattened, 3 m) of a data set's points and their Jacobian
+    (3 m, 14), as functions of the 14 parameters, for a general least-squares solver (e.g.
+    SciPy's ``least_squares``, to compare with): where the model has no measurement (a ray
+    that misses the laser plane, f < 0) every residual is ``unmeasured`` and the Jacobian 0,
+    so that a solver without bounds backs off, as MINPACK expects."""
+    px, ps, ref = data.pixels, data.poses, data.points
+    m = len(px)
+
+    def fun(q: Any) -> np.ndarray:
+        try:
+            return residuals(q, px, ps, ref).ravel()
+        except ValueError:
+            return np.full(3 * m, unmeasured)
+
+    def jac(q: Any) -> np.ndarray:
+        try:
+            return residual_jacobian(q, px, ps, ref)[1].reshape(3 * m, -1)
+        except ValueError:
+            return np.zeros((3 * m, len(as_params(q))))
+
+    return fun, jac
 
 
 MIN_RAY_ANGLE = float(np.arcsin(_core.MIN_RAY_SINE))  # 0.5 deg: see PaperSensor

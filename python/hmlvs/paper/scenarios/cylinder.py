@@ -15,16 +15,13 @@ from ...sim.scene import Cylinder, Hole, Scene, Table
 from .common import (
     HOME,
     JointReadout,
-    ScanProgress,
+    Progress,
     default_truth,
     params_and_result,
     point_jacobians,
-    rendered_records,
-    scan_folder,
-    scene_to_dict,
     surface_normals,
-    write_scan,
 )
+from .files import rendered_records, scan_folder, scene_to_dict, write_scan
 
 
 def cylinder_scene(radius: float = 50.0, length: float = 200.0,
@@ -249,7 +246,7 @@ def cylinder_scan(calibration: Any = None, truth: Any = None, *, seed: int = 0,
     readings = readout.read(joints, rng)
     poses = robot.poses(joints)
     ids = [f"p{i:03d}" for i in range(len(joints))]
-    bar = ScanProgress(progress, len(joints))
+    bar = Progress(progress, len(joints))
     frames = []
     for pose in poses:
         frames.append(render_scene(q_true, pose, scene, image_size, options, rng))

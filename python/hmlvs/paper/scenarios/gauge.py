@@ -13,17 +13,8 @@ from ...image.stripe_end import locate_stripe_end
 from ...models.paper import hand_from_camera
 from ...sim.render import RenderOptions, render_scene
 from ...sim.scene import Box, Scene, Table
-from .common import (
-    HOME,
-    JointReadout,
-    ScanProgress,
-    default_truth,
-    params_and_result,
-    point_jacobians,
-    scan_folder,
-    scene_to_dict,
-    write_scan,
-)
+from .common import HOME, JointReadout, Progress, default_truth, params_and_result, point_jacobians
+from .files import scan_folder, scene_to_dict, write_scan
 
 #: The paper's gauge block: 60 x 30 x 55 mm, left-bottom corner at (0, -500, 0) mm.
 GAUGE_BLOCK = Box((0.0, -530.0, 0.0), (60.0, -500.0, 55.0))
@@ -329,7 +320,7 @@ def gauge_block(calibration: Any = None, truth: Any = None, *, trials: int = 10,
     is_paper_block = block == GAUGE_BLOCK
     rng = np.random.default_rng([seed, 23])
     noise_rng = np.random.default_rng([seed, 29])
-    bar = ScanProgress(progress, trials * len(names))
+    bar = Progress(progress, trials * len(names))
     results, all_ids, all_frames, all_readings, e_pool = [], [], [], [], []
     for index, name in enumerate(names):
         corner = named[name]

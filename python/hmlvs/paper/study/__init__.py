@@ -38,11 +38,11 @@ from .results import (
     StudySettings,
     paper_value,
 )
-from .run import study
+from .run import run_seed, study
 
 __all__ = [
     "COLORS", "FULL", "HeldOut", "LABELS", "LM_MAX_ITERATIONS", "METHODS", "MethodRuns",
     "PAPER_S", "PAPER_TABLE1", "PLOT_DPI", "PSO_ITERATIONS", "QUICK", "STATS",
     "SUCCESS_THRESHOLD", "SWARM_SIZE", "Stats", "StudyProgress", "StudyResult",
-    "StudySettings", "VALLEY_PARAMS", "paper_value", "study"
+    "StudySettings", "VALLEY_PARAMS", "paper_value", "run_seed", "study"
 ]

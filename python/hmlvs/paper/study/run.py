@@ -31,7 +31,7 @@ from .results import (
 )
 
 
-def _seed(seed: int, s: float, tag: int) -> int:
+def run_seed(seed: int, s: float, tag: int) -> int:
     """A seed per (study seed, s, stream): the same s gives the same runs whatever the other
     s values of the study."""
     ss = np.random.SeedSequence([seed, zlib.crc32(repr(float(s)).encode()), tag])
@@ -197,18 +197,18 @@ def study(s_values: Sequence[float] = PAPER_S, runs_lm: Optional[int] = None,
                     reporter.begin(method, s, step_runs(method))
                     if method == "random":
                         r = calibrate(sim.fit, method="random", bounds=box, evaluations=n_eval,
-                                      seed=_seed(seed, s, 0), **common)
+                                      seed=run_seed(seed, s, 0), **common)
                         params = r.params.to_array()[None, :]
                     elif method in ("lm", "lm-paper"):
                         # Same seed -> the same Eq. 22 starts for both LM modes, both unbounded
                         # (paper mode as MINPACK lmdif): they differ only in the residual, the
                         # Jacobian and the rotation's parametrisation.
                         r = calibrate(sim.fit, method=method, runs=n_lm, use_bounds=False,
-                                      seed=_seed(seed, s, 1), **common)
+                                      seed=run_seed(seed, s, 1), **common)
                         params = r.run_params
                     else:  # pso, pso+lm: the same seed -> PSO+LM polishes the very PSO runs
                         r = calibrate(sim.fit, method=method, runs=n_pso, bounds=box,
-                                      seed=_seed(seed, s, 2), **common)
+                                      seed=run_seed(seed, s, 2), **common)
                         params = r.run_params
                     if r.termination == "cancelled":
                         raise KeyboardInterrupt
