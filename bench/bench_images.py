@@ -48,8 +48,8 @@ def _view(size: tuple[int, int], seed: int = 0):
 
 def stripe_rows(reps: int) -> list[str]:
     """stripe_from_pair (one C++ call per frame) beside the NumPy composition of the same
-    pipeline it replaced (tests/reference_frames.py) and NumPy's argmax + centroid."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    pipeline it replaced (tests/oracles/reference_frames.py) and NumPy's argmax + centroid."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "oracles"))
     from hmlvs.image.session import stripe_from_pair
     import reference_frames
 
@@ -64,7 +64,8 @@ def stripe_rows(reps: int) -> list[str]:
             rows.append(f"| stripe centres, {size[0]} x {size[1]}, {what} (difference image, "
                         f"albedo fit, Steger, refinement, quality checks; C++) | {ours:.1f} ms "
                         f"({1000 / ours:.0f} fps) | the same pipeline in NumPy "
-                        f"(tests/reference_frames.py) {ref:.1f} ms: {ref / ours:.1f}x faster; "
+                        f"(tests/oracles/reference_frames.py) {ref:.1f} ms: {ref / ours:.1f}x "
+                        f"faster; "
                         f"NumPy argmax + centroid {anchor:.1f} ms: {ours / anchor:.2f}x |")
     return rows
 

@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "oracles"))
 
 import hmlvs  # noqa: E402
 import reference_stripe  # noqa: E402
@@ -55,7 +55,8 @@ def main() -> None:
     if md:
         print("## Stripe extraction\n")
         print(f"One {img.shape[1]} x {img.shape[0]} 8-bit image, single thread, C++ against the "
-              "NumPy reference of `tests/reference_stripe.py` in the same run (frames/s).\n")
+              "NumPy reference of `tests/oracles/reference_stripe.py` in the same run "
+              "(frames/s).\n")
         print("| method | C++ fps | NumPy fps | ratio |\n|---|---:|---:|---:|")
     else:
         print(f"image {img.shape[1]} x {img.shape[0]} uint8, single thread")

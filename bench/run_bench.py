@@ -50,7 +50,7 @@ def session_times(reps: int) -> tuple[float, float, bool]:
     same joints."""
     from hmlvs import _core
 
-    sys.path.insert(0, str(ROOT / "tests"))
+    sys.path.insert(0, str(ROOT / "tests" / "oracles"))
     from reference_ik import solve_look_at  # the tests' NumPy reference of the solve
 
     native = _core._solve_look_at
@@ -80,7 +80,7 @@ def render_times(reps: int) -> tuple[float, float, int, int]:
     interleaved, and how many of how many 8-bit pixels differ between the two."""
     from hmlvs.sim import render as R
 
-    sys.path.insert(0, str(ROOT / "tests"))
+    sys.path.insert(0, str(ROOT / "tests" / "oracles"))
     # the tests' NumPy reference of the shading
     from reference_render import board_exposures_of_plane as numpy_shading
 
@@ -327,7 +327,7 @@ def main() -> None:
     px = rng.uniform([0, 0], [639, 479], (m, 2))
     poses = hmlvs.Robot.scorbot_er7().poses(rng.uniform(-1, 1, (m, 5)))
     t_model, _ = median_time(lambda: hmlvs.points_in_base(sim.truth, px, poses), args.reps)
-    sys.path.insert(0, str(ROOT / "tests"))
+    sys.path.insert(0, str(ROOT / "tests" / "oracles"))
     from reference_model import base_points  # the tests' independent NumPy oracle
     t_model_np, _ = median_time(lambda: base_points(sim.truth.to_array(), px, poses), 2)
     rows.append(("hmlvs.points_in_base, 1e6 points (pixels + poses -> base frame)",

@@ -1,12 +1,6 @@
-from pathlib import Path
-import sys
-
+from hmlvs.models.params import TABLE2_LOWER, TABLE2_UPPER
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))
-
-from hmlvs.models.params import TABLE2_LOWER, TABLE2_UPPER  # noqa: E402
 
 
 @pytest.fixture

@@ -6,7 +6,7 @@
 // refinement on the unrounded difference with a denoised laser-off frame, and the quality
 // checks. The reference is the composition of the whole-image steps (DifferenceImage,
 // ExtractStripe, RefineStripeCentres, AssessStripe and the NumPy glue of
-// hmlvs.image.session.stripe_from_pair, kept in tests/reference_frames.py); here only the
+// hmlvs.image.session.stripe_from_pair, kept in tests/oracles/reference_frames.py); here only the
 // statistics the thresholds need look at every pixel, in 8- or 16-bit integers, and every
 // other value (the normalised difference, its smoothing, the denoised laser-off frame) is
 // computed where a scan line reads it: around the stripe and wherever a bound on the pixels

@@ -28,7 +28,7 @@ from .common import (
     solve_progress,
     without_warning_lines,
 )
-from .options import JSON_OPTION, ROBOT_OPTION
+from .options import JSON_OPTION, ROBOT_OPTION, out_option
 
 _INITIAL_OPTION = typer.Option(
     None, help="opencv model: a calibration whose camera and laser plane are held (e.g. a "
@@ -167,8 +167,7 @@ def _summary(path: Path, report_path: Optional[Path], verdict: Any, result: Any,
 def calibrate(
     data: Path = typer.Argument(..., help="Calibration data set (.npz or .json), or an image "
                                 "manifest (a folder with manifest.json, or the file)."),
-    out: Path = typer.Option(Path("calibration.yaml"), "--out", "-o",
-                             help="Calibration file to write (.yaml or .json)."),
+    out: Path = out_option("calibration.yaml", "Calibration file to write (.yaml or .json)."),
     method: str = typer.Option("pso+lm", help="pso+lm, pso, lm, lm-paper or random."),
     test: Optional[Path] = typer.Option(None, help="Held-out data set for the test RMS."),
     holdout: float = typer.Option(0.0, help="Fraction of poses held out for testing when "

@@ -8,7 +8,7 @@ from typing import Optional
 import typer
 
 from .common import app, command, finish, inputs_of, load_robot
-from .options import JSON_OPTION, ROBOT_OPTION
+from .options import JSON_OPTION, ROBOT_OPTION, out_option
 
 
 # -- hmlvs inspect ---------------------------------------------------------------------------
@@ -16,8 +16,8 @@ from .options import JSON_OPTION, ROBOT_OPTION
 def inspect_images(
     data: Path = typer.Argument(..., help="An image session: a folder with manifest.json (or "
                                 "the manifest), with a board."),
-    out: Path = typer.Option(Path("inspect"), "--out", "-o",
-                             help="Folder for the pictures: one PNG per view, named by its id."),
+    out: Path = out_option("inspect", "Folder for the pictures: one PNG per view, named by its "
+                           "id."),
     robot: Optional[Path] = ROBOT_OPTION,
     as_json: bool = JSON_OPTION,
 ) -> None:

@@ -8,7 +8,7 @@ from typing import Optional
 import typer
 
 from .common import app, bar, command, finish, inputs_of, is_manifest, load_robot
-from .options import JSON_OPTION, ROBOT_OPTION
+from .options import JSON_OPTION, ROBOT_OPTION, out_option
 
 
 @app.command()
@@ -16,8 +16,7 @@ def measure(
     calibration: Path = typer.Argument(..., help="Calibration file (.yaml or .json)."),
     source: Path = typer.Argument(..., help="A data set (.npz/.json) of stripe pixels and poses, "
                                   "or an image manifest (folder or manifest.json)."),
-    out: Path = typer.Option(Path("cloud.ply"), "--out", "-o",
-                             help="Point cloud to write (.ply or .csv)."),
+    out: Path = out_option("cloud.ply", "Point cloud to write (.ply or .csv)."),
     robot: Optional[Path] = ROBOT_OPTION,
     as_json: bool = JSON_OPTION,
     accept_untrusted: bool = typer.Option(

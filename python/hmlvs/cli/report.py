@@ -8,7 +8,7 @@ from typing import Any, Optional
 import typer
 
 from .common import app, command, finish, inputs_of, is_manifest, load_robot
-from .options import JSON_OPTION, ROBOT_OPTION
+from .options import JSON_OPTION, ROBOT_OPTION, out_option
 
 
 @app.command()
@@ -17,7 +17,7 @@ def report(
     data: Path = typer.Argument(..., help="Data set to evaluate on (.npz or .json), or an "
                                 "image manifest (a folder with manifest.json, or the file)."),
     test: Optional[Path] = typer.Option(None, help="Held-out data set."),
-    out: Path = typer.Option(Path("report.html"), "--out", "-o", help="HTML file to write."),
+    out: Path = out_option("report.html", "HTML file to write."),
     mode: str = typer.Option("corners", help="Calibration points from images: corners or "
                              "homography (as for calibrate)."),
     robot: Optional[Path] = ROBOT_OPTION,

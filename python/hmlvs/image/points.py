@@ -209,7 +209,7 @@ def _homography_points(stripe: StripeResult, corners: Corners, board: Any, step:
     # Where one homography (after the distortion fit) explains every corner to within
     # GLOBAL_RESIDUAL, it maps the stripe points: it averages the corners' detection noise
     # over all of them, where a square's own homography has four (measured on independent
-    # renders, tests/independent_check.py: the reference points' error 0.008-0.0096 ->
+    # renders, tests/oracles/independent_check.py: the reference points' error 0.008-0.0096 ->
     # 0.004-0.005 mm, the held-out map error down by 10-30 %). Otherwise (a lens the
     # division model does not fit, a board that is not flat) each square's own.
     back = cv2.perspectiveTransform(corners.board_xy.reshape(-1, 1, 2).astype(float),

@@ -270,8 +270,8 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
     The whole pipeline runs in C++ (``hmlvs._core``, cpp/hmlvs/image/frames.h), one call
     per frame that releases the GIL, computing the normalised difference, its smoothing and
     the denoised laser-off frame only around the stripe and wherever a pixel could clear a
-    threshold; tests/reference_frames.py holds the NumPy composition of the whole-image
-    steps it reproduces (tests/test_frames.py compares them).
+    threshold; tests/oracles/reference_frames.py holds the NumPy composition of the whole-image
+    steps it reproduces (tests/parity/test_frames.py compares them).
 
     Raises ``ValueError`` naming the threshold when an automatic one leaves no pixel of the
     image above it (nothing to find, rather than a silent empty stripe).

@@ -396,7 +396,7 @@ def refine_centres(stripe: StripeResult, image: np.ndarray, noise: Any, *,
     a profile with a 1 px sigma core, periodic in the centre's sub-pixel position), and the
     best linear shift estimate under additive noise plus
     laser speckle, which weighs the flanks more than the speckled top. Measured on an
-    independent renderer's sessions (tests/independent_check.py), each view's mean error
+    independent renderer's sessions (tests/oracles/independent_check.py), each view's mean error
     drops from 0.0113 to 0.0095 px RMS against Steger's centre, which it starts from.
 
     Parameters

@@ -39,16 +39,12 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-import sys
-
-import cv2
-import numpy as np
-import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))
 
 from conftest import run_cli  # noqa: E402
+import cv2
 import independent_render as R  # noqa: E402
+import numpy as np
+import pytest
 
 PARAMS = dict(R.TRUE, f=6.0, Su=0.0148, Sv=0.0148, Cu=160.0, Cv=120.0)
 BOARD = {"rows": 4, "cols": 5, "square": 20.0, "origin": [600.0, 50.0, 0.0],

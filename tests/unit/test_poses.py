@@ -239,7 +239,7 @@ def test_the_documented_ur_example_reads(tmp_path):
     import pathlib
     import re
 
-    doc = (pathlib.Path(__file__).parents[1] / "docs" / "file-formats.md").read_text()
+    doc = (pathlib.Path(__file__).parents[2] / "docs" / "file-formats.md").read_text()
     csv = re.search(r"```text\n# poses.csv\n(.*?)```", doc, re.S).group(1)
     manifest = re.search(r"```yaml\n# manifest.yaml\n(.*?)```", doc, re.S).group(1)
     (tmp_path / "poses.csv").write_text(csv)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 
-from hmlvs.cli import main
+from conftest import run_cli
 from hmlvs.data.calibration_file import load_calibration
 from hmlvs.image.scan import stripes_from_images
 from hmlvs.sim.general import general_session, render_general_session
@@ -32,16 +32,9 @@ def sessions(tmp_path_factory):
     return s, robot, bench
 
 
-def _cli(argv, capsys):
-    with pytest.raises(SystemExit) as e:
-        main(argv)
-    out = capsys.readouterr()
-    return e.value.code, out.out, out.err
-
-
 def test_a_bench_session_calibrates_camera_and_laser_plane(sessions, tmp_path, capsys):
     s, _, bench = sessions
-    code, out, err = _cli(["calibrate", str(bench), "--out", str(tmp_path / "b.yaml")], capsys)
+    code, out, err = run_cli(["calibrate", str(bench), "--out", str(tmp_path / "b.yaml")], capsys)
     assert code in (0, None), err
     assert "camera mode" in out
     cal = load_calibration(tmp_path / "b.yaml")
@@ -55,8 +48,8 @@ def test_a_bench_session_calibrates_camera_and_laser_plane(sessions, tmp_path, c
 def test_a_robot_session_holds_the_bench_camera_and_finds_the_hand_eye(sessions, tmp_path,
                                                                       capsys):
     s, robot, bench = sessions
-    _cli(["calibrate", str(bench), "--out", str(tmp_path / "b.yaml")], capsys)
-    code, out, err = _cli(["calibrate", str(robot), "--initial", str(tmp_path / "b.yaml"),
+    run_cli(["calibrate", str(bench), "--out", str(tmp_path / "b.yaml")], capsys)
+    code, out, err = run_cli(["calibrate", str(robot), "--initial", str(tmp_path / "b.yaml"),
                            "--out", str(tmp_path / "r.yaml")], capsys)
     assert code in (0, None), err
     b, r = (load_calibration(tmp_path / n).sensor for n in ("b.yaml", "r.yaml"))
@@ -76,7 +69,7 @@ def test_bench_and_robot_poses_cannot_be_mixed(sessions, tmp_path, capsys):
     for e in doc["poses"]:
         e["on"], e["off"] = (str(robot / e[k]) for k in ("on", "off"))
     (tmp_path / "manifest.json").write_text(json.dumps(doc))
-    code, _, err = _cli(["calibrate", str(tmp_path), "--out", str(tmp_path / "x.yaml")],
+    code, _, err = run_cli(["calibrate", str(tmp_path), "--out", str(tmp_path / "x.yaml")],
                         capsys)
     assert code == 2 and "entry 3 (id v003) has neither 'joints' nor 'pose'" in err
     assert not (tmp_path / "x.yaml").exists()
@@ -86,14 +79,14 @@ def test_a_bench_session_is_refused_where_poses_are_needed(sessions, tmp_path, c
     _, _, bench = sessions
     with pytest.raises(ValueError, match="no robot poses .* measuring in the robot's base"):
         stripes_from_images(bench)
-    code, _, err = _cli(["calibrate", str(bench), "--model", "paper", "--out",
+    code, _, err = run_cli(["calibrate", str(bench), "--model", "paper", "--out",
                          str(tmp_path / "p.yaml")], capsys)
     assert code == 2 and "bench session" in err and "--model opencv" in err
 
 
 def test_opencv_options_that_do_nothing_are_refused(sessions, tmp_path, capsys):
     _, robot, _ = sessions
-    code, _, err = _cli(["calibrate", str(robot), "--method", "lm", "--fixed", "f", "--out",
+    code, _, err = run_cli(["calibrate", str(robot), "--method", "lm", "--fixed", "f", "--out",
                          str(tmp_path / "x.yaml")], capsys)
     assert code == 2 and "--method, --fixed apply to the paper model only" in err
     assert not (tmp_path / "x.yaml").exists()
@@ -101,8 +94,8 @@ def test_opencv_options_that_do_nothing_are_refused(sessions, tmp_path, capsys):
 
 def test_a_bench_calibration_does_not_measure_in_the_base_frame(sessions, tmp_path, capsys):
     s, robot, bench = sessions
-    _cli(["calibrate", str(bench), "--out", str(tmp_path / "b.yaml")], capsys)
-    code, _, err = _cli(["measure", str(tmp_path / "b.yaml"), str(robot), "--out",
+    run_cli(["calibrate", str(bench), "--out", str(tmp_path / "b.yaml")], capsys)
+    code, _, err = run_cli(["measure", str(tmp_path / "b.yaml"), str(robot), "--out",
                          str(tmp_path / "c.ply")], capsys)
     assert code == 2 and "bench session's (camera mode)" in err
     assert not (tmp_path / "c.ply").exists()

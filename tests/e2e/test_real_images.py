@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from classic_corners import classic_corners
 import cv2
 from hmlvs.geometry.board import Checkerboard
 from hmlvs.image.corner_base import CornerOptions
@@ -16,7 +17,7 @@ from hmlvs.image.corners import BoardNotFoundError, detect_board, find_corners, 
 import numpy as np
 import pytest
 
-DATA = Path(__file__).parent / "data" / "opencv_left"
+DATA = Path(__file__).parents[1] / "data" / "opencv_left"
 REF = json.loads((DATA / "reference.json").read_text())
 BOARD = Checkerboard(rows=6, cols=9, square=1.0)  # OpenCV's pattern (9, 6): 9 corners per row
 
@@ -162,25 +163,6 @@ def test_find_corners_takes_options_or_the_old_keywords(detected):
         find_corners(gray, BOARD, options={"extend": False})
 
 
-def _classic(gray: np.ndarray, window: int | None) -> tuple[np.ndarray, np.ndarray, int]:
-    """OpenCV's classic detector: findChessboardCorners, then cornerSubPix with a half-window
-    of ``window`` px, or (None) one that fits inside a square: round(0.2 x the median
-    distance between neighbouring corners), 2..9 px. Returns (refined corners, the corners
-    refined with the in-square window, the window used)."""
-    ok, c = cv2.findChessboardCorners(gray, (9, 6))
-    assert ok
-    raw = c.reshape(-1, 2)
-    d = np.linalg.norm(raw[:, None] - raw[None], axis=2)
-    np.fill_diagonal(d, np.inf)
-    inside = int(np.clip(round(0.2 * np.median(d.min(axis=1))), 2, 9))
-    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.001)
-    small = cv2.cornerSubPix(gray, c.copy(), (inside, inside), (-1, -1), crit).reshape(-1, 2)
-    if window is None:
-        return small, small, inside
-    big = cv2.cornerSubPix(gray, c.copy(), (window, window), (-1, -1), crit).reshape(-1, 2)
-    return big, small, window
-
-
 def _nearest(ours: np.ndarray, ref: np.ndarray) -> np.ndarray:
     """Per corner of ``ref``, the distance to the nearest of ``ours`` (numberings may differ)."""
     return np.linalg.norm(ref[:, None] - ours[None], axis=2).min(axis=1)
@@ -192,7 +174,7 @@ def test_every_corner_agrees_with_the_classic_detector_with_an_in_square_window(
     (measured: under 0.001 px; both refinements converge to the same points from different
     starts), one to one."""
     for name, c in subpix.items():
-        ref, _, win = _classic(_gray(name), None)
+        ref, _, win = classic_corners(_gray(name), None)
         assert 6 <= win <= 8, name
         d = _nearest(c.pixels, ref)
         assert d.max() < 0.1, (name, d.max())
@@ -223,7 +205,7 @@ def test_corners_agree_with_the_classic_11x11_pipeline_where_it_is_stable(subpix
     and JPEG noise), median 0.05 px."""
     misplaced, dist = {}, []
     for name, c in subpix.items():
-        big, small, _ = _classic(_gray(name), 11)
+        big, small, _ = classic_corners(_gray(name), 11)
         unstable = np.linalg.norm(big - small, axis=1) > 0.5
         d = _nearest(c.pixels, big)
         misplaced[name] = int(unstable.sum())

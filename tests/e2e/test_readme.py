@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
-README = Path(__file__).resolve().parent.parent / "README.md"
+README = Path(__file__).resolve().parents[2] / "README.md"
 
 
 def test_the_readme_is_short():
@@ -28,7 +28,7 @@ def test_quickstart_runs(tmp_path, monkeypatch, capsys):
     assert (tmp_path / "calibration.yaml").exists()
     assert "model opencv, chain mode" in capsys.readouterr().out
     # the frame's stripe, measured, lies on the board's plane (the stripe's noise, about
-    # 0.1 mm RMS at these distances: tests/test_measurer.py)
+    # 0.1 mm RMS at these distances: tests/unit/test_measurer.py)
     s, prof = ns["session"], ns["profile"]
     bfb = s.sensor.base_from_board
     d = (prof.points[prof.measured] - bfb[:3, 3]) @ bfb[:3, 2]

@@ -6,7 +6,6 @@ pixels, so a blur variance of 0.25 + 1/12 = 0.33 px^2)."""
 from __future__ import annotations
 
 from pathlib import Path
-import sys
 
 import cv2
 from hmlvs.image.paper_session import dataset_from_images
@@ -16,12 +15,9 @@ from hmlvs.image.session import (
     session_blur_var,
     stripe_from_pair,
 )
+import independent_render as R  # noqa: E402
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))
-
-import independent_render as R  # noqa: E402
 
 pytestmark = pytest.mark.scene  # rendered images
 

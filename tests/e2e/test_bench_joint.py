@@ -16,7 +16,7 @@ from hmlvs.sim.features import synthetic_views, transform
 import numpy as np
 import pytest
 
-BENCH = Path(__file__).resolve().parents[1] / "bench"
+BENCH = Path(__file__).resolve().parents[2] / "bench"
 sys.path.insert(0, str(BENCH))
 
 import bench_joint as bj  # noqa: E402

@@ -10,7 +10,7 @@ poses, the images' noise and speckle drawn again): its own scatter on that scene
 
 With hmlvs installed (``pip install .``; ``make test`` does it):
 
-    python tests/independent_check.py [--seeds 0 1 2] [--method pso+lm]
+    python tests/oracles/independent_check.py [--seeds 0 1 2] [--method pso+lm]
         [--ideal 30] [--redraw 10] [--speckle 0]
 """
 
@@ -18,15 +18,11 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-import sys
 import tempfile
 
 import cv2
-import numpy as np
-
-sys.path.insert(0, str(Path(__file__).parent))
-
 import independent_render as R  # noqa: E402
+import numpy as np
 
 GAUGE = ("Su", "Sv", "Cu", "Cv")  # what `hmlvs calibrate` holds fixed by default
 

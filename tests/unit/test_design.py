@@ -114,7 +114,7 @@ def test_resolution_at_pixels(paper):
 
 
 def oracle_maps(q: np.ndarray, w: int, h: int):
-    """Resolution maps by the independent NumPy model of tests/reference_model.py."""
+    """Resolution maps by the independent NumPy model of tests/oracles/reference_model.py."""
     u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
 
     def pts(du, dv):

@@ -150,17 +150,11 @@ Not reached, and why:
 
 from __future__ import annotations
 
-from pathlib import Path
-import sys
-
 import cv2
-import numpy as np
-import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))
-
 import independent_check as C  # noqa: E402
 import independent_render as R  # noqa: E402
+import numpy as np
+import pytest
 
 pytestmark = pytest.mark.scene
 

@@ -4,12 +4,12 @@
 composed in NumPy and OpenCV before the per-frame path moved into one C++ call
 (cpp/hmlvs/image/frames.h): whole-image steps -- the difference image, the albedo offset's fit
 (OpenCV's GaussianBlur around each column's peak), the noise-aware threshold, the library's
-whole-image extraction (ExtractStripe, itself checked against tests/reference_stripe.py), the
-denoised laser-off frame (cv2.bilateralFilter) and the refinement image smoothed along the
-stripe (cv2.sepFilter2D) -- glued by NumPy, the way the C++ kernel must reproduce them while
-computing only what scan lines read. The laser-on frame alone: its background by
-cv2.morphologyEx, scipy's median filter for the jumps. Grey frames only (the caller picks
-the channel). tests/test_frames.py compares the two.
+whole-image extraction (ExtractStripe, itself checked against
+tests/oracles/reference_stripe.py), the denoised laser-off frame (cv2.bilateralFilter) and the
+refinement image smoothed along the stripe (cv2.sepFilter2D) -- glued by NumPy, the way the C++
+kernel must reproduce them while computing only what scan lines read. The laser-on frame alone:
+its background by cv2.morphologyEx, scipy's median filter for the jumps. Grey frames only (the
+caller picks the channel). tests/parity/test_frames.py compares the two.
 """
 
 from __future__ import annotations
@@ -192,7 +192,7 @@ def _weighted_centres(stripe: StripeResult, on_g: np.ndarray, off_g: np.ndarray,
     laser-off frame is first denoised by an edge-preserving (bilateral) filter: the frame is
     the board's print under steady light, flat but for the squares' edges, and its noise would
     otherwise enter the difference a second time. Measured on 9 sessions of an independent
-    renderer (tests/independent_check.py): each view's mean centre error 0.0113 px RMS with
+    renderer (tests/oracles/independent_check.py): each view's mean centre error 0.0113 px RMS with
     Steger's centre, 0.0104 px refined on the plain difference, 0.0095 px with the denoised
     frame. With ``blur_var`` (px^2: the variance of the optics' blur and the pixel's area)
     the normalised difference is corrected at albedo steps (see :func:`stripe_from_pair`)."""

@@ -13,20 +13,14 @@ the board; the prediction uses the nominal parameters (k = 0), as the session do
 
 from __future__ import annotations
 
-from pathlib import Path
-import sys
-
 import hmlvs
 from hmlvs.image.corner_base import CornerOptions
 from hmlvs.image.corners import find_corners, predicted_corners
 from hmlvs.image.junctions import junction_corners, on_grid
 from hmlvs.models.params import Parameters
+import independent_render as R  # noqa: E402
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))
-
-import independent_render as R  # noqa: E402
 
 pytestmark = pytest.mark.scene  # rendered images
 

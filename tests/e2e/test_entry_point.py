@@ -73,5 +73,5 @@ def test_build_group_holds_the_build_requirements():
     # make builds the extension in .venv without build isolation, from the dependency group
     # `build`: it must hold what [build-system] requires
     tomllib = pytest.importorskip("tomllib")
-    project = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
+    project = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml").read_text())
     assert set(project["build-system"]["requires"]) <= set(project["dependency-groups"]["build"])

@@ -1,6 +1,6 @@
 """The per-frame stripe pipeline in C++ (stripe_from_pair, hmlvs.Measurer: one call per frame,
 cpp/hmlvs/image/frames.h) against its NumPy reference, the whole-image composition it replaces
-(tests/reference_frames.py): the same statuses, widths, thresholds and noise, centres within
+(tests/oracles/reference_frames.py): the same statuses, widths, thresholds and noise, centres within
 1e-3 px (measured: 3e-7 px at most: the denoised laser-off frame's weights are exact here and
 interpolated from a table by OpenCV, and single-precision sums run in another order) and
 sigmas within 1e-5 relative, on
@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 import reference_frames as ref
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "data"
 
 
 @pytest.fixture(scope="module")
@@ -217,8 +217,10 @@ def _avx2_case() -> np.ndarray:
 def test_the_same_values_without_avx2(tmp_path):
     """The AVX2 loops (taken on CPUs that have them) give the SSE2 loops' values to the bit."""
     path = tmp_path / "sse2.npy"
-    code = ("import sys, numpy as np; sys.path.insert(0, sys.argv[1]); "
+    code = ("import sys, numpy as np; sys.path[:0] = sys.argv[1].split(','); "
             "from test_frames import _avx2_case; np.save(sys.argv[2], _avx2_case())")
-    subprocess.run([sys.executable, "-c", code, str(Path(__file__).parent), str(path)],
+    here = Path(__file__).parent  # this module, beside the shared helpers and the oracles
+    paths = ",".join(str(d) for d in (here, here.parent, here.parent / "oracles"))
+    subprocess.run([sys.executable, "-c", code, paths, str(path)],
                    check=True, env={**os.environ, "HMLVS_NO_AVX2": "1"})
     np.testing.assert_array_equal(_avx2_case(), np.load(path))

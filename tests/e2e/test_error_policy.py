@@ -8,16 +8,10 @@ import json
 import os
 from pathlib import Path
 
+from conftest import run_cli
 from hmlvs import _io
 from hmlvs.cli import main
 import pytest
-
-
-def _run(argv, capsys):
-    with pytest.raises(SystemExit) as e:
-        main(argv)
-    out = capsys.readouterr()
-    return e.value.code, out.out, out.err
 
 
 @pytest.fixture(scope="module")
@@ -32,7 +26,7 @@ def data(tmp_path_factory):
 def test_output_path_that_is_a_folder_exits_2_naming_it(data, tmp_path, capsys):
     target = tmp_path / "existing_dir.yaml"
     target.mkdir()
-    code, _, err = _run(["calibrate", str(data), "--method", "lm", "-o", str(target)], capsys)
+    code, _, err = run_cli(["calibrate", str(data), "--method", "lm", "-o", str(target)], capsys)
     assert code == 2
     assert err.strip().splitlines() == [f"error: {target}: is a folder: give a file name"]
 
@@ -40,7 +34,7 @@ def test_output_path_that_is_a_folder_exits_2_naming_it(data, tmp_path, capsys):
 def test_output_under_a_file_exits_2(data, tmp_path, capsys):
     parent = tmp_path / "afile"
     parent.write_text("x")
-    code, _, err = _run(["calibrate", str(data), "--method", "lm", "-o",
+    code, _, err = run_cli(["calibrate", str(data), "--method", "lm", "-o",
                          str(parent / "cal.yaml")], capsys)
     assert code == 2 and "a part of this path is a file, not a folder" in err
     assert len(err.strip().splitlines()) == 1
@@ -52,7 +46,7 @@ def test_read_only_location_exits_2(data, tmp_path, capsys):
     ro.mkdir()
     ro.chmod(0o500)
     try:
-        code, _, err = _run(["calibrate", str(data), "--method", "lm", "-o",
+        code, _, err = run_cli(["calibrate", str(data), "--method", "lm", "-o",
                              str(ro / "cal.yaml")], capsys)
     finally:
         ro.chmod(0o700)
@@ -67,7 +61,7 @@ def test_every_command_on_a_read_only_file_system_exits_2(data, tmp_path, capsys
     import tempfile
 
     cal = tmp_path / "cal.yaml"
-    assert _run(["calibrate", str(data), "--method", "lm", "-o", str(cal)], capsys)[0] == 0
+    assert run_cli(["calibrate", str(data), "--method", "lm", "-o", str(cal)], capsys)[0] == 0
     out = tmp_path / "out"
     out.mkdir()
 
@@ -79,7 +73,7 @@ def test_every_command_on_a_read_only_file_system_exits_2(data, tmp_path, capsys
             "simulate": ["simulate", str(out / "s.npz"), "--poses", "4"],
             "measure": ["measure", str(cal), str(data), "-o", str(out / "cloud.ply")],
             "export": ["export", str(cal), "--format", "json", "--out", str(out / "e.json")]}
-    code, _, err = _run(argv[command], capsys)
+    code, _, err = run_cli(argv[command], capsys)
     assert code == 2, err
     assert err.strip().splitlines() == [
         f"error: {out}: the file system is read-only: choose another location"]
@@ -95,7 +89,7 @@ def test_disk_full_exits_2_and_leaves_nothing(data, tmp_path, capsys, monkeypatc
         raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr(os, "fsync", full)
-    code, _, err = _run(["calibrate", str(data), "--method", "lm", "-o",
+    code, _, err = run_cli(["calibrate", str(data), "--method", "lm", "-o",
                          str(tmp_path / "cal.yaml")], capsys)
     monkeypatch.setattr(os, "fsync", real_fsync)
     assert code == 2 and "the disk is full" in err
@@ -136,7 +130,7 @@ def test_internal_error_exits_1_with_one_line_and_debug_shows_it(data, tmp_path,
         raise KeyError("boom")
 
     monkeypatch.setattr(solvers, "calibrate", broken)
-    code, _, err = _run(["calibrate", str(data), "-o", str(tmp_path / "c.yaml")], capsys)
+    code, _, err = run_cli(["calibrate", str(data), "-o", str(tmp_path / "c.yaml")], capsys)
     assert code == 1
     assert err.strip().splitlines() == [
         "error: internal error (KeyError: 'boom'); this is a bug in hmlvs: run again with "
@@ -152,31 +146,38 @@ def test_json_output_is_valid_json_with_null_for_missing_figures():
 
 
 def test_json_error_output_is_valid_json(tmp_path, capsys):
-    code, out, err = _run(["calibrate", str(tmp_path / "missing.npz"), "--json"], capsys)
+    code, out, err = run_cli(["calibrate", str(tmp_path / "missing.npz"), "--json"], capsys)
     assert code == 2
     assert "error" in json.loads(out)
     assert Path(tmp_path / "missing.npz").exists() is False
 
 
-def test_simulate_with_images_is_all_or_nothing(tmp_path, capsys, monkeypatch):
+def _third_png_raises(monkeypatch, error: BaseException) -> dict:
+    """The image writer raises ``error`` at its third image (the others are written); the
+    count of calls, for the test to check."""
     import hmlvs.data.manifest as manifest
 
     real = manifest.write_png
     calls = {"n": 0}
 
-    def fail_on_third(path, image):
+    def third_raises(path, image):
         calls["n"] += 1
         if calls["n"] == 3:
-            raise OSError(28, "No space left on device", str(path))
+            raise error
         real(path, image)
 
-    monkeypatch.setattr(manifest, "write_png", fail_on_third)
-    code, _, err = _run(["simulate", str(tmp_path / "s.npz"), "--poses", "4", "--images",
+    monkeypatch.setattr(manifest, "write_png", third_raises)
+    return calls
+
+
+def test_simulate_with_images_is_all_or_nothing(tmp_path, capsys, monkeypatch):
+    _third_png_raises(monkeypatch, OSError(28, "No space left on device"))
+    code, _, err = run_cli(["simulate", str(tmp_path / "s.npz"), "--poses", "4", "--images",
                          str(tmp_path / "imgs")], capsys)
     assert code == 2 and "the disk is full" in err
     assert list(tmp_path.iterdir()) == []  # no data set, no image folder, no temporary folder
-    monkeypatch.setattr(manifest, "write_png", real)
-    code, _, _ = _run(["simulate", str(tmp_path / "s.npz"), "--poses", "4", "--images",
+    monkeypatch.undo()  # the real image writer again
+    code, _, _ = run_cli(["simulate", str(tmp_path / "s.npz"), "--poses", "4", "--images",
                        str(tmp_path / "imgs")], capsys)
     assert code == 0
     assert {p.name for p in tmp_path.iterdir()} == {"s.npz", "imgs"}
@@ -191,7 +192,7 @@ def test_calibration_is_not_left_without_its_report(data, tmp_path, capsys, monk
         raise OSError(28, "No space left on device", str(tmp_path / "r.html"))
 
     monkeypatch.setattr(html, "write_report", full)
-    code, _, err = _run(["calibrate", str(data), "--method", "lm", "-o",
+    code, _, err = run_cli(["calibrate", str(data), "--method", "lm", "-o",
                          str(tmp_path / "cal.yaml"), "--report", str(tmp_path / "r.html")],
                         capsys)
     assert code == 2 and "the disk is full" in err
@@ -211,7 +212,7 @@ def test_calibration_is_not_left_without_its_report(data, tmp_path, capsys, monk
 def test_options_are_checked_whatever_the_input(data, tmp_path, capsys, args, message):
     import re
 
-    code, _, err = _run(["calibrate", str(data), "-o", str(tmp_path / "c.yaml"), *args], capsys)
+    code, _, err = run_cli(["calibrate", str(data), "-o", str(tmp_path / "c.yaml"), *args], capsys)
     assert code == 2 and re.search(message, err), err
     assert not (tmp_path / "c.yaml").exists()
 
@@ -220,7 +221,7 @@ def test_measuring_with_a_calibration_whose_plane_no_ray_meets(data, tmp_path, c
     from hmlvs import Calibration, Parameters
 
     cal = Calibration(params=Parameters.nominal().replace(theta=-0.5)).save(tmp_path / "c.yaml")
-    code, _, err = _run(["measure", str(cal), str(data), "-o", str(tmp_path / "cloud.ply")],
+    code, _, err = run_cli(["measure", str(cal), str(data), "-o", str(tmp_path / "cloud.ply")],
                         capsys)
     assert code == 2 and "none of the" in err and "meets the laser plane" in err
     assert not (tmp_path / "cloud.ply").exists()
@@ -290,7 +291,7 @@ def test_measure_in_text_mode_names_the_rejected_pairs(data, tmp_path, capsys):
     entries[1]["stripe"] = "gone.csv"
     (tmp_path / "manifest.json").write_text(json.dumps(
         {"format": "hmlvs-images", "version": 1, "poses": entries}))
-    code, out, err = _run(["measure", str(cal), str(tmp_path), "-o", str(tmp_path / "c.csv")],
+    code, out, err = run_cli(["measure", str(cal), str(tmp_path), "-o", str(tmp_path / "c.csv")],
                           capsys)
     assert code == 0, err
     rejected = [x for x in out.splitlines() if x.startswith("p1: rejected: ")]
@@ -300,19 +301,8 @@ def test_measure_in_text_mode_names_the_rejected_pairs(data, tmp_path, capsys):
 
 def test_simulate_with_images_interrupted_leaves_nothing(tmp_path, capsys, monkeypatch):
     """Ctrl-C while the images are rendered: exit 130, neither the data set nor the images."""
-    import hmlvs.data.manifest as manifest
-
-    real = manifest.write_png
-    calls = {"n": 0}
-
-    def interrupt_on_third(path, image):
-        calls["n"] += 1
-        if calls["n"] == 3:
-            raise KeyboardInterrupt
-        real(path, image)
-
-    monkeypatch.setattr(manifest, "write_png", interrupt_on_third)
-    code, out, _ = _run(["simulate", str(tmp_path / "s.npz"), "--poses", "4", "--images",
+    calls = _third_png_raises(monkeypatch, KeyboardInterrupt())
+    code, out, _ = run_cli(["simulate", str(tmp_path / "s.npz"), "--poses", "4", "--images",
                          str(tmp_path / "imgs")], capsys)
     assert code == 130 and calls["n"] == 3
     assert list(tmp_path.iterdir()) == []  # no s.npz, no image folder, no temporary folder

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from conftest import run_cli
 from hmlvs import Bounds, Parameters, points_in_camera
 from hmlvs.data.export import sensor_of
 from hmlvs.data.guess import read_bounds, read_initial
@@ -85,32 +86,23 @@ def test_initial_from_a_mapping_and_from_an_opencv_calibration(tmp_path):
     assert math.isclose(q.f, p.f, rel_tol=1e-9)
 
 
-def _cli(argv, capsys):
-    from hmlvs.cli import main
-
-    with pytest.raises(SystemExit) as e:
-        main(argv)
-    out = capsys.readouterr()
-    return e.value.code, out.out, out.err
-
-
 def test_cli_takes_initial_and_bounds_files(tmp_path, capsys):
     import json
 
     sim = tmp_path / "sim.npz"
-    assert _cli(["simulate", str(sim), "--poses", "12", "--seed", "3"], capsys)[0] == 0
+    assert run_cli(["simulate", str(sim), "--poses", "12", "--seed", "3"], capsys)[0] == 0
     guess = tmp_path / "guess.yaml"
     guess.write_text("H: 138\n")
     bounds = tmp_path / "bounds.yaml"
     bounds.write_text("H: {plus_minus: 10}\ntheta: [0.3, 0.6]\n")
-    code, out, _ = _cli(["calibrate", str(sim), "--method", "lm", "--initial", str(guess),
+    code, out, _ = run_cli(["calibrate", str(sim), "--method", "lm", "--initial", str(guess),
                          "--bounds", str(bounds), "--out", str(tmp_path / "cal.yaml"),
                          "--json"], capsys)
     assert code == 0
     assert 128 <= json.loads(out)["parameters"]["H"] <= 148
     # a bounds file the guess falls outside of is refused before any solve
     bounds.write_text("H: [100, 110]\n")
-    code, _, err = _cli(["calibrate", str(sim), "--method", "lm", "--initial", str(guess),
+    code, _, err = run_cli(["calibrate", str(sim), "--method", "lm", "--initial", str(guess),
                          "--bounds", str(bounds), "--out", str(tmp_path / "cal2.yaml")], capsys)
     assert code != 0 and "initial value of H lies outside its bounds" in err
     assert not (tmp_path / "cal2.yaml").exists()

@@ -1,6 +1,6 @@
 """The NumPy shading of the board that ``hmlvs.sim.render`` ran before the C++ core's
 ``ShadeBoard`` (``hmlvs._core._shade_board``): the reference of the parity test
-(``tests/test_render_shading.py``) and of the render row of ``make bench``."""
+(``tests/parity/test_render_shading.py``) and of the render row of ``make bench``."""
 
 from __future__ import annotations
 

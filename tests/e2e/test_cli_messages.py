@@ -9,21 +9,14 @@ import subprocess
 import sys
 import warnings
 
+from conftest import run_cli
 import hmlvs
 from hmlvs import cli
 from hmlvs.cli import common as cli_common
-from hmlvs.cli import main as cli_main
 from hmlvs.models.params import Parameters
 import numpy as np
 import pytest
 import typer
-
-
-def _run(argv, capsys):
-    with pytest.raises(SystemExit) as e:
-        cli_main(argv)
-    out = capsys.readouterr()
-    return e.value.code, out.out, out.err
 
 
 def _hmlvs(*args, cwd=None):
@@ -42,7 +35,7 @@ def small(tmp_path_factory):
 
 
 def test_version(capsys):
-    code, out, _ = _run(["--version"], capsys)
+    code, out, _ = run_cli(["--version"], capsys)
     assert code == 0 and out.strip() == f"hmlvs {hmlvs.__version__}"
 
 
@@ -52,7 +45,7 @@ COMMANDS = ["simulate", "demo", "calibrate", "design", "report", "measure", "ins
 
 @pytest.mark.parametrize("command", ["", *COMMANDS])
 def test_help_has_no_bool_placeholder(command, capsys):
-    code, out, _ = _run(([command] if command else []) + ["--help"], capsys)
+    code, out, _ = run_cli(([command] if command else []) + ["--help"], capsys)
     assert code == 0 and "Show this message and exit." in out
     assert "<bool>" not in out
 
@@ -64,7 +57,7 @@ def test_help_paragraphs_flow_to_the_terminal_width(command, capsys, monkeypatch
     import inspect
 
     monkeypatch.setenv("COLUMNS", "400")
-    code, out, _ = _run([command, "--help"], capsys)
+    code, out, _ = run_cli([command, "--help"], capsys)
     assert code == 0
     lines = [" ".join(line.split()) for line in out.splitlines()]
     doc = inspect.getdoc(next(c.callback for c in cli.app.registered_commands
@@ -109,22 +102,22 @@ def test_json_and_quiet_collect_the_warnings(small, tmp_path):
 
 def test_fixed_adds_to_the_default_gauge(small, tmp_path, capsys):
     _, data = small
-    code, out, _ = _run(["calibrate", str(data), "--iterations", "300", "--fixed", "Sv",
+    code, out, _ = run_cli(["calibrate", str(data), "--iterations", "300", "--fixed", "Sv",
                          "--fixed", "k", "--out", str(tmp_path / "c.yaml"), "--json"], capsys)
     assert code == 0
     doc = json.loads(out)
     assert set(doc["fixed"]) == {"Su", "Sv", "Cu", "Cv", "k"}
     assert not any("scale gauge" in w["message"] for w in doc["warnings"])
-    code, out, _ = _run(["calibrate", str(data), "--iterations", "300", "--free", "Cu",
+    code, out, _ = run_cli(["calibrate", str(data), "--iterations", "300", "--free", "Cu",
                          "--out", str(tmp_path / "c.yaml"), "--json"], capsys)
     assert code == 0 and set(json.loads(out)["fixed"]) == {"Su", "Sv", "Cv"}
-    code, _, err = _run(["calibrate", str(data), "--fixed", "Sw"], capsys)
+    code, _, err = run_cli(["calibrate", str(data), "--fixed", "Sw"], capsys)
     assert code == 2 and "unknown parameter 'Sw'" in err
 
 
 def test_text_output_says_what_is_fixed_and_why(small, tmp_path, capsys):
     _, data = small
-    code, out, _ = _run(["calibrate", str(data), "--iterations", "300", "--fixed", "Sv",
+    code, out, _ = run_cli(["calibrate", str(data), "--iterations", "300", "--fixed", "Sv",
                          "--out", str(tmp_path / "c.yaml"), "--quiet"], capsys)
     assert code == 0
     line = next(x for x in out.splitlines() if x.startswith("held fixed: "))
@@ -170,7 +163,7 @@ def test_report_shows_pixels_hand_eye_and_paper_columns_only_for_the_paper_senso
                                                                                      capsys):
     s, data = small
     cal = hmlvs.Calibration(params=s.truth).save(tmp_path / "cal.yaml")
-    code, _, _ = _run(["report", str(cal), str(data), "--out", str(tmp_path / "r.html")],
+    code, _, _ = run_cli(["report", str(cal), str(data), "--out", str(tmp_path / "r.html")],
                       capsys)
     assert code == 0
     page = (tmp_path / "r.html").read_text()
@@ -192,7 +185,7 @@ def test_views_rejected_one_line_each_and_report_from_images(tmp_path, capsys):
     session = hmlvs.simulate.session(num_poses=3, seed=5)
     hmlvs.simulate.render_session(session, out)
     cal = hmlvs.Calibration(params=session.truth).save(tmp_path / "cal.yaml")
-    code, _, _ = _run(["report", str(cal), str(out), "--out", str(tmp_path / "r.html")], capsys)
+    code, _, _ = run_cli(["report", str(cal), str(out), "--out", str(tmp_path / "r.html")], capsys)
     assert code == 0
     page = (tmp_path / "r.html").read_text()
     assert "of 3 image pairs used" in page and page.count("<td>p00") == 3
@@ -202,7 +195,7 @@ def test_views_rejected_one_line_each_and_report_from_images(tmp_path, capsys):
         p["off"] = "missing.png"
     bad = out / "bad.json"
     bad.write_text(json.dumps(doc))
-    code, _, err = _run(["calibrate", str(bad), "--out", str(tmp_path / "c.yaml")], capsys)
+    code, _, err = run_cli(["calibrate", str(bad), "--out", str(tmp_path / "c.yaml")], capsys)
     assert code == 2
     lines = err.strip().splitlines()
     assert lines[0] == "error: no image pair gave a calibration point:"

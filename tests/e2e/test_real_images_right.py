@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from classic_corners import classic_corners
 import cv2
 from hmlvs.calibration.joint import consistent_numbering
 from hmlvs.geometry.board import BoardSpec, Checkerboard
@@ -19,7 +20,7 @@ from hmlvs.image.corners import detect_board, flip_board_numbering
 import numpy as np
 import pytest
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "data"
 RIGHT = DATA / "opencv_right"
 LEFT = DATA / "opencv_left"
 BOARD = Checkerboard(rows=6, cols=9, square=1.0)  # OpenCV's pattern (9, 6), unit squares
@@ -51,21 +52,6 @@ def left() -> dict:
     return {n: detect_board(_gray(LEFT / f"left{n}.jpg"), BOARD) for n in PAIRS}
 
 
-def _classic(gray: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
-    """findChessboardCorners, then cornerSubPix with a half-window inside the squares
-    (round(0.2 x the median neighbour distance), 2..9 px) and with OpenCV's customary
-    11 x 11: (in-square corners, 11 x 11 corners, the in-square window)."""
-    ok, c = cv2.findChessboardCorners(gray, (9, 6))
-    assert ok
-    raw = c.reshape(-1, 2)
-    d = np.linalg.norm(raw[:, None] - raw[None], axis=2)
-    np.fill_diagonal(d, np.inf)
-    win = int(np.clip(round(0.2 * np.median(d.min(axis=1))), 2, 9))
-    small = cv2.cornerSubPix(gray, c.copy(), (win, win), (-1, -1), CRIT).reshape(-1, 2)
-    big = cv2.cornerSubPix(gray, c.copy(), (11, 11), (-1, -1), CRIT).reshape(-1, 2)
-    return small, big, win
-
-
 def test_the_set_is_opencvs_13_right_images():
     files = sorted(p.name for p in RIGHT.glob("*.jpg"))
     assert files == [f"right{n}.jpg" for n in NAMES]
@@ -90,7 +76,7 @@ def test_every_corner_agrees_with_the_classic_detector_to_a_tenth_of_a_pixel(rig
     corners in every view as detect_board refining with cornerSubPix alone, one to one.
     Measured: within 0.06 px (right09), the others within 0.001 px."""
     for n, c in right_subpix.items():
-        ref, _, win = _classic(_gray(RIGHT / f"right{n}.jpg"))
+        ref, _, win = classic_corners(_gray(RIGHT / f"right{n}.jpg"), None)
         assert 5 <= win <= 8, n
         d = np.linalg.norm(ref[:, None] - c.pixels[None], axis=2)
         assert d.min(axis=1).max() < 0.1, (n, d.min(axis=1).max())
@@ -104,7 +90,7 @@ def test_corners_agree_with_the_classic_11x11_pipeline_where_it_is_stable(right_
     each 0.5-5.2 px off ours; every other corner within 0.4 px of ours, median 0.06 px."""
     misplaced, dist = {}, []
     for n, c in right_subpix.items():
-        small, big, _ = _classic(_gray(RIGHT / f"right{n}.jpg"))
+        big, small, _ = classic_corners(_gray(RIGHT / f"right{n}.jpg"), 11)
         unstable = np.linalg.norm(big - small, axis=1) > 0.5
         d = np.linalg.norm(big[:, None] - c.pixels[None], axis=2).min(axis=1)
         misplaced[n] = int(unstable.sum())

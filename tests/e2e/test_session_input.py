@@ -6,8 +6,8 @@ from __future__ import annotations
 import json
 import shutil
 
+from conftest import run_cli
 import hmlvs
-from hmlvs.cli import main as cli_main
 import numpy as np
 import pytest
 import yaml
@@ -35,13 +35,6 @@ def _copy(rendered, tmp_path, change=None):
         change(doc)
         (folder / "manifest.json").write_text(json.dumps(doc))
     return folder, doc
-
-
-def _run(argv, capsys):
-    with pytest.raises(SystemExit) as e:
-        cli_main(argv)
-    out = capsys.readouterr()
-    return e.value.code, out.out, out.err
 
 
 def test_a_wrong_board_origin_rejects_the_pair_not_the_session(rendered, tmp_path):
@@ -130,7 +123,7 @@ def _manifest_forms(rendered, tmp_path):
 
 def test_calibrate_and_measure_take_a_manifest_file_of_any_name(rendered, tmp_path, capsys):
     forms = _manifest_forms(rendered, tmp_path)
-    calibrate = [_run(["calibrate", str(f), "--method", "lm", "--out",
+    calibrate = [run_cli(["calibrate", str(f), "--method", "lm", "--out",
                        str(tmp_path / "c.yaml")], capsys) for f in forms]
     # 9 points from 4 pairs, too few for 10 free parameters: the same refusal from the
     # calibration stage for every form, after the same per-pair lines
@@ -144,7 +137,7 @@ def test_calibrate_and_measure_take_a_manifest_file_of_any_name(rendered, tmp_pa
     cal = hmlvs.Calibration(params=hmlvs.Parameters.nominal()).save(tmp_path / "cal.yaml")
     measured = []
     for f in forms:
-        code, out, err = _run(["measure", str(cal), str(f), "--out", str(tmp_path / "m.csv"),
+        code, out, err = run_cli(["measure", str(cal), str(f), "--out", str(tmp_path / "m.csv"),
                                "--json"], capsys)
         assert code == 0, err
         measured.append((json.loads(out)["points"], (tmp_path / "m.csv").read_text()))
