@@ -32,8 +32,8 @@ SOURCES := CMakeLists.txt pyproject.toml README.md \
 CPP_SOURCES = $(shell find cpp python/bindings bench -name '*.cpp' -o -name '*.h')
 SUDO := $(shell if [ "$$(id -u)" != 0 ] && command -v sudo >/dev/null 2>&1; then echo sudo; fi)
 
-.PHONY: deps test-deps venv install test-install style deps-check demo test test-lowest bench \
-	clean
+.PHONY: deps test-deps venv install test-install style deps-check demo test test-fast test-lowest \
+	bench clean
 
 # Install the Debian packages that are missing (apt-get update + install, as root or via sudo).
 define apt_install
@@ -109,6 +109,11 @@ test: test-install style deps-check
 	$(PYTEST)
 	OPENBLAS_CORETYPE=Prescott $(PYTEST) -m "scene and not one_kernel"
 	$(MAKE) --no-print-directory test-lowest
+
+# A quick loop while developing: the Python suite without the tests marked slow (make test
+# runs everything).
+test-fast: test-install
+	$(PYTEST) -m "not slow"
 
 # The oldest releases pyproject.toml admits (uv's lowest-direct resolution), with the wheel
 # make test built, over the command-line and API smoke tests (marker `smoke`).

@@ -20,6 +20,7 @@ def test_cli_json():
     assert d["files"] == []
 
 
+@pytest.mark.slow
 def test_cli_out_writes_pngs_and_markdown(tmp_path):
     out = tmp_path / "d"
     res = runner.invoke(app, ["design", "--width", "64", "--height", "48", "--pitch", "0.074",

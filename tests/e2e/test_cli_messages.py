@@ -203,6 +203,7 @@ def test_views_rejected_one_line_each_and_report_from_images(tmp_path, capsys):
     assert all("missing.png does not exist" in x for x in lines[1:])
 
 
+@pytest.mark.slow
 @pytest.mark.scene
 def test_demo_is_determined_accurate_and_warning_free(tmp_path):
     r = _hmlvs("demo", "--out", str(tmp_path / "demo-out"), cwd=tmp_path)

@@ -22,6 +22,7 @@ def rendered(tmp_path_factory):
     return session, out
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore::hmlvs.HmlvsDataWarning")
 @pytest.mark.parametrize("mode", [
     "corners", pytest.param("homography", marks=pytest.mark.one_kernel)])

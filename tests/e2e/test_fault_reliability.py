@@ -210,6 +210,7 @@ def _work(tmp_path: Path) -> Path:
     return work
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["simulate", "calibrate", "measure", "inspect", "export",
                                      "report", "demo", "design", "scenario"])
 def test_sigterm_while_writing_cleans_up_and_exits_143(files, tmp_path, monkeypatch, capsys,

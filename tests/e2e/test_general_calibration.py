@@ -86,6 +86,7 @@ def test_paper_model_can_start_from_the_opencv_calibration(rendered, tmp_path):
     assert start.H > 0 and 0 < start.theta < np.pi / 2
 
 
+@pytest.mark.slow
 def test_the_paper_model_calibrates_the_session_from_the_opencv_calibration(rendered, tmp_path,
                                                                            capsys):
     """`--model paper --initial <opencv cal.yaml>` on a session whose manifest does not place

@@ -156,7 +156,7 @@ import independent_render as R  # noqa: E402
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.scene
+pytestmark = [pytest.mark.scene, pytest.mark.slow]
 
 
 @pytest.fixture(scope="module", params=[0, pytest.param(1, marks=pytest.mark.one_kernel)])

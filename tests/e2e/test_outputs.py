@@ -90,6 +90,7 @@ def test_measure_bad_input(calibrated):
     assert isinstance(cloud, PointCloud)
 
 
+@pytest.mark.slow
 def test_report_html_and_screenshot(tmp_path, calibrated):
     sim, result = calibrated
     path = write_report(result, sim.fit, tmp_path / "report.html", test=sim.test,

@@ -25,7 +25,7 @@ from hmlvs.sim.general import (
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.scene  # rendered images
+pytestmark = [pytest.mark.scene, pytest.mark.slow]  # rendered images
 
 SEEDS = (0, 2)
 FULL, PARTIAL = 6, 3

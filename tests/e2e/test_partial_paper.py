@@ -37,6 +37,7 @@ def _camera_matrix(q: Parameters) -> np.ndarray:
     return np.array([[q.f / q.Su, 0.0, q.Cu], [0.0, q.f / q.Sv, q.Cv], [0.0, 0.0, 1.0]])
 
 
+@pytest.mark.slow
 def test_partial_boards_of_the_table2_sensor_are_numbered_and_calibrate(rendered):
     # not in the Prescott pass (marker scene): its figures are pixels and tenths of a mm
     # within limits several times wider (1 px, 0.3 mm; measured 0.11 mm)

@@ -15,6 +15,7 @@ def test_the_readme_is_short():
     assert len(README.read_text().splitlines()) <= 200
 
 
+@pytest.mark.slow
 @pytest.mark.smoke
 def test_quickstart_runs(tmp_path, monkeypatch, capsys):
     text = README.read_text()
@@ -36,6 +37,7 @@ def test_quickstart_runs(tmp_path, monkeypatch, capsys):
     assert np.sqrt(np.mean(d**2)) < 0.3
 
 
+@pytest.mark.slow
 def test_every_command_block_runs(tmp_path):
     """Each shell block of the README, line by line as a user types it (the set-up lines
     `make ...` are what CI itself runs), with the installed `hmlvs` and `python` first on the

@@ -108,6 +108,7 @@ def _noisy_poses(views, sigma_mm, sigma_rad, seed):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1])
 def test_uncertain_robot_poses_are_estimated_and_keep_the_camera(seed):
     views, board, truth, _ = synthetic_views(seed, n_views=16, corner_noise=0.1,

@@ -195,6 +195,7 @@ def _crops() -> list:
     return out
 
 
+@pytest.mark.slow
 def test_partly_visible_real_boards_are_numbered_right_or_rejected():
     """The real photographs cut through the board: detect_grid finds the visible grid and
     number_grid places it from predicted pixels (here the whole image's corners, off by a

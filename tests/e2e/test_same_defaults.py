@@ -36,6 +36,7 @@ def test_the_command_line_defaults_are_the_librarys():
     assert inspect.signature(calibrate_paper).parameters["fixed"].default == DEFAULT_FIXED
 
 
+@pytest.mark.slow
 def test_paper_model_same_parameters_from_the_cli_and_the_library(cli_files, tmp_path, capsys):
     _, ds, _, _ = cli_files
     code, _, err = run_cli(["calibrate", str(ds), "--out", str(tmp_path / "cal.yaml"), "-q"],

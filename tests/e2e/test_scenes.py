@@ -17,7 +17,7 @@ from hmlvs.sim.sessions import ik_look_at
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.scene  # simulated sessions or rendered images
+pytestmark = [pytest.mark.scene, pytest.mark.slow]  # simulated sessions or rendered images
 
 
 def rms(x):

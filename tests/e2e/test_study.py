@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+pytestmark = pytest.mark.slow  # the module's shared sessions take long to make
+
 # Tiny settings for the tests that do not check the findings (one s, a few runs).
 TINY = {"s_values": (0.01,), "runs_lm": 4, "runs_pso": 2, "evaluations": 10_000,
         "progress": False}

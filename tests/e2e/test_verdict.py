@@ -23,6 +23,8 @@ from hmlvs.sim.general import general_session, render_general_session
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.slow  # the module's shared sessions take long to make
+
 # Only the tests whose figures are fine numerical agreements run again in the Prescott pass
 # (marker scene); the mistakes are tens to hundreds of pixels off, whatever the BLAS kernels.
 

@@ -19,7 +19,7 @@ import independent_render as R  # noqa: E402
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.scene  # rendered images
+pytestmark = [pytest.mark.scene, pytest.mark.slow]  # rendered images
 
 VIEWS = 10
 

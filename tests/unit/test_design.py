@@ -269,6 +269,7 @@ def test_bad_input_other_functions(tmp_path):
                     sweeps=[], errors=[])
 
 
+@pytest.mark.slow
 def test_plot_writes_readable_pngs(tmp_path):
     import matplotlib.image
 

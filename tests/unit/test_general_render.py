@@ -24,6 +24,8 @@ from hmlvs.sim.general import (
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.slow  # the module's shared sessions take long to make
+
 SEEDS = (0, 1, 2)
 VIEWS = 3  # per seed: 9 rendered views in all
 

@@ -197,6 +197,7 @@ def test_laser_on_image_alone(seed):
     assert len(corners) == s.board.rows * s.board.cols and np.median(err_c) < 0.5
 
 
+@pytest.mark.slow
 def test_threshold_that_leaves_no_pixel_names_the_image():
     s = general_session(views=1, seed=0)
     on, off = render_general_view(s, 0, realistic())
