@@ -144,7 +144,7 @@ def study_section(threads: int) -> list[str]:
 
     print("full simulation study (hmlvs study) ...", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
-        r = hmlvs.study(progress=False, threads=threads, out_dir=tmp)
+        r = hmlvs.paper.study.study(progress=False, threads=threads, out_dir=tmp)
         ours = (Path(tmp) / "study.md").read_text()
     committed = ROOT / "docs" / "study" / "study.md"
     mine, theirs = _study_figures(ours), _study_figures(committed.read_text())
@@ -154,7 +154,8 @@ def study_section(threads: int) -> list[str]:
     lines = [
         "## Simulation study (paper Table 1)",
         "",
-        f"`hmlvs.study()` in full ({r.settings.describe()}): **{r.seconds:.0f} s** wall time "
+        f"`hmlvs.paper.study.study()` in full ({r.settings.describe()}): **{r.seconds:.0f} s** "
+        "wall time "
         f"(target < 180 s), CPU {r.cpu_seconds:.0f} s. Per method (s): "
         + ", ".join(f"{m} {t:.1f}" for m, t in per.items()) + ".",
         "",
@@ -296,7 +297,7 @@ def main() -> None:
     print("LM: hmlvs (Ceres) against scipy.optimize.least_squares ...", flush=True)
     from scipy.optimize import least_squares
 
-    starts = hmlvs.initial_candidates(sim.truth, 0.01, 20, seed=3, bounds=b)
+    starts = hmlvs.calibration.solvers.initial_candidates(sim.truth, 0.01, 20, seed=3, bounds=b)
     lm_opts = {"method": "lm", "fixed": (), "analyze": False}  # time the solve alone
     t_lm, _ = median_time(lambda: [hmlvs.calibrate(fit, initial=s, threads=1, **lm_opts)
                                    for s in starts], args.reps)
@@ -326,11 +327,12 @@ def main() -> None:
     m = 1_000_000
     px = rng.uniform([0, 0], [639, 479], (m, 2))
     poses = hmlvs.Robot.scorbot_er7().poses(rng.uniform(-1, 1, (m, 5)))
-    t_model, _ = median_time(lambda: hmlvs.points_in_base(sim.truth, px, poses), args.reps)
+    t_model, _ = median_time(lambda: hmlvs.models.paper.points_in_base(sim.truth, px, poses),
+                             args.reps)
     sys.path.insert(0, str(ROOT / "tests" / "oracles"))
     from reference_model import base_points  # the tests' independent NumPy oracle
     t_model_np, _ = median_time(lambda: base_points(sim.truth.to_array(), px, poses), 2)
-    rows.append(("hmlvs.points_in_base, 1e6 points (pixels + poses -> base frame)",
+    rows.append(("hmlvs.models.paper.points_in_base, 1e6 points (pixels + poses -> base frame)",
                  f"{t_model * 1e3:.0f} ms", "includes pose validation"))
     rows.append(("NumPy oracle of the same model, 1e6 points", f"{t_model_np * 1e3:.0f} ms", ""))
     ratios.append(f"Model: 1e6 points in {t_model * 1e3:.0f} ms from Python "

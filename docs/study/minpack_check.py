@@ -32,7 +32,7 @@ def main(n: int) -> None:
     fit = sim.fit
     test = fitness_data(sim.test)
     s = 0.2
-    starts = hmlvs.initial_candidates(sim.truth, s, n, seed=run_seed(0, s, 1))
+    starts = hmlvs.calibration.solvers.initial_candidates(sim.truth, s, n, seed=run_seed(0, s, 1))
 
     # a ray that misses the laser plane: a large residual, MINPACK backs off
     components, jacobian = least_squares_functions(fit)

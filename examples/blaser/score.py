@@ -513,7 +513,7 @@ def load_cal(path: Path, image_size: tuple[int, int]) -> tuple[Calibration, Open
         if path.suffix.lower() == ".mat":
             cal = authors_mat(path, image_size)
         else:
-            cal = hmlvs.load_calibration(path)
+            cal = hmlvs.data.calibration_file.load_calibration(path)
         sensor = sensor_of(cal, image_size)
     except (OSError, ValueError) as e:
         msg = str(e)

@@ -26,56 +26,38 @@ from . import _core
 
 __version__ = _core.__version__
 
-# module (relative to hmlvs) -> the public names it defines
+# module (relative to hmlvs) -> the public names it defines. Everything else is reached through
+# its subpackage (``hmlvs.models.paper.residuals``, ``hmlvs.errors.FlatDirectionWarning``);
+# the paper's studies live under ``hmlvs.paper``.
 _PUBLIC = {
-    "models.params": ("NAMES", "Bounds", "Parameters"),
-    "models.paper": ("hand_from_camera", "laser_plane_distance", "objective", "pixels_from_points",
-        "points_in_base", "points_in_camera", "project", "residuals"),
-    "geometry.robot": ("DHLink", "Robot"),
-    "data.dataset": ("Dataset",),
-    "data.calibration_file": ("Calibration", "load_calibration"),
-    "calibration.solvers": ("CalibrationResult", "initial_candidates"),
-    "pipeline": ("calibrate", "calibrate_views"),
-    "calibration.options": ("PsoOptions", "LmOptions", "RandomSearchOptions"),
-    "calibration.result": ("Termination", "PsoStage", "LmStage", "RandomSearchStage"),
-    "calibration.joint": ("JointCalibration", "calibrate_joint"),
+    "pipeline": ("calibrate",),
+    "data.calibration_file": ("Calibration",),
+    "measurement.measurer": ("Measurer",),
+    "measurement.measure": ("measure", "PointCloud"),
+    "models.params": ("Parameters", "Bounds"),
     "models.opencv": ("OpenCvSensor",),
-    "models.base": ("SensorModel",),
+    "geometry.robot": ("Robot",),
     "geometry.board": ("Checkerboard", "BoardSpec"),
-    "data.views": ("ViewData",),
-    "errors": ("BoardNotFoundError", "HmlvsDataWarning", "FlatDirectionWarning",
-        "TooFewPointsWarning", "PoseVarietyWarning", "GimbalLockWarning", "AtBoundWarning",
-        "DiagnosticsFailedWarning", "SetupWarning", "warning_category"),
-    "diagnostics.identifiability": ("Direction", "IdentifiabilityReport", "identifiability"),
-    "diagnostics.uncertainty": ("Combination", "Uncertainty", "uncertainty"),
-    "diagnostics.repeatability": ("RepeatabilityReport", "Spread", "repeatability"),
-    "image.stripe": ("StripeResult", "StripeStatus", "StripeOptions", "difference_image",
-        "extract_stripe"),
-    "image.corner_base": ("Corners", "CornerOptions"),
-    "image.corners": ("find_corners",
-        "detect_board", "flip_board_numbering"),
-    "image.points": ("CalibrationPoints", "calibration_points"),
-    "image.accounts": ("ImageReport",),
-    "image.paper_session": ("dataset_from_images",),
-    "measurement.measure": ("PointCloud", "measure", "MeasureResult"),
-    "measurement.measurer": ("Measurer", "Profile", "PointStatus"),
+    "data.dataset": ("Dataset",),
+    "calibration.options": ("PsoOptions", "LmOptions", "RandomSearchOptions"),
+    "diagnostics.identifiability": ("identifiability",),
+    "diagnostics.uncertainty": ("uncertainty",),
+    "diagnostics.repeatability": ("repeatability",),
+    "image.corners": ("detect_board",),
+    "image.stripe": ("StripeOptions", "difference_image", "extract_stripe"),
+    "errors": ("HmlvsDataWarning",),
     "sim": ("simulate",),
-    "paper.study": ("study",),
 }
 _EXPORTS = {name: module for module, names in _PUBLIC.items() for name in names}
-# modules reached as attributes: hmlvs.design.analyze(...), hmlvs.scenarios.cylinder_scan(...)
-_MODULES = {"design": "paper.design", "scenarios": "paper.scenarios"}
-_SUBPACKAGES = {"calibration", "data", "diagnostics", "geometry", "image", "measurement",
-                "models", "paper", "report", "sim"}
+_SUBPACKAGES = {"calibration", "data", "diagnostics", "errors", "geometry", "image",
+                "measurement", "models", "paper", "pipeline", "report", "sim"}
 
-__all__ = sorted([*_EXPORTS, *_MODULES, "__version__"])
+__all__ = sorted([*_EXPORTS, "__version__"])
 
 
 def __getattr__(name: str) -> Any:
     if name in _EXPORTS:
         value = getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
-    elif name in _MODULES:
-        value = importlib.import_module(f".{_MODULES[name]}", __name__)
     elif name in _SUBPACKAGES:
         value = importlib.import_module(f".{name}", __name__)
     else:

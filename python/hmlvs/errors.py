@@ -24,7 +24,7 @@ class HmlvsDataWarning(UserWarning):
     """The data cannot determine (some of) what is being estimated.
 
     Every data warning of hmlvs is an instance of one of the subclasses below, so that a
-    user can filter one kind (``warnings.simplefilter("ignore", hmlvs.TooFewPointsWarning)``)
+    user can filter one kind (``warnings.simplefilter("ignore", hmlvs.errors.TooFewPointsWarning)``)
     or all of them (``HmlvsDataWarning``). :func:`warning_category` maps a message (as stored
     in ``CalibrationResult.warnings``) to its subclass. The terms are explained in
     ``docs/glossary.md``.

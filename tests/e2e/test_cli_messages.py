@@ -125,18 +125,18 @@ def test_text_output_says_what_is_fixed_and_why(small, tmp_path, capsys):
     assert "rotation vector" in out
 
 
-def test_warning_classes_are_exported_and_classify_every_message(small):
+def test_warning_classes_are_in_errors_and_classify_every_message(small):
     s, _ = small
     for name in ("FlatDirectionWarning", "TooFewPointsWarning", "PoseVarietyWarning",
                  "GimbalLockWarning", "AtBoundWarning", "SetupWarning"):
-        assert issubclass(getattr(hmlvs, name), hmlvs.HmlvsDataWarning)
+        assert issubclass(getattr(hmlvs.errors, name), hmlvs.HmlvsDataWarning)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", hmlvs.HmlvsDataWarning)
         result = hmlvs.calibrate(s.dataset, fixed=("Su", "Sv", "Cu"), iterations=300, seed=0)
     assert len(result.warnings) >= 2  # too few points, and a flat direction (Cv free)
     for w in result.warnings:
-        assert hmlvs.warning_category(w) is not hmlvs.HmlvsDataWarning, w
-    assert hmlvs.warning_category(result.warnings[0]) is hmlvs.TooFewPointsWarning
+        assert hmlvs.errors.warning_category(w) is not hmlvs.HmlvsDataWarning, w
+    assert hmlvs.errors.warning_category(result.warnings[0]) is hmlvs.errors.TooFewPointsWarning
 
 
 def test_rotation_vector_is_well_defined_at_the_gimbal_lock():
@@ -151,10 +151,10 @@ def test_rotation_vector_is_well_defined_at_the_gimbal_lock():
 
 
 def test_simulator_warns_when_the_board_cannot_suit_the_sensor():
-    with pytest.warns(hmlvs.SetupWarning, match=r"3 of 3 views cannot be used"):
+    with pytest.warns(hmlvs.errors.SetupWarning, match=r"3 of 3 views cannot be used"):
         hmlvs.simulate.session(num_poses=3, seed=0, board=hmlvs.Checkerboard(square=1.5))
     with warnings.catch_warnings():
-        warnings.simplefilter("error", hmlvs.SetupWarning)
+        warnings.simplefilter("error", hmlvs.errors.SetupWarning)
         hmlvs.simulate.session(num_poses=3, seed=0)
 
 

@@ -28,7 +28,7 @@ def rendered(tmp_path_factory):
     "corners", pytest.param("homography", marks=pytest.mark.one_kernel)])
 def test_calibration_from_images_matches_perfect_extraction(rendered, mode):
     session, folder = rendered
-    ds, reports = hmlvs.dataset_from_images(folder, mode=mode)
+    ds, reports = hmlvs.image.paper_session.dataset_from_images(folder, mode=mode)
     # every view showing a whole 3 x 3 block of the board is used; partial boards without
     # one are rejected, with a reason
     poses = session.robot.poses(session.joints)
@@ -37,7 +37,7 @@ def test_calibration_from_images_matches_perfect_extraction(rendered, mode):
     assert sum(clear) >= 12
     assert all(r.ok for r, v in zip(reports, clear) if v)
     assert all(r.reason for r in reports if not r.ok)
-    exact, ok = hmlvs.project(session.truth, ds.points, ds.poses)
+    exact, ok = hmlvs.models.paper.project(session.truth, ds.points, ds.poses)
     assert ok.all()
     sigma = np.sqrt(np.mean((ds.pixels - exact) ** 2, axis=0))
     assert sigma.max() < 0.1  # sub-pixel extraction on rendered images (px)

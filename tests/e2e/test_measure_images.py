@@ -98,7 +98,8 @@ def test_pose_entries_and_stripe_lists(rendered, tmp_path):
     del e0["joints"]
     # entry 1 as a stripe list (u, v, intensity) written from the true stripe of that pose
     pts = session.dataset.points[session.dataset.pose_index == 1]
-    px, _ = hmlvs.pixels_from_points(session.truth, pts, np.repeat(poses[1:2], len(pts), 0))
+    px, _ = hmlvs.models.paper.pixels_from_points(session.truth, pts,
+                                                  np.repeat(poses[1:2], len(pts), 0))
     np.savetxt(out / "p001.csv", np.c_[px, np.ones(len(px))], delimiter=",",
                header="u,v,intensity", comments="")
     doc["poses"][1] = {"id": "p001", "stripe": "p001.csv", "joints": session.joints[1].tolist()}

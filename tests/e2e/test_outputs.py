@@ -34,7 +34,8 @@ def test_calibration_file_roundtrip(tmp_path, calibrated):
         np.testing.assert_allclose(back.robot.poses(np.zeros(5)),
                                    hmlvs.Robot.scorbot_er7().poses(np.zeros(5)))
     d = json.loads((tmp_path / "cal.json").read_text())
-    np.testing.assert_allclose(d["hand_from_camera"], hmlvs.hand_from_camera(result.params))
+    np.testing.assert_allclose(d["hand_from_camera"],
+                               hmlvs.models.paper.hand_from_camera(result.params))
     # standard deviations: from the uncertainty analysis, None when fixed or not determined
     u = result.uncertainty
     assert d["std"]["Su"] is None

@@ -33,7 +33,7 @@ def calibration():
 
 def look_down_pose(params, target, standoff=270.0, cam_x=(1.0, 0.0, 0.0)):
     robot = hmlvs.Robot.scorbot_er7()
-    j = ik_look_at(robot, hmlvs.hand_from_camera(params),
+    j = ik_look_at(robot, hmlvs.models.paper.hand_from_camera(params),
                     np.asarray(target, float) + [0, 0, standoff], np.array([0, 0, -1.0]),
                     [scenes.HOME], cam_x=np.asarray(cam_x))
     return robot.poses(j)[0]
@@ -56,12 +56,13 @@ def test_table_stripe_extracts_onto_the_model_stripe(texture):
     # the plane meets z = 0 along a line: two points on it from the (linear) plane distance
     pts = []
     for x in (300.0, 600.0):
-        a, b = (hmlvs.laser_plane_distance(truth, [[x, y, 0.0]], pose[None])[0]
+        a, b = (hmlvs.models.paper.laser_plane_distance(truth, [[x, y, 0.0]], pose[None])[0]
                 for y in (-300.0, 100.0))
         pts.append([x, -300.0 + 400.0 * a / (a - b), 0.0])
     p0, p1 = np.array(pts)
     line = p0 + np.linspace(-1, 2, 20001)[:, None] * (p1 - p0)
-    px, ok = hmlvs.pixels_from_points(truth, line, np.repeat(pose[None], len(line), axis=0),
+    px, ok = hmlvs.models.paper.pixels_from_points(truth, line,
+                                                   np.repeat(pose[None], len(line), axis=0),
                                       plane_tolerance=1e-6, on_invalid="mask")
     px = px[ok]
     order = np.argsort(px[:, 0])

@@ -45,7 +45,7 @@ def test_a_wrong_board_origin_rejects_the_pair_not_the_session(rendered, tmp_pat
     folder, _ = _copy(rendered, tmp_path, wrong_origin)
     # no pair gives a point with this origin; every pair after the failing one is still tried
     with pytest.raises(ValueError, match="no image pair gave a calibration point") as e:
-        hmlvs.dataset_from_images(folder)
+        hmlvs.image.paper_session.dataset_from_images(folder)
     lines = str(e.value).splitlines()[1:]
     assert [x.split(":")[0] for x in lines] == ["p003", "p000", "p001", "p002"]
     # (before, OpenCV's perspectiveTransform failed on the degenerate homography here)
@@ -63,7 +63,7 @@ def test_an_opencv_error_in_one_pair_leaves_the_others_used(rendered, tmp_path, 
     from hmlvs.image import paper_session as session
 
     folder, _ = _copy(rendered, tmp_path)
-    ds, reports = hmlvs.dataset_from_images(folder)
+    ds, reports = hmlvs.image.paper_session.dataset_from_images(folder)
     used = {r.id: r.points for r in reports if r.ok}
     assert used == {"p000": 1, "p001": 1, "p002": 1, "p003": 6}
     real = session.find_corners
@@ -76,7 +76,7 @@ def test_an_opencv_error_in_one_pair_leaves_the_others_used(rendered, tmp_path, 
         return real(image, board, expected=expected, **kw)
 
     monkeypatch.setattr(session, "find_corners", failing_once)
-    ds2, reports2 = hmlvs.dataset_from_images(folder)
+    ds2, reports2 = hmlvs.image.paper_session.dataset_from_images(folder)
     assert not reports2[0].ok and reports2[0].reason.startswith("checkerboard: OpenCV failed")
     assert "board's origin" in reports2[0].reason
     assert {r.id: r.points for r in reports2 if r.ok} == {"p001": 1, "p002": 1, "p003": 6}

@@ -21,7 +21,7 @@ TINY = {"s_values": (0.01,), "runs_lm": 4, "runs_pso": 2, "evaluations": 10_000,
 def quick(tmp_path_factory):
     """The quick study (30 LM starts, 5 PSO runs, 200,000 RS evaluations per s), run once."""
     out = tmp_path_factory.mktemp("study")
-    return hmlvs.study(quick=True, progress=False, out_dir=out), out
+    return hmlvs.paper.study.study(quick=True, progress=False, out_dir=out), out
 
 
 def test_quick_settings(quick):
@@ -135,14 +135,15 @@ def test_paper_values():
 
 
 def test_deterministic_across_thread_counts_and_s_subsets():
-    one = hmlvs.study(threads=1, **TINY)
-    two = hmlvs.study(threads=2, **TINY)
-    both = hmlvs.study(**{**TINY, "s_values": (0.2, 0.01)})  # 0.01 runs the same as alone
+    one = hmlvs.paper.study.study(threads=1, **TINY)
+    two = hmlvs.paper.study.study(threads=2, **TINY)
+    # 0.01 runs the same as alone
+    both = hmlvs.paper.study.study(**{**TINY, "s_values": (0.2, 0.01)})
     for m in METHODS:
         np.testing.assert_array_equal(one.get(m, 0.01).fit_rms, two.get(m, 0.01).fit_rms)
         np.testing.assert_array_equal(one.get(m, 0.01).params, two.get(m, 0.01).params)
         np.testing.assert_array_equal(one.get(m, 0.01).params, both.get(m, 0.01).params)
-    other = hmlvs.study(seed=1, **TINY)
+    other = hmlvs.paper.study.study(seed=1, **TINY)
     assert not np.array_equal(other.get("pso", 0.01).params, one.get("pso", 0.01).params)
 
 
@@ -155,7 +156,7 @@ def test_progress_callable_and_interrupt():
             raise KeyboardInterrupt  # as Ctrl-C does, polled from C++ during the solve
 
     with pytest.raises(KeyboardInterrupt):
-        hmlvs.study(s_values=(0.2,), runs_lm=200, runs_pso=2, evaluations=10_000,
+        hmlvs.paper.study.study(s_values=(0.2,), runs_lm=200, runs_pso=2, evaluations=10_000,
                     progress=progress)
     methods = list(dict.fromkeys(m for m, *_ in seen))
     assert methods == ["random", "lm-paper"]
@@ -166,9 +167,9 @@ def test_progress_callable_and_interrupt():
 def test_progress_bar_leaves_results_alone_and_closes():
     """The rich bar changes nothing in the results, and it is stopped when the study ends:
     a bar left running makes the next one fail ("Only one live display may be active")."""
-    quiet = hmlvs.study(**TINY)
+    quiet = hmlvs.paper.study.study(**TINY)
     for _ in range(2):
-        r = hmlvs.study(**{**TINY, "progress": True})
+        r = hmlvs.paper.study.study(**{**TINY, "progress": True})
         for m in ("random", "lm-paper", "pso"):
             a, b = r.get(m, 0.01), quiet.get(m, 0.01)
             np.testing.assert_array_equal(a.fit_rms, b.fit_rms)
@@ -181,7 +182,7 @@ def test_study_does_not_warn_about_the_parameters_it_frees_on_purpose():
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        hmlvs.study(**TINY)
+        hmlvs.paper.study.study(**TINY)
     assert not [w for w in caught if issubclass(w.category, hmlvs.HmlvsDataWarning)]
 
 
@@ -205,7 +206,7 @@ def test_progress_bar_counts_runs_of_the_whole_study_with_an_eta(monkeypatch):
             return ok
 
     monkeypatch.setattr(study_module, "_Reporter", Spy)
-    hmlvs.study(**{**TINY, "progress": True})
+    hmlvs.paper.study.study(**{**TINY, "progress": True})
     (rep,) = bars
     task = rep.bar.tasks[rep.overall]
     # TINY: per s, 2 x runs_lm + 2 x runs_pso + 1 random-search run
@@ -231,14 +232,14 @@ def test_progress_bar_counts_runs_of_the_whole_study_with_an_eta(monkeypatch):
 )
 def test_bad_input(kwargs, match):
     with pytest.raises(ValueError, match=match):
-        hmlvs.study(**{**TINY, **kwargs})
+        hmlvs.paper.study.study(**{**TINY, **kwargs})
 
 
 def test_out_dir_is_a_file(tmp_path):
     f = tmp_path / "f"
     f.write_text("x")
     with pytest.raises(ValueError, match="exists and is not a folder"):
-        hmlvs.study(out_dir=f, **TINY)
+        hmlvs.paper.study.study(out_dir=f, **TINY)
 
 
 def test_get_unknown(quick):

@@ -50,7 +50,8 @@ def test_chain_matches_oracle(rng, convention):
 def test_degrees_and_tool_and_prismatic():
     tool = np.eye(4)
     tool[2, 3] = 100.0
-    robot = hmlvs.Robot((hmlvs.DHLink(0, 0, 0), hmlvs.DHLink(0, 0, 0, prismatic=True)),
+    link = hmlvs.geometry.robot.DHLink
+    robot = hmlvs.Robot((link(0, 0, 0), link(0, 0, 0, prismatic=True)),
                         flange_from_hand=tool)
     t = robot.poses([[90.0, 50.0]], degrees=True)[0]
     np.testing.assert_allclose(t[:3, 3], [0, 0, 150], atol=1e-12)

@@ -23,18 +23,18 @@ def poses(n):
 )
 def test_shapes_and_nan(pixels, pose_arr, match):
     with pytest.raises(ValueError, match=match):
-        hmlvs.points_in_base(Q, pixels, pose_arr)
+        hmlvs.models.paper.points_in_base(Q, pixels, pose_arr)
 
 
 def test_pose_that_is_not_rigid():
     p = poses(3)
     p[2, 0, 0] = 2.0
     with pytest.raises(ValueError, match="pose 2 has a rotation part that is not a proper"):
-        hmlvs.points_in_base(Q, np.full((3, 2), 300.0), p)
+        hmlvs.models.paper.points_in_base(Q, np.full((3, 2), 300.0), p)
     p = poses(2)
     p[1, 3, 3] = 0.5
     with pytest.raises(ValueError, match="pose 1 is not a homogeneous transform"):
-        hmlvs.points_in_base(Q, np.full((2, 2), 300.0), p)
+        hmlvs.models.paper.points_in_base(Q, np.full((2, 2), 300.0), p)
 
 
 def test_pixel_whose_ray_misses_the_laser_plane():
@@ -42,12 +42,12 @@ def test_pixel_whose_ray_misses_the_laser_plane():
     pixels = np.array([[320.0, 300.0], [320.0, 10.0]])
     with pytest.raises(ValueError, match=r"pixel 1 \(u=320, v=10\) has a ray that misses the "
                                          r"laser plane"):
-        hmlvs.points_in_base(q, pixels, poses(2))
-    pts, valid = hmlvs.points_in_base(q, pixels, poses(2), on_invalid="mask")
+        hmlvs.models.paper.points_in_base(q, pixels, poses(2))
+    pts, valid = hmlvs.models.paper.points_in_base(q, pixels, poses(2), on_invalid="mask")
     assert valid.tolist() == [True, False] and np.isnan(pts[1]).all()
     with pytest.raises(ValueError, match="misses the laser plane"):
-        hmlvs.residuals(q, pixels, poses(2), np.zeros((2, 3)))
-    assert hmlvs.objective(q, pixels, poses(2), np.zeros((2, 3))) == np.inf
+        hmlvs.models.paper.residuals(q, pixels, poses(2), np.zeros((2, 3)))
+    assert hmlvs.models.paper.objective(q, pixels, poses(2), np.zeros((2, 3))) == np.inf
 
 
 @pytest.mark.parametrize(
@@ -57,7 +57,7 @@ def test_pixel_whose_ray_misses_the_laser_plane():
 )
 def test_bad_parameters(changes, match):
     with pytest.raises(ValueError, match=match):
-        hmlvs.points_in_base(Q.replace(**changes), np.full((1, 2), 300.0), poses(1))
+        hmlvs.models.paper.points_in_base(Q.replace(**changes), np.full((1, 2), 300.0), poses(1))
 
 
 def test_parameters_type():

@@ -1,4 +1,4 @@
-"""Sensor design analysis (hmlvs.design) against hand-computed values.
+"""Sensor design analysis (hmlvs.paper.design) against hand-computed values.
 
 The paper's design: f = 8 mm, 7.4 um pixels, 640 x 480 px, H = 100 mm, theta = 25 deg,
 principal point at the image centre (319.5, 239.5), k = 0. By hand (docs/model.md, step 3):
@@ -33,13 +33,13 @@ def paper():
 
 def test_import_hmlvs_is_light():
     """``import hmlvs`` loads the C++ core and nothing heavy: SciPy's optimizers, matplotlib
-    and OpenCV come with the functions that need them (hmlvs.design among them)."""
+    and OpenCV come with the functions that need them (hmlvs.paper.design among them)."""
     import subprocess
     import sys
 
     code = ("import sys, hmlvs; heavy = ['scipy.optimize', 'matplotlib', 'cv2', 'scipy']; "
-            "print([m for m in heavy if m in sys.modules]); hmlvs.design.analyze; "
-            "print(hmlvs.design.__name__)")
+            "print([m for m in heavy if m in sys.modules]); hmlvs.paper.design.analyze; "
+            "print(hmlvs.paper.design.__name__)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.split("\n")
     assert out[0] == "[]" and out[1] == "hmlvs.paper.design"

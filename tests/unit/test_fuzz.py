@@ -201,8 +201,8 @@ def _array_call(fn, *args, **kwargs):
 @given(pixels=arrays)
 def test_paper_model_points(pixels):
     p = Parameters.nominal()
-    _array_call(hmlvs.points_in_camera, p, pixels, on_invalid="mask")
-    _array_call(hmlvs.points_in_base, p, pixels, np.eye(4), on_invalid="mask")
+    _array_call(hmlvs.models.paper.points_in_camera, p, pixels, on_invalid="mask")
+    _array_call(hmlvs.models.paper.points_in_base, p, pixels, np.eye(4), on_invalid="mask")
 
 
 @FUZZ

@@ -5,11 +5,11 @@ from __future__ import annotations
 import math
 
 from conftest import run_cli
-from hmlvs import Bounds, Parameters, points_in_camera
+from hmlvs import Bounds, Parameters
 from hmlvs.data.export import sensor_of
 from hmlvs.data.guess import read_bounds, read_initial
 from hmlvs.models.convert import euler_zyz, paper_params_of
-from hmlvs.models.paper import hand_from_camera
+from hmlvs.models.paper import hand_from_camera, points_in_camera
 import numpy as np
 import pytest
 

@@ -112,14 +112,14 @@ def test_known_tangents_are_exact_null_vectors_and_exact_finite_moves():
     q2 = q.copy()
     q2[6], q2[2] = q[6] - d, q[2] * (1 - d / q[6])
     q2[4] = q[4] + q[0] / q2[2] * d / q[6] * math.tan(q[7])
-    q2[11:14] = q[11:14] + d * hmlvs.hand_from_camera(q)[:3, 1]
-    assert np.abs(hmlvs.residuals(q2, ds.pixels, ds.poses, ds.points)).max() < 1e-9
+    q2[11:14] = q[11:14] + d * hmlvs.models.paper.hand_from_camera(q)[:3, 1]
+    assert np.abs(hmlvs.models.paper.residuals(q2, ds.pixels, ds.poses, ds.points)).max() < 1e-9
     qk = truth.replace(k=0.003).to_array()
     dsk = hmlvs.simulate(hmlvs.Parameters.from_array(qk), seed=3).fit
     q3 = qk.copy()
     q3[[0, 1, 2]] *= 1.3
     q3[5] /= 1.3**2
-    assert np.abs(hmlvs.residuals(q3, dsk.pixels, dsk.poses, dsk.points)).max() < 1e-9
+    assert np.abs(hmlvs.models.paper.residuals(q3, dsk.pixels, dsk.poses, dsk.points)).max() < 1e-9
     # the gimbal tangent is null exactly at phi = 0 and far from null at phi = 0.12
     q0 = truth.replace(phi=0.0).to_array()
     _, j0 = residual_jacobian(q0, ds.pixels, ds.poses, ds.points)
@@ -167,7 +167,8 @@ def test_data_warnings_too_few_points_one_pose_one_line(paper):
                rep.warnings)
     # one pose: the same base_from_hand for every point, pixels spread over the image
     pose = paper.fit.poses[0]
-    pts, _ = hmlvs.points_in_base(paper.truth, paper.fit.pixels, np.repeat(pose[None], 50, 0))
+    pts, _ = hmlvs.models.paper.points_in_base(paper.truth, paper.fit.pixels,
+                                               np.repeat(pose[None], 50, 0))
     one = hmlvs.Dataset(paper.fit.pixels, np.repeat(pose[None], 50, 0), pts)
     rep = hmlvs.identifiability(one, paper.truth)
     assert any("nearly the same hand pose" in w for w in rep.warnings)
@@ -176,7 +177,7 @@ def test_data_warnings_too_few_points_one_pose_one_line(paper):
     # one stripe line in the image (v = 200 + u / 10), seen from varied poses
     u = np.linspace(10, 630, 50)
     line_px = np.column_stack([u, 200 + u / 10])
-    pts, _ = hmlvs.points_in_base(paper.truth, line_px, paper.fit.poses)
+    pts, _ = hmlvs.models.paper.points_in_base(paper.truth, line_px, paper.fit.poses)
     line = hmlvs.Dataset(line_px, paper.fit.poses, pts)
     rep = hmlvs.identifiability(line, paper.truth, fixed=("Su", "Sv", "Cu", "Cv"))
     assert any("one image line" in w for w in rep.warnings)
@@ -214,7 +215,7 @@ def test_calibrate_warns_about_too_few_points(paper):
 
 @pytest.mark.parametrize("kwargs, match", [
     ({"fixed": ("Su", "focal")}, "'focal' is not a parameter"),
-    ({"fixed": hmlvs.NAMES}, "every parameter is fixed"),
+    ({"fixed": hmlvs.models.params.NAMES}, "every parameter is fixed"),
     ({"params": [1.0, 2.0]}, "params must be 14 finite values"),
     ({"null_tol": 1e-3, "weak_tol": 1e-4}, "need 0 < null_tol < weak_tol < 1"),
     ({"dataset": "points.npz"}, "dataset must be an hmlvs.Dataset, got str"),

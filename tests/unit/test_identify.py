@@ -72,7 +72,7 @@ def test_robust_loss_with_gross_outliers():
     points = fit.points.copy()
     points[bad] += rng.normal(0, 30, (5, 3))
     dirty = hmlvs.Dataset(fit.pixels, fit.poses, points)
-    start = hmlvs.initial_candidates(sim.truth, 0.05, 1, seed=1)[0]
+    start = hmlvs.calibration.solvers.initial_candidates(sim.truth, 0.05, 1, seed=1)[0]
     # Su alone held: the perturbed start's Sv, Cu, Cv must be free to reach the truth
     su = ("Su",)
     plain = hmlvs.calibrate(dirty, method="lm", initial=start, test=sim.test, fixed=su)
@@ -87,10 +87,11 @@ def test_robust_loss_with_gross_outliers():
 
 def test_lm_modes_and_fixed_parameters():
     sim = hmlvs.simulate(seed=8)
-    start = hmlvs.initial_candidates(sim.truth, 0.01, 1, seed=2)[0]
+    start = hmlvs.calibration.solvers.initial_candidates(sim.truth, 0.01, 1, seed=2)[0]
     r = hmlvs.calibrate(sim, method="lm", initial=start, fixed=("Su", "Cu", "omega"))
     assert r.params.Cu == start[3] and r.params.omega == start[8] and r.params.Su == start[1]
-    assert r.termination in (hmlvs.Termination.CONVERGED, hmlvs.Termination.MAX_ITERATIONS)
+    ends = hmlvs.calibration.result.Termination
+    assert r.termination in (ends.CONVERGED, ends.MAX_ITERATIONS)
     assert r.lm.ceres_termination in ("CONVERGENCE", "NO_CONVERGENCE")
     # the Euler path (an Euler angle fixed) matches the quaternion path when the angle is right
     exact = hmlvs.calibrate(sim, method="lm", initial=sim.truth.replace(f=7.9), fixed=("Su", "phi"))
@@ -123,9 +124,9 @@ def test_progress_callback_error_propagates():
 
 def test_fitness_kernel_matches_model():
     sim = hmlvs.simulate(seed=9, pixel_noise=0.3)
-    q = hmlvs.initial_candidates(sim.truth, 0.05, 1, seed=0)[0]
+    q = hmlvs.calibration.solvers.initial_candidates(sim.truth, 0.05, 1, seed=0)[0]
     d = fitness_data(sim.fit)
-    f = hmlvs.objective(q, sim.fit.pixels, sim.fit.poses, sim.fit.points)
+    f = hmlvs.models.paper.objective(q, sim.fit.pixels, sim.fit.poses, sim.fit.points)
     assert d.evaluate(q) == pytest.approx(f, rel=1e-12)
 
 
@@ -199,7 +200,8 @@ def test_per_run_details():
     # the same Eq. 22 starts for both modes; unbounded modern LM does not clip them to Table 2
     starts = paper.lm.starts
     np.testing.assert_array_equal(modern.lm.starts, starts)
-    np.testing.assert_array_equal(starts, hmlvs.initial_candidates(sim.truth, 0.2, 20, seed=4))
+    np.testing.assert_array_equal(
+        starts, hmlvs.calibration.solvers.initial_candidates(sim.truth, 0.2, 20, seed=4))
     assert (~((starts[:, 3] >= 300) & (starts[:, 3] <= 340))).any()  # Cu outside Table 2
     pso = hmlvs.calibrate(sim, method="pso+lm", iterations=500, **{**kw, "runs": 3})
     for r in (paper, modern, pso):

@@ -465,7 +465,7 @@ def true_corner_errors(r, params=None):
         truth = predicted_corners(s.truth, poses[i], s.board)
         exp = predicted_corners(params or s.truth, poses[i], s.board)
         try:
-            c = hmlvs.find_corners(r.off[i], s.board, expected=exp)
+            c = hmlvs.image.corners.find_corners(r.off[i], s.board, expected=exp)
         except ValueError:
             counts.append(0)
             continue
@@ -499,7 +499,7 @@ def overhead_pose(q, flip=False):
     bfc = np.eye(4)
     bfc[:3, 0], bfc[:3, 1], bfc[:3, 2] = x, np.cross(z, x), z
     bfc[:3, 3] = [625.0, -15.0, 700.0]
-    return bfc @ np.linalg.inv(hmlvs.hand_from_camera(q))
+    return bfc @ np.linalg.inv(hmlvs.models.paper.hand_from_camera(q))
 
 
 def test_corner_numbering_full_board_and_flip():
@@ -510,19 +510,20 @@ def test_corner_numbering_full_board_and_flip():
         pose = overhead_pose(q, flip)
         img = render_pose(q, pose, board).off
         truth = predicted_corners(q, pose, board)
-        c = hmlvs.find_corners(img, board, expected=truth)
+        c = hmlvs.image.corners.find_corners(img, board, expected=truth)
         assert len(c) == n and c.rule == "expected"
         assert np.linalg.norm(c.pixels - truth[c.index], axis=1).max() < 0.1
         # the marker-free rule: r0c0 is the corner nearest the image's top-left. Right for
         # the upright view; for the view turned by 180 degrees it numbers the board from the
         # opposite corner (the documented limit of a rule without markers).
-        c2 = hmlvs.find_corners(img, board)
+        c2 = hmlvs.image.corners.find_corners(img, board)
         assert c2.rule == "top-left" and len(c2) == n
         want = truth if not flip else truth[::-1]
         assert np.linalg.norm(c2.pixels - want[c2.index], axis=1).max() < 0.1
     # a partly visible board cannot be numbered without expected pixels
     with pytest.raises(ValueError, match="for a partly visible board pass the expected"):
-        hmlvs.find_corners(render_pose(q, overhead_pose(q)[:, :] @ _shift(150), board).off,
+        hmlvs.image.corners.find_corners(
+            render_pose(q, overhead_pose(q)[:, :] @ _shift(150), board).off,
                            board)
 
 
@@ -536,12 +537,12 @@ def test_find_corners_refuses_a_mirrored_expectation():
     pose = overhead_pose(q)
     img = render_pose(q, pose, board).off
     truth = predicted_corners(q, pose, board)
-    c = hmlvs.find_corners(img, board, expected=truth)
+    c = hmlvs.image.corners.find_corners(img, board, expected=truth)
     assert len(c) == 9 and np.linalg.norm(c.pixels - truth[c.index], axis=1).max() < 0.1
     for mirror in (truth.reshape(3, 3, 2)[:, ::-1], truth.reshape(3, 3, 2)[::-1, :],
                    truth.reshape(3, 3, 2).transpose(1, 0, 2)):
         with pytest.raises(ValueError, match="mirror image"):
-            hmlvs.find_corners(img, board, expected=mirror.reshape(-1, 2))
+            hmlvs.image.corners.find_corners(img, board, expected=mirror.reshape(-1, 2))
 
 
 def test_full_board_detector_gets_its_flags(clean, monkeypatch):
@@ -558,7 +559,7 @@ def test_full_board_detector_gets_its_flags(clean, monkeypatch):
     q = hmlvs.Parameters.nominal()
     board = hmlvs.Checkerboard()
     img = render_pose(q, overhead_pose(q), board).off
-    hmlvs.find_corners(img, board)
+    hmlvs.image.corners.find_corners(img, board)
     assert len(calls) == 1
     args, kwargs = calls[0]
     want = cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
@@ -579,16 +580,16 @@ def _shift(dx):
 def test_find_corners_no_board_and_bad_expected(clean):
     blank = np.full((480, 640), 120, np.uint8)
     with pytest.raises(ValueError, match="no checkerboard found"):
-        hmlvs.find_corners(blank, expected=np.zeros((48, 2)))
+        hmlvs.image.corners.find_corners(blank, expected=np.zeros((48, 2)))
     with pytest.raises(ValueError, match=r"expected must hold the \(48, 2\)"):
-        hmlvs.find_corners(clean.off[0], expected=np.zeros((10, 2)))
+        hmlvs.image.corners.find_corners(clean.off[0], expected=np.zeros((10, 2)))
     s = clean.session
     far = predicted_corners(s.truth, s.robot.poses(s.joints)[0], s.board) + [0.0, 0.0]
     far[:, 0] = far[:, 0][::-1]  # scrambled: nothing is where it should be
     # the corners matched to it that fit one grid are its mirror image (u reversed)
     with pytest.raises(ValueError, match="do not match the expected|do not form a board|"
                                          "a mirror image of the board"):
-        hmlvs.find_corners(clean.off[0], s.board, expected=far)
+        hmlvs.image.corners.find_corners(clean.off[0], s.board, expected=far)
 
 
 # ------------------------------------------------------------------------------ points
@@ -603,16 +604,16 @@ def test_calibration_points_corners_mode(clean):
     for i in range(len(poses)):
         exp = predicted_corners(s.truth, poses[i], s.board)
         try:
-            c = hmlvs.find_corners(clean.off[i], s.board, expected=exp)
+            c = hmlvs.image.corners.find_corners(clean.off[i], s.board, expected=exp)
         except ValueError:
             assert not shows_block(exp, s.board)
             continue
         found_views.add(f"p{i:03d}")
         st = hmlvs.extract_stripe(hmlvs.difference_image(clean.on[i], clean.off[i],
                                                          normalize=True))
-        cp = hmlvs.calibration_points(st, c, mode="corners")
+        cp = hmlvs.image.points.calibration_points(st, c, mode="corners")
         found_ids += [f"p{i:03d}:{k}" for k in cp.ids]
-        exact, _ = hmlvs.pixels_from_points(s.truth, cp.points,
+        exact, _ = hmlvs.models.paper.pixels_from_points(s.truth, cp.points,
                                             np.repeat(poses[i][None], len(cp), axis=0))
         errs.append(np.linalg.norm(cp.pixels - exact, axis=1))
         assert np.all(np.abs(cp.distance) < 0.5)
@@ -630,20 +631,20 @@ def test_calibration_points_homography_mode(clean):
     for i in range(len(poses)):
         exp = predicted_corners(s.truth, poses[i], s.board)
         try:
-            c = hmlvs.find_corners(clean.off[i], s.board, expected=exp)
+            c = hmlvs.image.corners.find_corners(clean.off[i], s.board, expected=exp)
         except ValueError:
             continue
         st = hmlvs.extract_stripe(hmlvs.difference_image(clean.on[i], clean.off[i],
                                                          normalize=True))
-        cp = hmlvs.calibration_points(st, c, mode="homography", step=4)
+        cp = hmlvs.image.points.calibration_points(st, c, mode="homography", step=4)
         if len(cp) == 0:
             continue
         n_images += 1
         rep = np.repeat(poses[i][None], len(cp), axis=0)
         # the reference points lie on the board plane, at the laser plane to ~0.01 mm
         assert np.abs(cp.points[:, 2]).max() < 1e-9
-        assert np.abs(hmlvs.laser_plane_distance(s.truth, cp.points, rep)).max() < 0.05
-        exact, _ = hmlvs.project(s.truth, cp.points, rep)
+        assert np.abs(hmlvs.models.paper.laser_plane_distance(s.truth, cp.points, rep)).max() < 0.05
+        exact, _ = hmlvs.models.paper.project(s.truth, cp.points, rep)
         errs.append(np.linalg.norm(cp.pixels - exact, axis=1))
     e = np.concatenate(errs)
     assert e.size > 20 * n_images  # many points per image, not one or two corners
@@ -653,20 +654,20 @@ def test_calibration_points_homography_mode(clean):
 def test_calibration_points_bad_input(clean):
     st = hmlvs.extract_stripe(hmlvs.difference_image(clean.on[0], clean.off[0]))
     s = clean.session
-    c = hmlvs.find_corners(clean.off[0], s.board, expected=predicted_corners(
+    c = hmlvs.image.corners.find_corners(clean.off[0], s.board, expected=predicted_corners(
         s.truth, s.robot.poses(s.joints)[0], s.board))
     with pytest.raises(ValueError, match="mode must be"):
-        hmlvs.calibration_points(st, c, mode="lines")
+        hmlvs.image.points.calibration_points(st, c, mode="lines")
     with pytest.raises(ValueError, match="tolerance must be > 0"):
-        hmlvs.calibration_points(st, c, tolerance=0)
+        hmlvs.image.points.calibration_points(st, c, tolerance=0)
     with pytest.raises(ValueError, match="numbered on a 6 x 8 board"):
-        hmlvs.calibration_points(st, c, hmlvs.Checkerboard(rows=5, cols=7))
+        hmlvs.image.points.calibration_points(st, c, hmlvs.Checkerboard(rows=5, cols=7))
     # a stripe without a found centre (every scan line flagged, here ALBEDO_EDGE: a stripe
     # along a row of squares' edges with the check on) gives no point and says why
     flagged = replace(st, status=np.where(st.found, np.uint8(StripeStatus.ALBEDO_EDGE),
                                           st.status))
     for mode in ("corners", "homography"):
-        cp = hmlvs.calibration_points(flagged, c, mode=mode)
+        cp = hmlvs.image.points.calibration_points(flagged, c, mode=mode)
         assert len(cp) == 0 and cp.rejected, mode
 
 
@@ -693,22 +694,23 @@ def test_render_session_writes_manifest_and_images(written):
 def test_dataset_from_images_end_to_end(written, mode):
     r, out = written
     s = r.session
-    ds, report = hmlvs.dataset_from_images(out, mode=mode)
+    ds, report = hmlvs.image.paper_session.dataset_from_images(out, mode=mode)
     assert len(report) == 8
     assert sum(x.ok for x in report) >= 6
     assert all(x.reason for x in report if not x.ok)
     np.testing.assert_allclose(ds.poses, s.robot.poses(ds.joints), atol=1e-12)
     assert all(k.split(":")[0] == f"p{i:03d}" for k, i in zip(ds.ids, ds.pose_index))
-    exact, ok = hmlvs.project(s.truth, ds.points, ds.poses)
+    exact, ok = hmlvs.models.paper.project(s.truth, ds.points, ds.poses)
     err = np.linalg.norm(ds.pixels - exact, axis=1)
     assert ok.all() and rms(err) < 0.1
-    e3 = np.linalg.norm(hmlvs.residuals(s.truth, ds.pixels, ds.poses, ds.points), axis=1)
+    e3 = np.linalg.norm(hmlvs.models.paper.residuals(s.truth, ds.pixels, ds.poses, ds.points),
+                        axis=1)
     if mode == "corners":
         # the snapped corners are exactly the session's points: the residual is the 3D
         # effect of the pixel error alone
         assert set(ds.ids) <= set(s.dataset.ids)
-        p_exact, _ = hmlvs.points_in_base(s.truth, exact, ds.poses)
-        p_found, _ = hmlvs.points_in_base(s.truth, ds.pixels, ds.poses)
+        p_exact, _ = hmlvs.models.paper.points_in_base(s.truth, exact, ds.poses)
+        p_found, _ = hmlvs.models.paper.points_in_base(s.truth, ds.pixels, ds.poses)
         assert rms(e3) == pytest.approx(rms(np.linalg.norm(p_found - p_exact, axis=1)),
                                         rel=1e-6)
     else:
@@ -741,7 +743,7 @@ def test_smooth_along_bad_values(written):
         with pytest.raises(ValueError, match="smooth_along"):
             stripe_from_pair(r.on[0], r.off[0], smooth_along=bad)
     with pytest.raises(ValueError, match="smooth_along"):
-        hmlvs.dataset_from_images(out, smooth_along=20)
+        hmlvs.image.paper_session.dataset_from_images(out, smooth_along=20)
 
 
 def test_dataset_from_images_reports_bad_pairs(written, tmp_path):
@@ -764,7 +766,7 @@ def test_dataset_from_images_reports_bad_pairs(written, tmp_path):
          "joints": joints[0]},
         {"id": "joints", "on": r.on[0], "off": r.off[0], "joints": [0.1, 0.2]},
     ]
-    ds, report = hmlvs.dataset_from_images(good[:1] + bad + good[1:])
+    ds, report = hmlvs.image.paper_session.dataset_from_images(good[:1] + bad + good[1:])
     by_id = {x.id: x for x in report}
     assert by_id["g0"].ok and by_id["g2"].ok
     assert set(ds.pose_index.tolist()) == {0, len(bad) + 1}
@@ -782,14 +784,14 @@ def test_dataset_from_images_reports_bad_pairs(written, tmp_path):
     for k, text in expect.items():
         assert not by_id[k].ok and text in by_id[k].reason, (k, by_id[k].reason)
     # the data set from the good pairs is the same as from a session of only those pairs
-    ds2, _ = hmlvs.dataset_from_images(good)
+    ds2, _ = hmlvs.image.paper_session.dataset_from_images(good)
     np.testing.assert_allclose(ds.pixels, ds2.pixels, rtol=0, atol=0)
     with pytest.raises(ValueError, match="no image pair gave a calibration point"):
-        hmlvs.dataset_from_images(bad)
+        hmlvs.image.paper_session.dataset_from_images(bad)
     with pytest.raises(ValueError, match="no such manifest"):
-        hmlvs.dataset_from_images(tmp_path / "nowhere")
+        hmlvs.image.paper_session.dataset_from_images(tmp_path / "nowhere")
     with pytest.raises(ValueError, match="method must be"):
-        hmlvs.dataset_from_images(good, method="moments")
+        hmlvs.image.paper_session.dataset_from_images(good, method="moments")
 
 
 @pytest.fixture(scope="module")
@@ -814,9 +816,9 @@ def test_pipeline_with_radial_distortion(distorted):
     for mode in ("corners", "homography"):
         # the approximate parameters (nominal, k = 0) still number the corners: every view
         # showing a whole 3 x 3 block of the board is used
-        ds, report = hmlvs.dataset_from_images(records, mode=mode)
+        ds, report = hmlvs.image.paper_session.dataset_from_images(records, mode=mode)
         assert all(x.ok for x, v in zip(report, clear) if v), [x.reason for x in report]
-        exact, _ = hmlvs.project(q, ds.points, ds.poses)
+        exact, _ = hmlvs.models.paper.project(q, ds.points, ds.poses)
         assert rms(np.linalg.norm(ds.pixels - exact, axis=1)) < 0.1
 
 
@@ -825,7 +827,7 @@ def _view_corners(q, s, r):
     out = []
     for i in range(len(poses)):
         try:
-            out.append((i, hmlvs.find_corners(r.off[i], s.board,
+            out.append((i, hmlvs.image.corners.find_corners(r.off[i], s.board,
                                               expected=predicted_corners(q, poses[i], s.board))))
         except ValueError:
             continue
@@ -850,10 +852,10 @@ def test_session_distortion_is_fitted_to_all_views(distorted):
             assert fit_division_distortion([c])[1] == pytest.approx(true_k, rel=0.5)
     records = [{"id": f"p{i:03d}", "on": r.on[i], "off": r.off[i], "joints": s.joints[i]}
                for i in range(len(r.on))]
-    ds, _ = hmlvs.dataset_from_images(records, mode="homography")
+    ds, _ = hmlvs.image.paper_session.dataset_from_images(records, mode="homography")
     got = ds.meta["division_distortion"]
     assert got["centre_px"] == [319.5, 239.5] and got["k_per_px2"] == pytest.approx(k, rel=1e-9)
-    ds_c, _ = hmlvs.dataset_from_images(records, mode="corners")
+    ds_c, _ = hmlvs.image.paper_session.dataset_from_images(records, mode="corners")
     assert "division_distortion" not in ds_c.meta
 
 
@@ -881,8 +883,8 @@ def test_a_view_with_few_corners_is_mapped_with_the_session_distortion(distorted
                 keep = np.isin(c.index, ids)
                 few = Corners(c.pixels[keep], c.index[keep], c.anchor[keep], c.board, c.rule,
                               c.image_size)
-                alone = hmlvs.calibration_points(st, few, mode="homography", step=4)
-                shared = hmlvs.calibration_points(st, few, mode="homography", step=4,
+                alone = hmlvs.image.points.calibration_points(st, few, mode="homography", step=4)
+                shared = hmlvs.image.points.calibration_points(st, few, mode="homography", step=4,
                                                   distortion=dist)
                 assert len(shared) >= len(alone)
                 if len(shared) == 0:
@@ -890,7 +892,7 @@ def test_a_view_with_few_corners_is_mapped_with_the_session_distortion(distorted
                 blocks += 1
                 gained += len(shared) - len(alone)
                 rep = np.repeat(poses[i][None], len(shared), axis=0)
-                exact, _ = hmlvs.project(q, shared.points, rep)
+                exact, _ = hmlvs.models.paper.project(q, shared.points, rep)
                 err = np.linalg.norm(shared.pixels - exact, axis=1)
                 assert rms(err) < 0.1 and err.max() < 0.3, (i, row, col)
     assert blocks >= 3 and gained > 100  # measured: 8 blocks, 627 points gained
@@ -912,4 +914,5 @@ def test_session_distortion_bad_input(distorted):
         fit_division_distortion([c, other])
     st = hmlvs.extract_stripe(hmlvs.difference_image(r.on[0], r.off[0]))
     with pytest.raises(ValueError, match="distortion must be a finite"):
-        hmlvs.calibration_points(st, c, mode="homography", distortion=(np.zeros(2), np.nan))
+        hmlvs.image.points.calibration_points(st, c, mode="homography",
+                                              distortion=(np.zeros(2), np.nan))

@@ -49,15 +49,15 @@ def test_frames_are_measured_on_the_board_plane(rendered):
             np.testing.assert_allclose(base, prof.points[ok], atol=1e-9)
             # the rest carry no point, and say why
             assert np.isnan(prof.points[~ok]).all()
-            assert set(np.unique(prof.status[~ok])) <= {hmlvs.PointStatus.NO_STRIPE,
-                                                       hmlvs.PointStatus.NO_POINT}
+            status = hmlvs.measurement.measurer.PointStatus
+            assert set(np.unique(prof.status[~ok])) <= {status.NO_STRIPE, status.NO_POINT}
 
 
 def test_a_blank_frame_has_no_stripe(rendered):
     s, _ = rendered
     prof = hmlvs.Measurer(s.sensor).points(np.full(SIZE[::-1], 40, np.uint8),
                                             s.base_from_hand[0])
-    assert (prof.status == hmlvs.PointStatus.NO_STRIPE).all()
+    assert (prof.status == hmlvs.measurement.measurer.PointStatus.NO_STRIPE).all()
     assert np.isnan(prof.points).all()
 
 

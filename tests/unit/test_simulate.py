@@ -14,7 +14,7 @@ def test_simulate_defaults_and_seed():
     np.testing.assert_array_equal(a.dataset.points, b.dataset.points)
     assert not np.array_equal(a.dataset.points, hmlvs.simulate(seed=4).dataset.points)
     # noise-free: the truth reproduces every reference point
-    e = hmlvs.residuals(a.truth, a.dataset.pixels, a.dataset.poses, a.dataset.points)
+    e = hmlvs.models.paper.residuals(a.truth, a.dataset.pixels, a.dataset.poses, a.dataset.points)
     assert np.abs(e).max() < 1e-9
 
 
@@ -35,8 +35,9 @@ def test_session_puts_corners_on_the_stripe():
     corners = s.board.corners()
     d = np.min(np.linalg.norm(ds.points[:, None, :] - corners[None], axis=2), axis=1)
     assert d.max() < 1e-9
-    assert np.abs(hmlvs.laser_plane_distance(s.truth, ds.points, ds.poses)).max() < 1e-7
-    e = hmlvs.residuals(s.truth, ds.pixels, ds.poses, ds.points)
+    plane = hmlvs.models.paper.laser_plane_distance(s.truth, ds.points, ds.poses)
+    assert np.abs(plane).max() < 1e-7
+    e = hmlvs.models.paper.residuals(s.truth, ds.pixels, ds.poses, ds.points)
     assert np.linalg.norm(e, axis=1).max() < 1e-6
     assert ((ds.pixels >= 0) & (ds.pixels <= [639, 479])).all()
 
@@ -77,7 +78,7 @@ for seed in range(3):
     s = hmlvs.simulate.session(num_poses=6, seed=seed, pixel_noise=0.1)
     out += [s.joints.ravel(), s.dataset.pixels.ravel(), s.dataset.poses.ravel()]
 robot = hmlvs.Robot.scorbot_er7()
-hfc = hmlvs.hand_from_camera(hmlvs.Parameters.nominal())
+hfc = hmlvs.models.paper.hand_from_camera(hmlvs.Parameters.nominal())
 home = np.array([0.0, -0.8, 1.2, 0.0, 0.0])
 for x, y in [(650.0, 0.0), (700.0, 60.0), (600.0, -80.0)]:
     j = ik_look_at(robot, hfc, np.array([x, y, 300.0]), np.array([0.0, 0.0, -1.0]), [home],
@@ -141,7 +142,7 @@ def test_look_at_solve_is_the_numpy_solve_bit_for_bit(limits):
     lim = robot.joint_limits
     lo = lim[:, 0] if limits else np.full(robot.dof, -np.inf)
     hi = lim[:, 1] if limits else np.full(robot.dof, np.inf)
-    hfc = hmlvs.hand_from_camera(hmlvs.Parameters.nominal())
+    hfc = hmlvs.models.paper.hand_from_camera(hmlvs.Parameters.nominal())
     rng = np.random.default_rng(7)
     exact = 0
     for trial in range(24):
@@ -169,7 +170,7 @@ def test_look_at_solve_bad_input():
     from hmlvs import _core
 
     robot = hmlvs.Robot.scorbot_er7()
-    hfc = hmlvs.hand_from_camera(hmlvs.Parameters.nominal())
+    hfc = hmlvs.models.paper.hand_from_camera(hmlvs.Parameters.nominal())
     args = (robot._native(), hfc, np.array([600.0, 0.0, 300.0]), np.array([0.0, 0.0, -1.0]), None)
     inf = np.full(5, np.inf)
     with pytest.raises(ValueError, match="one value per joint"):

@@ -5,7 +5,8 @@ per-stage results agree with what the solve did."""
 import math
 
 import hmlvs
-from hmlvs import LmOptions, PsoOptions, RandomSearchOptions, Termination
+from hmlvs import LmOptions, PsoOptions, RandomSearchOptions
+from hmlvs.calibration.result import Termination
 import numpy as np
 import pytest
 

@@ -14,8 +14,8 @@ def _rotation_error(truth, est) -> np.ndarray:
     """Rotation vector (camera frame) of R_true^T R_est."""
     from scipy.spatial.transform import Rotation
 
-    rt = hmlvs.hand_from_camera(truth)[:3, :3]
-    re = hmlvs.hand_from_camera(est)[:3, :3]
+    rt = hmlvs.models.paper.hand_from_camera(truth)[:3, :3]
+    re = hmlvs.models.paper.hand_from_camera(est)[:3, :3]
     return Rotation.from_matrix(rt.T @ re).as_rotvec()
 
 
@@ -61,7 +61,7 @@ def test_monte_carlo_predicted_std_within_25_percent(where):
     # Well-determined: every free parameter, except at the gimbal lock omega, phi, varphi
     # (there only the rotation and omega + varphi are; checked below).
     names = [n for n in free if where != "nominal" or n not in ("omega", "phi", "varphi")]
-    cols = [hmlvs.NAMES.index(n) for n in names]
+    cols = [hmlvs.models.params.NAMES.index(n) for n in names]
     empirical = est[:, cols].std(axis=0, ddof=1)
     for key in ("estimated", "given"):
         pred = np.sqrt(np.mean(var[key], axis=0))[[free.index(n) for n in names]]

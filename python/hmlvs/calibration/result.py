@@ -1,6 +1,6 @@
 """Typed outcome of a solve: why it stopped, and what each stage (PSO, LM, random search) did.
 
-:class:`hmlvs.CalibrationResult`, the paper model's calibration, holds these.
+:class:`hmlvs.calibration.result.CalibrationResult`, the paper model's calibration, holds these.
 """
 
 from __future__ import annotations

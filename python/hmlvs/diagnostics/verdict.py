@@ -277,7 +277,8 @@ def require_check(verdict: Verdict, require_mm: float | None) -> Verdict:
 def judge_paper(result: Any, dataset: Any = None, *, views: Sequence[Any] | None = None,
                 map_sigma: bool = True, mistakes: bool = True, cross_validate: bool = True,
                 image_size: tuple[int, int] | None = None) -> Verdict:
-    """The verdict on a paper-model calibration (:class:`hmlvs.CalibrationResult`) and the
+    """The verdict on a paper-model calibration
+    (:class:`hmlvs.calibration.result.CalibrationResult`) and the
     data set it was fitted to: the paper model's own checks (the solve's end, the fit
     against the sensor class's accuracy, held-out points against the fit) and, with the
     data set, the checks both models share (the stripe's coverage of the image when its size

@@ -2,3 +2,7 @@
 (``corners``), calibration points (``points``) and whole sessions (``session``).
 
 It never imports the renderer (``hmlvs.sim``): it works on any images."""
+
+from .._lazy import submodules
+
+__getattr__ = submodules(__name__)

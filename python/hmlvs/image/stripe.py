@@ -8,8 +8,8 @@ Typical use::
 
     d = hmlvs.difference_image(on, off)             # paper Eq. 23
     stripe = hmlvs.extract_stripe(d)                 # one centre per image column
-    corners = hmlvs.find_corners(off, board, expected=predicted_corner_pixels)
-    pts = hmlvs.calibration_points(stripe, corners, board, mode="corners")
+    corners = hmlvs.image.corners.find_corners(off, board, expected=predicted_corner_pixels)
+    pts = hmlvs.image.points.calibration_points(stripe, corners, board, mode="corners")
 """
 
 from __future__ import annotations

@@ -2,3 +2,7 @@
 
 Every model maps stripe pixels seen at hand poses to points in the robot base frame through
 one C++ formulation (``hmlvs._core``); this package is its typed Python face."""
+
+from .._lazy import submodules
+
+__getattr__ = submodules(__name__)

@@ -147,7 +147,8 @@ def render_report(result: Any, ds: Dataset, test: Dataset | None = None,
     standard deviations (e.g. those stored in a calibration file). "n.d.": not determined
     by the data.
 
-    ``image_reports`` (from :func:`hmlvs.dataset_from_images`) adds a per-view account.
+    ``image_reports`` (from :func:`hmlvs.image.paper_session.dataset_from_images`) adds a
+    per-view account.
     ``paper_sensor`` shows the paper's Table 2 bounds and best fit beside the result;
     by default only when every parameter lies within those bounds (:func:`is_paper_sensor`).
     """

@@ -10,7 +10,7 @@ blurred (optics), given sensor noise and rounded to 8 bits.
 
 ``hmlvs.simulate.render_session(...)`` renders a whole simulated session
 (:func:`hmlvs.simulate.session`) and writes the images plus a JSON manifest of joint readings;
-:func:`hmlvs.dataset_from_images` reads that back.
+:func:`hmlvs.image.paper_session.dataset_from_images` reads that back.
 
 Board layout: inner corner (r, c) is at board coordinates (x, y) = (r, c) * square. The
 squares between inner corners, extended by one square on every side, form the pattern; the
@@ -357,7 +357,7 @@ def render_session(session: "Session | None" = None, out_dir: str | os.PathLike 
     Examples
     --------
     >>> r = hmlvs.simulate.render_session(num_poses=4, seed=1, out_dir="session1")
-    >>> ds, report = hmlvs.dataset_from_images("session1")
+    >>> ds, report = hmlvs.image.paper_session.dataset_from_images("session1")
     """
     from .sessions import session as make_session
     if session is None:

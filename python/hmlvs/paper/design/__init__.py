@@ -2,7 +2,7 @@
 the 3D error caused by a wrong baseline H or projection angle theta.
 
 Everything is computed in the camera frame by the model of docs/model.md (``hmlvs._core``
-through :func:`hmlvs.points_in_camera`), at every pixel of the image; this module only
+through :func:`hmlvs.models.paper.points_in_camera`), at every pixel of the image; this module only
 measures the resulting point maps. Units: mm, rad, pixels (angles in degrees only in text).
 
 Definitions (the paper does not give them; these are ours):

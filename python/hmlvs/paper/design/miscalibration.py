@@ -107,7 +107,7 @@ def error_from_wrong(*, H_true: Optional[float] = None, theta_true: Optional[flo
 
     Examples
     --------
-    >>> e = hmlvs.design.error_from_wrong(H=100.0, H_true=99.0)
+    >>> e = hmlvs.paper.design.error_from_wrong(H=100.0, H_true=99.0)
     >>> round(e.max, 2)   # = |P| / 100 at the far image corners
     4.35
     """

@@ -492,7 +492,7 @@ def analyze(f: float = 8.0, pixel_pitch: float | Sequence[float] = 0.0074,
 
     Examples
     --------
-    >>> r = hmlvs.design.analyze(H=100.0, theta=np.radians(25))
+    >>> r = hmlvs.paper.design.analyze(H=100.0, theta=np.radians(25))
     >>> round(r.ranges.z, 1), round(r.ranges.x_growth, 1)
     (263.2, 155.6)
     """

@@ -118,7 +118,7 @@ def sweep(parameter: str, values: Optional[Iterable[float]] = None, *,
 
     Examples
     --------
-    >>> s = hmlvs.design.sweep("H", [50.0, 100.0, 150.0])
+    >>> s = hmlvs.paper.design.sweep("H", [50.0, 100.0, 150.0])
     >>> np.round(s.z / s.values, 4)   # the ranges scale with H
     array([2.6316, 2.6316, 2.6316])
     """

@@ -71,7 +71,7 @@ def simulated_calibration(truth: Any = None, *, num_poses: int = 40, pixel_noise
     (:func:`hmlvs.simulate.session`, the paper's set-up) with ``pixel_noise`` px on the stripe
     pixels and the poses computed from noisy joint readings (``readout``), half of the poses
     held out, identified by :func:`hmlvs.calibrate` (PSO + LM from the nominal values, Su
-    fixed). Returns the :class:`hmlvs.CalibrationResult`."""
+    fixed). Returns the :class:`hmlvs.calibration.result.CalibrationResult`."""
     import warnings
 
     from ...calibration.solvers import calibrate

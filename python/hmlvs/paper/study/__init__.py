@@ -14,7 +14,7 @@ Table 2 nominal parameters, the first 50 to fit, the last 50 held out) is identi
 All 14 parameters are estimated (nothing fixed), as in the paper. A run succeeds when its RMS
 of ||E_i|| over the 50 held-out points is below :data:`SUCCESS_THRESHOLD` (0.01 mm).
 
-``hmlvs.study(...)`` runs it and returns a :class:`StudyResult`; ``hmlvs study`` is the
+``hmlvs.paper.study.study(...)`` runs it and returns a :class:`StudyResult`; ``hmlvs study`` is the
 command line."""
 
 from .report import COLORS, PLOT_DPI, StudyResult

@@ -148,7 +148,7 @@ def study(s_values: Sequence[float] = PAPER_S, runs_lm: Optional[int] = None,
 
     Examples
     --------
-    >>> r = hmlvs.study(quick=True, progress=False)
+    >>> r = hmlvs.paper.study.study(quick=True, progress=False)
     >>> r.get("pso+lm", 0.2).success_rate
     1.0
     """
