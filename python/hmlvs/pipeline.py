@@ -3,15 +3,24 @@ pipeline (:mod:`hmlvs.image`) and the identification (:mod:`hmlvs.calibration`).
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+import os
+from typing import Any, Sequence, Union
 
 from .calibration.joint import JointCalibration, calibrate_joint
 from .calibration.solvers import CalibrationResult
 from .calibration.solvers import calibrate as calibrate_paper
+from .data.dataset import Dataset
 from .data.views import ViewData
+from .geometry.board import BoardSpec, Checkerboard
+from .geometry.robot import Robot
+
+#: what :func:`calibrate` takes: calibration points (paper model: a data set, or a
+#: simulation's fit and test points), an image session's folder or manifest, or views already
+#: extracted (opencv model)
+CalibrationData = Union[Dataset, str, os.PathLike, Sequence[ViewData]]
 
 
-def calibrate(data: Any, *, model: str = "paper", **options: Any
+def calibrate(data: CalibrationData, *, model: str = "paper", **options: Any
               ) -> CalibrationResult | JointCalibration:
     """Calibrate a sensor: ``model="paper"`` identifies the paper's 14 parameters from
     calibration points (a :class:`hmlvs.Dataset` or a simulation; options and result:
@@ -25,8 +34,10 @@ def calibrate(data: Any, *, model: str = "paper", **options: Any
     return calibrate_paper(data, **options)
 
 
-def calibrate_views(source: Any, *, board: Any = None, image_size: tuple[int, int] | None = None,
-                    robot: Any = None, test: Sequence[ViewData] | None = None,
+def calibrate_views(source: str | os.PathLike | Sequence[ViewData], *,
+                    board: BoardSpec | Checkerboard | None = None,
+                    image_size: tuple[int, int] | None = None,
+                    robot: Robot | None = None, test: Sequence[ViewData] | None = None,
                     **options: Any) -> JointCalibration:
     """The general model's calibration from an image session (a folder or manifest, see
     docs/file-formats.md) or from views already extracted (a list of :class:`ViewData`, with

@@ -38,6 +38,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from ..data.dataset import Dataset
 from ..models.params import NAMES, Bounds, Parameters, param_index
 from .identifiability import (
     EULER_INDEX,
@@ -404,7 +405,8 @@ def _compute(an: Analysis, pixel_noise: float | None = None,
         rank=r, flat=flat_names, warnings=warnings_, notes=notes)
 
 
-def uncertainty(dataset: Any, params: Parameters | Any, fixed: Iterable[str] | str = ("Su",),
+def uncertainty(dataset: Dataset, params: Parameters | np.ndarray,
+                fixed: Iterable[str] | str = ("Su",),
                 pixel_noise: float | None = None, point_noise: float | None = None,
                 bounds: Bounds | None = None, null_tol: float = NULL_TOL) -> Uncertainty:
     """Covariance, standard deviations, correlations and identifiable combinations.

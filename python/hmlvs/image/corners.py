@@ -9,6 +9,7 @@ import numpy as np
 
 from .._opencv import calibrate_camera
 from ..errors import BoardNotFoundError, NumberingError  # noqa: F401 (re-exported)
+from ..geometry.board import BoardSpec, Checkerboard
 from ..models.paper import project
 from .corner_base import (
     CornerOptions,
@@ -66,8 +67,6 @@ def find_corners(image: np.ndarray, board: Any = None, expected: np.ndarray | No
     Raises ``ValueError`` if the image is not an 8- or 16-bit image or the corners cannot be
     numbered, and :class:`BoardNotFoundError` (a ``ValueError``) if no board is found.
     """
-
-    from ..geometry.board import Checkerboard
     if options is None:
         options = CornerOptions(extend=extend, max_error=max_error)
     elif not isinstance(options, CornerOptions):
@@ -246,7 +245,7 @@ def sb_positions(image: np.ndarray, corners: Corners) -> Corners:
     return replace(corners, detected=detected)
 
 
-def detect_board(image: np.ndarray, board: Any,
+def detect_board(image: np.ndarray, board: BoardSpec | Checkerboard,
                  options: CornerOptions | None = None) -> Corners:
     """The corners of a fully visible checkerboard, numbered without any prior model.
 

@@ -191,8 +191,9 @@ def sensor_model(calibration: Any) -> SensorModel:
                      "OpenCvSensor or the path of a calibration file")
 
 
-def measure(calibration: Any, stripes: Sequence[Any] | np.ndarray, poses: Any = None, *,
-            joints: Any = None, robot: Robot | None = None, degrees: bool = False,
+def measure(calibration: Calibration | Parameters | SensorModel,
+            stripes: Sequence[Any] | np.ndarray, poses: np.ndarray | None = None, *,
+            joints: np.ndarray | None = None, robot: Robot | None = None, degrees: bool = False,
             on_invalid: str = "mask", stripe_options: dict[str, Any] | None = None) -> PointCloud:
     """Stripe pixels seen at hand poses -> a point cloud in the robot base frame.
 

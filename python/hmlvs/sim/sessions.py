@@ -64,8 +64,9 @@ def random_joints(robot: Robot, n: int, rng: np.random.Generator,
     return rng.uniform(mid - half, mid + half, size=(n, robot.dof))
 
 
-def simulate(params: Any = None, n: int = 100, *, robot: Robot | None = None,
-             poses: Any = None, image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE,
+def simulate(params: Parameters | np.ndarray | None = None, n: int = 100, *,
+             robot: Robot | None = None, poses: np.ndarray | None = None,
+             image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE,
              pixel_noise: float = 0.0, point_noise: float = 0.0, seed: int = 0,
              fit: float | int = 0.5) -> Simulation:
     """Paper section 4: random stripe pixels and robot poses -> reference points.
