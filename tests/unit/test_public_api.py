@@ -43,5 +43,5 @@ def test_subpackages_load_their_modules_on_first_use():
     assert issubclass(hmlvs.errors.FlatDirectionWarning, hmlvs.HmlvsDataWarning)
     assert callable(hmlvs.paper.study.study) and callable(hmlvs.paper.design.analyze)
     with pytest.raises(AttributeError, match="no attribute 'no_such_module'"):
-        hmlvs.models.no_such_module
+        _ = hmlvs.models.no_such_module
 
