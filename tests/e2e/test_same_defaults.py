@@ -57,10 +57,15 @@ def test_opencv_model_same_parameters_from_the_cli_and_the_library(cli_files, tm
     assert code in (0, 3), err  # 3 views: the verdict may call it untrustworthy
     from_cli = hmlvs.Calibration.load(tmp_path / "cal.yaml").sensor
     from_lib = hmlvs.calibrate(session, model="opencv").sensor
+    # the command's library call: the same calibration, judged as the file says
+    run = hmlvs.pipeline.calibrate_session(session)
+    assert run.verdict.to_dict() == hmlvs.Calibration.load(tmp_path / "cal.yaml").verdict
     for name in ("camera_matrix", "dist_coeffs", "laser_plane", "hand_from_camera",
                  "base_from_board"):
         np.testing.assert_array_equal(getattr(from_cli, name), getattr(from_lib, name),
                                       err_msg=name)
+        np.testing.assert_array_equal(getattr(from_cli, name),
+                                      getattr(run.calibration.sensor, name), err_msg=name)
 
 
 @pytest.mark.filterwarnings("ignore")

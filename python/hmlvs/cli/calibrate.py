@@ -101,42 +101,18 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
     file. With ``initial`` (an opencv calibration, e.g. of a bench session) its camera and
     laser plane are held and the hand-eye transform and board pose calibrated. Exits 3 when
     the verdict is not trustworthy (the file is still written, marked so)."""
-    from ..calibration.joint import calibrate_joint
-    from ..data.calibration_file import Calibration
-    from ..data.views import split_views
-    from ..diagnostics.mistakes import explaining
-    from ..diagnostics.verdict import judge_joint, require_check
-    from ..image.views import views_from_images
+    from ..pipeline import calibrate_session
 
     with command(as_json) as caught:
-        arm = load_robot(robot)
-        camera = _held_camera(initial)
-        terms = tuple(t.strip() for t in distortion.split(",") if t.strip())
-        views, board, size, board_pose, reports = views_from_images(data, robot=arm)
-        if not (as_json or quiet):
-            for r in reports:
-                typer.echo(f"{r.id}: rejected: {r.reason}" if not r.ok else
-                           f"{r.id}: {r.corners} corners, stripe in "
-                           f"{r.stripe.get('FOUND', 0)} scan lines" if r.corners else
-                           f"{r.id}: laser only (no board seen), stripe in "
-                           f"{r.stripe.get('FOUND', 0)} scan lines")
-        if not views:
-            raise ValueError("no view has both the whole board and a stripe:\n" + "\n".join(
-                f"  {r.id}: {r.reason}" for r in reports))
-        views, test_views = split_views(views, holdout, seed)
-        with explaining(views, board, size):  # a failure led by the likely mistake
-            result = calibrate_joint(views, board, size, distortion=terms,
-                                     base_from_board=board_pose, test=test_views or None,
-                                     camera=camera)
-        verdict = require_check(judge_joint(
-            result, views, board, options={"distortion": terms, "base_from_board": board_pose,
-                                           "camera": camera}), require)
+        run = calibrate_session(
+            data, robot=load_robot(robot), camera=_held_camera(initial), holdout=holdout,
+            seed=seed, require=require,
+            distortion=[t.strip() for t in distortion.split(",") if t.strip()],
+            on_views=None if (as_json or quiet) else _echo_views)
+        result, verdict, reports = run.result, run.verdict, run.reports
         report_path = None
         with outputs(out) as made:
-            blur = next((r.blur_var for r in reports if r.ok), None)
-            cal = Calibration.from_joint(result, robot=arm, blur_var=blur)
-            cal.verdict = verdict.to_dict()
-            path = cal.save(out)
+            path = run.calibration.save(out)
             made.append(path)
             if report is not None:
                 from ..report.joint import write_joint_report
@@ -151,6 +127,15 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
     typer.echo(verdict.text())
     typer.echo(result.summary())
     _written(path, report_path, verdict, warns, quiet)
+
+
+def _echo_views(reports: list) -> None:
+    """One line per image pair of an opencv-model session, before the solve."""
+    for r in reports:
+        found = f"stripe in {r.stripe.get('FOUND', 0)} scan lines"
+        typer.echo(f"{r.id}: rejected: {r.reason}" if not r.ok else
+                   f"{r.id}: {r.corners} corners, {found}" if r.corners else
+                   f"{r.id}: laser only (no board seen), {found}")
 
 
 def _summary(path: Path, report_path: Optional[Path], verdict: Any, result: Any,
