@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
-#include "hmlvs/model/model.h"
-#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/model/paper.h"
+#include "hmlvs/model/paper_fitness.h"
 #include "hmlvs/solvers/lm.h"
 #include "hmlvs/solvers/random.h"
 #include "hmlvs/solvers/search.h"
@@ -19,6 +19,9 @@
 
 namespace hmlvs {
 namespace {
+
+using namespace hmlvs::paper;
+using namespace hmlvs::solvers;
 
 using test::Generic;
 using test::MakeScene;

@@ -12,7 +12,7 @@
 #include <vector>
 
 #include "bindings.h"
-#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/model/paper_fitness.h"
 #include "hmlvs/solvers/lm.h"
 #include "hmlvs/solvers/parallel.h"
 #include "hmlvs/solvers/search.h"
@@ -20,6 +20,9 @@
 namespace py = pybind11;
 
 namespace hmlvs::python {
+
+using namespace hmlvs::paper;
+using namespace hmlvs::solvers;
 
 namespace {
 

@@ -12,7 +12,9 @@
 #include "hmlvs/solvers/parallel.h"
 #include "hmlvs/solvers/random.h"
 
-namespace hmlvs {
+namespace hmlvs::solvers {
+
+using namespace hmlvs::paper;
 
 namespace {
 
@@ -399,4 +401,4 @@ RandomSearchResult RunRandomSearch(const FitnessData& data, const RandomSearchOp
   return result;
 }
 
-}  // namespace hmlvs
+}  // namespace hmlvs::solvers

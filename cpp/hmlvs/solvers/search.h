@@ -9,9 +9,9 @@
 #include <string>
 #include <vector>
 
-#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/model/paper_fitness.h"
 
-namespace hmlvs {
+namespace hmlvs::solvers {
 
 /// Progress of a long solve; a callback returning false stops the solve early (e.g. Ctrl-C).
 struct Progress {
@@ -33,17 +33,18 @@ struct PsoOptions {
   int runs = 1;                 ///< independent runs (different random streams)
   int threads = 0;              ///< <= 0: all hardware threads
   std::uint64_t seed = 0;
-  Vector14d lower = Vector14d::Zero();  ///< search bounds (lower == upper holds it fixed)
-  Vector14d upper = Vector14d::Zero();
+  paper::Vector14d lower =
+      paper::Vector14d::Zero();  ///< search bounds (lower == upper holds it fixed)
+  paper::Vector14d upper = paper::Vector14d::Zero();
   /// Box the initial swarm is drawn from (e.g. Eq. 22 around a nominal vector); it is
   /// intersected with the search bounds. Unset (lower > upper): the search bounds.
-  Vector14d init_lower = Vector14d::Constant(1.0);
-  Vector14d init_upper = Vector14d::Constant(-1.0);
+  paper::Vector14d init_lower = paper::Vector14d::Constant(1.0);
+  paper::Vector14d init_upper = paper::Vector14d::Constant(-1.0);
   int progress_every = 100;  ///< iterations between progress callbacks
 };
 
 struct PsoRun {
-  Vector14d best = Vector14d::Zero();
+  paper::Vector14d best = paper::Vector14d::Zero();
   double best_fitness = 0.0;
   int iterations = 0;
   std::string termination;      ///< "max_iterations", "target_fitness" or "cancelled"
@@ -59,19 +60,20 @@ struct PsoResult {
 };
 
 /// Throws std::invalid_argument for bad options (bounds reversed or not finite, swarm < 2, ...).
-PsoResult RunPso(const FitnessData& data, const PsoOptions& options,
+PsoResult RunPso(const paper::FitnessData& data, const PsoOptions& options,
                  const ProgressCallback& progress = {});
 
 struct RandomSearchOptions {
   long long evaluations = 1000000;
   int threads = 0;
   std::uint64_t seed = 0;
-  Vector14d lower = Vector14d::Zero();  ///< candidates are uniform in [lower, upper] (Eq. 22)
-  Vector14d upper = Vector14d::Zero();
+  paper::Vector14d lower =
+      paper::Vector14d::Zero();  ///< candidates are uniform in [lower, upper] (Eq. 22)
+  paper::Vector14d upper = paper::Vector14d::Zero();
 };
 
 struct RandomSearchResult {
-  Vector14d best = Vector14d::Zero();
+  paper::Vector14d best = paper::Vector14d::Zero();
   double best_fitness = 0.0;
   long long evaluations = 0;
   long long best_index = -1;  ///< which evaluation found the best
@@ -80,7 +82,8 @@ struct RandomSearchResult {
   bool cancelled = false;
 };
 
-RandomSearchResult RunRandomSearch(const FitnessData& data, const RandomSearchOptions& options,
+RandomSearchResult RunRandomSearch(const paper::FitnessData& data,
+                                   const RandomSearchOptions& options,
                                    const ProgressCallback& progress = {});
 
-}  // namespace hmlvs
+}  // namespace hmlvs::solvers

@@ -1,11 +1,11 @@
-#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/model/paper_fitness.h"
 
 #include <cmath>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
 
-namespace hmlvs {
+namespace hmlvs::paper {
 
 FitnessData::FitnessData(PixelsRef pixels, PosesRef poses, Points3Ref references) {
   const Eigen::Index m = pixels.rows();
@@ -15,7 +15,7 @@ FitnessData::FitnessData(PixelsRef pixels, PosesRef poses, Points3Ref references
         << references.rows() << "; they must match";
     throw std::invalid_argument(msg.str());
   }
-  ValidatePoses(poses);
+  geometry::ValidatePoses(poses);
   for (Eigen::Index i = 0; i < m; ++i) {
     if (!pixels.row(i).allFinite() || !references.row(i).allFinite()) {
       std::ostringstream msg;
@@ -29,11 +29,8 @@ FitnessData::FitnessData(PixelsRef pixels, PosesRef poses, Points3Ref references
   hy_.resize(m);
   hz_.resize(m);
   for (Eigen::Index i = 0; i < m; ++i) {
-    const double* p = poses.row(i).data();
-    Eigen::Matrix3d r;
-    r << p[0], p[1], p[2], p[4], p[5], p[6], p[8], p[9], p[10];
-    const Eigen::Vector3d h =
-        r.transpose() * (references.row(i).transpose() - Eigen::Vector3d(p[3], p[7], p[11]));
+    const Eigen::Vector3d h = geometry::PoseRotation(poses, i).transpose() *
+                              (references.row(i).transpose() - geometry::PosePosition(poses, i));
     u_[i] = pixels(i, 0);
     v_[i] = pixels(i, 1);
     hx_[i] = h[0];
@@ -88,7 +85,7 @@ double Kernel(const double* q, const Eigen::Matrix3d& hand_from_camera_rot, doub
 }  // namespace
 
 double FitnessData::Evaluate(const double* q) const {
-  const Eigen::Matrix3d rc = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
+  const Eigen::Matrix3d rc = geometry::RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
   double min_plane = 0.0;
   const double sum = Kernel(q, rc, std::tan(q[kTheta]), u_.data(), v_.data(), hx_.data(),
                             hy_.data(), hz_.data(), size(), &min_plane);
@@ -97,7 +94,7 @@ double FitnessData::Evaluate(const double* q) const {
 }
 
 Eigen::VectorXd FitnessData::PointErrors(const double* q) const {
-  const Eigen::Matrix3d rc = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
+  const Eigen::Matrix3d rc = geometry::RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
   const double tan_theta = std::tan(q[kTheta]);
   Eigen::VectorXd out(size());
   for (Eigen::Index i = 0; i < size(); ++i) {
@@ -111,4 +108,4 @@ Eigen::VectorXd FitnessData::PointErrors(const double* q) const {
   return out;
 }
 
-}  // namespace hmlvs
+}  // namespace hmlvs::paper

@@ -1,12 +1,12 @@
-// The general sensor model (model "opencv"): OpenCV's pinhole camera with Brown-Conrady
-// distortion, a laser plane with three degrees of freedom and a hand-eye transform with any
-// rotation.
+// The general sensor model (model "opencv", namespace hmlvs::opencv): OpenCV's pinhole camera
+// with Brown-Conrady distortion, a laser plane with three degrees of freedom and a hand-eye
+// transform with any rotation.
 //
 // Units: mm and pixels; pixel centres at integer coordinates (u = column, v = row), as in
 // cv2.projectPoints. Intrinsics are 9 numbers [fx, fy, cx, cy, k1, k2, p1, p2, k3]. The laser
 // plane is n . X + d = 0 in the camera frame, with n a unit vector.
 //
-// As in model.h, the single-point functions are templates on the scalar, so that one
+// As in paper.h, the single-point functions are templates on the scalar, so that one
 // formulation serves plain evaluation, calibration (ceres::Jet) and measurement.
 #pragma once
 
@@ -16,9 +16,10 @@
 #include <cstdint>
 #include <vector>
 
-#include "hmlvs/model/model.h"
+#include "hmlvs/geometry/geometry.h"
+#include "hmlvs/model/arrays.h"
 
-namespace hmlvs::general {
+namespace hmlvs::opencv {
 
 constexpr int kNumIntrinsics = 9;
 enum Intrinsic : int { kFx = 0, kFy, kCx, kCy, kK1, kK2, kP1, kP2, kK3 };
@@ -81,14 +82,8 @@ void CameraFromBoard(const T* hand_from_camera_q, const T* hand_from_camera_t,
                      Eigen::Matrix<T, 3, 1>* translation) {
   using Mat3 = Eigen::Matrix<T, 3, 3>;
   using Vec3 = Eigen::Matrix<T, 3, 1>;
-  const Mat3 r_hc = Eigen::Quaternion<T>(hand_from_camera_q[3], hand_from_camera_q[0],
-                                         hand_from_camera_q[1], hand_from_camera_q[2])
-                        .normalized()
-                        .toRotationMatrix();
-  const Mat3 r_bb = Eigen::Quaternion<T>(base_from_board_q[3], base_from_board_q[0],
-                                         base_from_board_q[1], base_from_board_q[2])
-                        .normalized()
-                        .toRotationMatrix();
+  const Mat3 r_hc = geometry::QuaternionRotation(hand_from_camera_q);
+  const Mat3 r_bb = geometry::QuaternionRotation(base_from_board_q);
   const Mat3 r_hand_base = base_from_hand_r.transpose().cast<T>();
   const Vec3 t_hc(hand_from_camera_t[0], hand_from_camera_t[1], hand_from_camera_t[2]);
   const Vec3 t_bb(base_from_board_t[0], base_from_board_t[1], base_from_board_t[2]);
@@ -124,4 +119,4 @@ PointsResult LaserPointsInBase(const Vector9d& intrinsics, const Eigen::Vector4d
                                const Eigen::Matrix4d& hand_from_camera, PixelsRef pixels,
                                PosesRef base_from_hand, bool throw_on_invalid);
 
-}  // namespace hmlvs::general
+}  // namespace hmlvs::opencv

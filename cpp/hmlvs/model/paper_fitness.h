@@ -1,13 +1,13 @@
-// The calibration objective F(q) = 1/2 sum_i ||E_i||^2 over m reference points (paper Eq. 13),
-// laid out for the optimizers' hot loop.
+// The paper model's calibration objective F(q) = 1/2 sum_i ||E_i||^2 over m reference points (paper
+// Eq. 13), laid out for the optimizers' hot loop.
 #pragma once
 
 #include <Eigen/Core>
 #include <vector>
 
-#include "hmlvs/model/model.h"
+#include "hmlvs/model/paper.h"
 
-namespace hmlvs {
+namespace hmlvs::paper {
 
 /// Calibration points precomputed once per data set. Each reference point is stored in its
 /// hand frame, h_i = R_N^T (P_i - P_N); since R_N is a rotation, ||E_i|| = ||h_i - (R_C cP + t)||
@@ -35,4 +35,4 @@ class FitnessData {
   std::vector<double> u_, v_, hx_, hy_, hz_;
 };
 
-}  // namespace hmlvs
+}  // namespace hmlvs::paper
