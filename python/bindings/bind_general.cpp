@@ -64,15 +64,9 @@ void BindGeneral(py::module_& m) {
       .def_readwrite("function_tolerance", &JointOptions::function_tolerance)
       .def_readwrite("parameter_tolerance", &JointOptions::parameter_tolerance)
       .def_readwrite("gradient_tolerance", &JointOptions::gradient_tolerance);
-  py::class_<JointResult>(m, "_JointResult")
-      .def_readonly("state", &JointResult::state)
-      .def_readonly("initial_cost", &JointResult::initial_cost)
-      .def_readonly("final_cost", &JointResult::final_cost)
-      .def_readonly("iterations", &JointResult::iterations)
-      .def_readonly("termination", &JointResult::termination)
-      .def_readonly("message", &JointResult::message)
-      .def_readonly("usable", &JointResult::usable)
-      .def_readonly("seconds", &JointResult::seconds);
+  // _SolveSummary: bound by BindSolvers, which runs first (main.cpp)
+  py::class_<JointResult, SolveSummary>(m, "_JointResult")
+      .def_readonly("state", &JointResult::state);
   m.def("_solve_joint", &SolveJoint, py::arg("views"), py::arg("initial"), py::arg("options"),
         release);
   m.def(

@@ -206,15 +206,17 @@ void BindSolvers(py::module_& m) {
       .def_readwrite("function_tolerance", &LmOptions::function_tolerance)
       .def_readwrite("parameter_tolerance", &LmOptions::parameter_tolerance)
       .def_readwrite("gradient_tolerance", &LmOptions::gradient_tolerance);
-  py::class_<LmResult>(m, "_LmResult")
-      .def_readonly("params", &LmResult::params)
-      .def_readonly("initial_cost", &LmResult::initial_cost)
-      .def_readonly("final_cost", &LmResult::final_cost)
-      .def_readonly("iterations", &LmResult::iterations)
-      .def_readonly("termination", &LmResult::termination)
-      .def_readonly("message", &LmResult::message)
-      .def_readonly("usable", &LmResult::usable)
-      .def_readonly("seconds", &LmResult::seconds);
+  // The summary of a Ceres solve, the base of _LmResult and of _JointResult (bind_general.cpp,
+  // bound after this).
+  py::class_<SolveSummary>(m, "_SolveSummary")
+      .def_readonly("initial_cost", &SolveSummary::initial_cost)
+      .def_readonly("final_cost", &SolveSummary::final_cost)
+      .def_readonly("iterations", &SolveSummary::iterations)
+      .def_readonly("termination", &SolveSummary::termination)
+      .def_readonly("message", &SolveSummary::message)
+      .def_readonly("usable", &SolveSummary::usable)
+      .def_readonly("seconds", &SolveSummary::seconds);
+  py::class_<LmResult, SolveSummary>(m, "_LmResult").def_readonly("params", &LmResult::params);
   m.def("_run_lm", &RunLm, py::arg("data"), py::arg("initial"), py::arg("options"),
         py::call_guard<py::gil_scoped_release>());
   m.def(

@@ -82,18 +82,6 @@ void CheckInput(const std::vector<JointView>& views, const JointState& s, const 
   }
 }
 
-ceres::LossFunction* MakeJointLoss(const JointOptions& o) {
-  switch (o.loss) {
-    case LossKind::kHuber:
-      return new ceres::HuberLoss(o.loss_scale);
-    case LossKind::kCauchy:
-      return new ceres::CauchyLoss(o.loss_scale);
-    case LossKind::kNone:
-      break;
-  }
-  return nullptr;
-}
-
 // The problem and its parameter blocks; built the same way for solving and for the Jacobian.
 class JointProblem {
  public:
@@ -104,96 +92,15 @@ class JointProblem {
     const double n = s.laser_plane.head<3>().norm();
     normal_ = s.laser_plane.head<3>() / n;
     offset_ = s.laser_plane[3] / n;
-    const bool soft = SoftChain(o);
-    if (!o.chain || soft) {
+    if (!o.chain || SoftChain(o)) {
       for (const auto& m : s.camera_from_board) views_pose_.emplace_back(m);
     }
     ceres::Problem::Options popt;
     popt.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     problem_ = std::make_unique<ceres::Problem>(popt);
-    loss_.reset(MakeJointLoss(o));
-    const double wc = 1.0 / o.corner_sigma, wl = 1.0 / o.laser_sigma;
-    for (std::size_t i = 0; i < views.size(); ++i) {
-      const JointView* v = &views[i];
-      const int nc = 2 * static_cast<int>(v->corner_pixels.rows());
-      const int nl = static_cast<int>(v->laser_pixels.rows());
-      if (o.chain && !soft) {
-        if (nc > 0) {  // none in a laser-only view
-          AddBlock(NewChainCornerCost(v, wc),
-                   {intrinsics_.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
-                    board_.t.data()},
-                   nc);
-        }
-        if (o.laser && nl > 0) {
-          AddBlock(NewLaserCost(v, wl, true),
-                   {intrinsics_.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
-                    board_.t.data(), normal_.data(), &offset_},
-                   nl);
-        }
-        continue;
-      }
-      // The view's own board pose: camera mode, or uncertain robot poses (tied to the chain).
-      PoseBlocks& p = views_pose_[i];
-      if (nc > 0) {  // none in a laser-only view
-        AddBlock(NewFreeCornerCost(v, wc), {intrinsics_.data(), p.q.data(), p.t.data()}, nc);
-      }
-      if (o.laser && nl > 0) {
-        AddBlock(NewLaserCost(v, wl, false),
-                 {intrinsics_.data(), p.q.data(), p.t.data(), normal_.data(), &offset_}, nl);
-      }
-      if (soft) {
-        AddBlock(NewPosePriorCost(v, 1.0 / o.pose_sigma_r, 1.0 / o.pose_sigma_t),
-                 {p.q.data(), p.t.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
-                  board_.t.data()},
-                 6);
-      }
-    }
-    // Manifolds and what is held fixed, in the order of the Jacobian's columns.
-    std::vector<int> fixed;
-    for (int k = 0; k < kNumIntrinsics; ++k) {
-      if (o.fixed[k]) fixed.push_back(k);
-    }
-    static const char* names[kNumIntrinsics] = {"fx", "fy", "cx", "cy", "k1",
-                                                "k2", "p1", "p2", "k3"};
-    if (static_cast<int>(fixed.size()) == kNumIntrinsics) {
-      problem_->SetParameterBlockConstant(intrinsics_.data());
-    } else {
-      if (!fixed.empty()) {
-        problem_->SetManifold(intrinsics_.data(), new ceres::SubsetManifold(kNumIntrinsics, fixed));
-      }
-      free_.push_back(intrinsics_.data());
-      for (int k = 0; k < kNumIntrinsics; ++k) {
-        if (!o.fixed[k]) names_.push_back(names[k]);
-      }
-    }
-    auto add_pose = [&](PoseBlocks& p, bool constant, const std::string& prefix) {
-      problem_->SetManifold(p.q.data(), new ceres::EigenQuaternionManifold());
-      if (constant) {
-        problem_->SetParameterBlockConstant(p.q.data());
-        problem_->SetParameterBlockConstant(p.t.data());
-        return;
-      }
-      free_.push_back(p.q.data());
-      free_.push_back(p.t.data());
-      rotation_columns_.push_back(static_cast<int>(names_.size()));
-      for (const char* c : {"rx", "ry", "rz", "tx", "ty", "tz"}) names_.push_back(prefix + c);
-    };
-    if (o.chain) {
-      add_pose(hand_eye_, o.hand_eye_known, "hand_");
-      add_pose(board_, o.board_pose_known, "board_");
-    }
-    for (std::size_t i = 0; i < views_pose_.size(); ++i) {
-      add_pose(views_pose_[i], false, "view" + std::to_string(i) + "_");
-    }
-    if (o.laser && o.plane_known && problem_->HasParameterBlock(normal_.data())) {
-      problem_->SetParameterBlockConstant(normal_.data());
-      problem_->SetParameterBlockConstant(&offset_);
-    } else if (o.laser && problem_->HasParameterBlock(normal_.data())) {
-      problem_->SetManifold(normal_.data(), new ceres::SphereManifold<3>());
-      free_.push_back(normal_.data());
-      free_.push_back(&offset_);
-      for (const char* c : {"plane_n1", "plane_n2", "plane_d"}) names_.push_back(c);
-    }
+    loss_ = MakeLoss(o.loss, o.loss_scale, "sigmas");
+    for (std::size_t i = 0; i < views.size(); ++i) AddView(views[i], i);
+    HoldAndName();
   }
 
   ceres::Problem& problem() { return *problem_; }
@@ -216,6 +123,95 @@ class JointProblem {
   void AddBlock(ceres::CostFunction* cost, const std::vector<double*>& blocks, int residuals) {
     problem_->AddResidualBlock(cost, loss_.get(), blocks);
     num_residuals_ += residuals;
+  }
+
+  // The residual blocks of view i: its corners, its stripe and, with uncertain robot poses, the
+  // robot pose error its own board pose implies.
+  void AddView(const JointView& view, std::size_t i) {
+    const JointOptions& o = options_;
+    const JointView* v = &view;
+    const double wc = 1.0 / o.corner_sigma, wl = 1.0 / o.laser_sigma;
+    const int nc = 2 * static_cast<int>(v->corner_pixels.rows());
+    const int nl = static_cast<int>(v->laser_pixels.rows());
+    const bool soft = SoftChain(o);
+    if (o.chain && !soft) {
+      if (nc > 0) {  // none in a laser-only view
+        AddBlock(NewChainCornerCost(v, wc),
+                 {intrinsics_.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
+                  board_.t.data()},
+                 nc);
+      }
+      if (o.laser && nl > 0) {
+        AddBlock(NewLaserCost(v, wl, true),
+                 {intrinsics_.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
+                  board_.t.data(), normal_.data(), &offset_},
+                 nl);
+      }
+      return;
+    }
+    // The view's own board pose: camera mode, or uncertain robot poses (tied to the chain).
+    PoseBlocks& p = views_pose_[i];
+    if (nc > 0) {  // none in a laser-only view
+      AddBlock(NewFreeCornerCost(v, wc), {intrinsics_.data(), p.q.data(), p.t.data()}, nc);
+    }
+    if (o.laser && nl > 0) {
+      AddBlock(NewLaserCost(v, wl, false),
+               {intrinsics_.data(), p.q.data(), p.t.data(), normal_.data(), &offset_}, nl);
+    }
+    if (soft) {
+      AddBlock(NewPosePriorCost(v, 1.0 / o.pose_sigma_r, 1.0 / o.pose_sigma_t),
+               {p.q.data(), p.t.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
+                board_.t.data()},
+               6);
+    }
+  }
+
+  // Manifolds and what is held fixed, and the names of the free unknowns in the order of the
+  // Jacobian's columns.
+  void HoldAndName() {
+    const JointOptions& o = options_;
+    std::vector<int> fixed;
+    for (int k = 0; k < kNumIntrinsics; ++k) {
+      if (o.fixed[k]) fixed.push_back(k);
+    }
+    static const char* names[kNumIntrinsics] = {"fx", "fy", "cx", "cy", "k1",
+                                                "k2", "p1", "p2", "k3"};
+    if (HoldEntries(problem_.get(), intrinsics_.data(), kNumIntrinsics, fixed)) {
+      free_.push_back(intrinsics_.data());
+      for (int k = 0; k < kNumIntrinsics; ++k) {
+        if (!o.fixed[k]) names_.push_back(names[k]);
+      }
+    }
+    if (o.chain) {
+      AddPose(hand_eye_, o.hand_eye_known, "hand_");
+      AddPose(board_, o.board_pose_known, "board_");
+    }
+    for (std::size_t i = 0; i < views_pose_.size(); ++i) {
+      AddPose(views_pose_[i], false, "view" + std::to_string(i) + "_");
+    }
+    if (o.laser && o.plane_known && problem_->HasParameterBlock(normal_.data())) {
+      problem_->SetParameterBlockConstant(normal_.data());
+      problem_->SetParameterBlockConstant(&offset_);
+    } else if (o.laser && problem_->HasParameterBlock(normal_.data())) {
+      problem_->SetManifold(normal_.data(), new ceres::SphereManifold<3>());
+      free_.push_back(normal_.data());
+      free_.push_back(&offset_);
+      for (const char* c : {"plane_n1", "plane_n2", "plane_d"}) names_.push_back(c);
+    }
+  }
+
+  // A transform's blocks: on SO(3) x R^3, held or free (its six columns named `prefix` rx ...).
+  void AddPose(PoseBlocks& p, bool constant, const std::string& prefix) {
+    problem_->SetManifold(p.q.data(), new ceres::EigenQuaternionManifold());
+    if (constant) {
+      problem_->SetParameterBlockConstant(p.q.data());
+      problem_->SetParameterBlockConstant(p.t.data());
+      return;
+    }
+    free_.push_back(p.q.data());
+    free_.push_back(p.t.data());
+    rotation_columns_.push_back(static_cast<int>(names_.size()));
+    for (const char* c : {"rx", "ry", "rz", "tx", "ty", "tz"}) names_.push_back(prefix + c);
   }
 
   JointOptions options_;
@@ -254,30 +250,15 @@ JointResult SolveJoint(const std::vector<JointView>& views, const JointState& in
         "the initial state cannot be evaluated: a board corner lies behind the camera, or a "
         "stripe pixel's ray misses its view's board plane or cannot be undistorted");
   }
-  ceres::Solver::Options sopt;
-  sopt.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
   // Uncertain robot poses tie every view's pose to the chain's: dense QR, which, unlike the
   // Schur complement's Cholesky factorisation, copes with the poorly conditioned systems of
   // laser-only views (whose poses the priors and a stripe alone determine).
-  sopt.linear_solver_type = options.chain ? ceres::DENSE_QR : ceres::DENSE_SCHUR;
-  sopt.max_num_iterations = options.max_iterations;
-  sopt.function_tolerance = options.function_tolerance;
-  sopt.parameter_tolerance = options.parameter_tolerance;
-  sopt.gradient_tolerance = options.gradient_tolerance;
-  sopt.num_threads = 1;  // the cost sums of several threads would depend on their schedule
-  sopt.logging_type = ceres::SILENT;
-  ceres::Solver::Summary summary;
-  ceres::Solve(sopt, &jp.problem(), &summary);
-
+  const StopRules stop{options.max_iterations, options.function_tolerance,
+                       options.parameter_tolerance, options.gradient_tolerance};
   JointResult r;
+  static_cast<SolveSummary&>(r) =
+      SolveLm(&jp.problem(), stop, options.chain ? ceres::DENSE_QR : ceres::DENSE_SCHUR, start);
   r.state = jp.State();
-  r.initial_cost = summary.initial_cost;
-  r.final_cost = summary.final_cost;
-  r.iterations = static_cast<int>(summary.iterations.size()) - 1;
-  r.termination = ceres::TerminationTypeToString(summary.termination_type);
-  r.message = summary.message;
-  r.usable = summary.IsSolutionUsable();
-  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return r;
 }
 

@@ -20,7 +20,7 @@
 #include <vector>
 
 #include "hmlvs/model/opencv.h"
-#include "hmlvs/solvers/lm.h"
+#include "hmlvs/solvers/solve.h"
 
 namespace hmlvs::solvers {
 
@@ -68,15 +68,9 @@ struct JointOptions {
   double gradient_tolerance = 1e-14;
 };
 
-struct JointResult {
+/// The solve's summary (Ceres' costs: 1/2 sum of squared weighted residuals) and its result.
+struct JointResult : SolveSummary {
   JointState state;
-  double initial_cost = 0.0;  ///< Ceres' cost (1/2 sum of squared weighted residuals)
-  double final_cost = 0.0;
-  int iterations = 0;
-  std::string termination;
-  std::string message;
-  bool usable = false;
-  double seconds = 0.0;
 };
 
 /// Solves the joint problem from `initial`. Throws std::invalid_argument for bad input (views

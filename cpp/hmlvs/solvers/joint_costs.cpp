@@ -98,6 +98,28 @@ struct FreeCorners {
   }
 };
 
+// One stripe pixel's row of d(residual)/d(intrinsics), times w, from the residual's derivatives
+// drdx, drdy with respect to the undistorted point (x, y) and the distortion's Jacobian jd
+// there (row-major 2x2), through the implicit function theorem (LaserCost).
+void IntrinsicsRow(const double* in, double u, double v, double x, double y, const double* jd,
+                   double drdx, double drdy, double w, double* row) {
+  const double det = jd[0] * jd[3] - jd[1] * jd[2];
+  // g = (dr/dx, dr/dy) Jd^-1, so that dr/din = -g (d distort/d in - d m/d in)
+  const double g0 = (drdx * jd[3] - drdy * jd[2]) / det;
+  const double g1 = (-drdx * jd[1] + drdy * jd[0]) / det;
+  const double r2 = x * x + y * y;
+  const double mx = (u - in[kCx]) / in[kFx], my = (v - in[kCy]) / in[kFy];
+  row[kFx] = -g0 * (mx / in[kFx]) * w;  // -(g . (0 - dm/dfx)), dm_x/dfx = -mx/fx
+  row[kFy] = -g1 * (my / in[kFy]) * w;
+  row[kCx] = -g0 / in[kFx] * w;  // dm_x/dcx = -1/fx
+  row[kCy] = -g1 / in[kFy] * w;
+  row[kK1] = -(g0 * x + g1 * y) * r2 * w;
+  row[kK2] = -(g0 * x + g1 * y) * r2 * r2 * w;
+  row[kK3] = -(g0 * x + g1 * y) * r2 * r2 * r2 * w;
+  row[kP1] = -(g0 * 2.0 * x * y + g1 * (r2 + 2.0 * y * y)) * w;
+  row[kP2] = -(g0 * (r2 + 2.0 * x * x) + g1 * 2.0 * x * y) * w;
+}
+
 // The laser residuals of one view with an analytic Jacobian (the autodiff version of
 // the same residual costs ~10x more: a Jet of 27 numbers through every pixel's arithmetic).
 //
@@ -170,22 +192,7 @@ class LaserCost final : public ceres::CostFunction {
       const double drdx = -ob / nn * (n[0] * b - a * nb[0]) / (b * b);
       const double drdy = -ob / nn * (n[1] * b - a * nb[1]) / (b * b);
       if (jacobians[0] != nullptr) {
-        const double det = jd[0] * jd[3] - jd[1] * jd[2];
-        // g = (dr/dx, dr/dy) Jd^-1, so that dr/din = -g (d distort/d in - d m/d in)
-        const double g0 = (drdx * jd[3] - drdy * jd[2]) / det;
-        const double g1 = (-drdx * jd[1] + drdy * jd[0]) / det;
-        const double r2 = x * x + y * y;
-        const double mx = (u - in[kCx]) / in[kFx], my = (v - in[kCy]) / in[kFy];
-        double* row = jacobians[0] + i * kNumIntrinsics;
-        row[kFx] = -g0 * (mx / in[kFx]) * w_;  // -(g . (0 - dm/dfx)), dm_x/dfx = -mx/fx
-        row[kFy] = -g1 * (my / in[kFy]) * w_;
-        row[kCx] = -g0 / in[kFx] * w_;  // dm_x/dcx = -1/fx
-        row[kCy] = -g1 / in[kFy] * w_;
-        row[kK1] = -(g0 * x + g1 * y) * r2 * w_;
-        row[kK2] = -(g0 * x + g1 * y) * r2 * r2 * w_;
-        row[kK3] = -(g0 * x + g1 * y) * r2 * r2 * r2 * w_;
-        row[kP1] = -(g0 * 2.0 * x * y + g1 * (r2 + 2.0 * y * y)) * w_;
-        row[kP2] = -(g0 * (r2 + 2.0 * x * x) + g1 * 2.0 * x * y) * w_;
+        IntrinsicsRow(in, u, v, x, y, jd, drdx, drdy, w_, jacobians[0] + i * kNumIntrinsics);
       }
       // dr/d(nb, ob)
       const double k_nb = ob * a / (nn * b * b);

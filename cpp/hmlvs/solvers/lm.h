@@ -13,11 +13,11 @@
 #include <string>
 
 #include "hmlvs/model/paper_fitness.h"
+#include "hmlvs/solvers/solve.h"
 
 namespace hmlvs::solvers {
 
 enum class LmMode { kModern, kPaper };
-enum class LossKind { kNone, kHuber, kCauchy };
 
 struct LmOptions {
   LmMode mode = LmMode::kModern;
@@ -37,15 +37,10 @@ struct LmOptions {
   bool paper_fast_cost = true;
 };
 
-struct LmResult {
+/// The solve's summary, with initial_cost and final_cost the objective F before and after
+/// (1/2 sum ||E||^2, without any robust loss), and the parameters found.
+struct LmResult : SolveSummary {
   paper::Vector14d params = paper::Vector14d::Zero();
-  double initial_cost = 0.0;  ///< F at the start (1/2 sum ||E||^2, before any robust loss)
-  double final_cost = 0.0;    ///< F at the end
-  int iterations = 0;
-  std::string termination;  ///< Ceres' termination type, e.g. "CONVERGENCE"
-  std::string message;      ///< Ceres' explanation
-  bool usable = false;      ///< Ceres' IsSolutionUsable()
-  double seconds = 0.0;
 };
 
 /// Throws std::invalid_argument for an initial vector that is not valid (a ray misses the laser
