@@ -23,12 +23,10 @@ namespace {
 using namespace hmlvs::paper;
 using namespace hmlvs::solvers;
 
+using test::BitIdentical;
 using test::Generic;
 using test::MakeScene;
-
-bool BitIdentical(const Vector14d& a, const Vector14d& b) {
-  return std::memcmp(a.data(), b.data(), sizeof(double) * kNumParams) == 0;
-}
+using test::PerturbedTruth;
 
 PsoOptions SmallPso(int runs, int threads) {
   PsoOptions o;
@@ -119,18 +117,6 @@ TEST(Solvers, RandomSearchSameSeedSameResultForAnyThreadCount) {
     EXPECT_TRUE(BitIdentical(other.best, reference.best)) << threads << " threads";
     EXPECT_EQ(other.best_fitness, reference.best_fitness);
   }
-}
-
-// Truth perturbed by up to 1e-3 relative (absolute 1e-3 for the parameters whose truth is small).
-Vector14d PerturbedTruth(const Vector14d& truth, unsigned seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(-1e-3, 1e-3);
-  Vector14d q = truth;
-  for (int j = 0; j < kNumParams; ++j) {
-    q[j] = std::abs(truth[j]) > 1.0 ? truth[j] * (1.0 + u(rng)) : truth[j] + u(rng);
-  }
-  q[kSu] = truth[kSu];  // the scale gauge (docs/model.md): Su from the datasheet, held fixed
-  return q;
 }
 
 double HeldOutRms(const Vector14d& q, const test::Scene& held_out) {

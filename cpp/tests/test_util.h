@@ -3,6 +3,7 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <cstring>
 #include <random>
 
 #include "hmlvs/model/paper.h"
@@ -63,6 +64,26 @@ inline Scene MakeScene(const paper::Vector14d& q, int m, unsigned seed) {
   }
   s.points = paper::BasePointsFromPixels(q, s.pixels, s.poses, /*throw_on_invalid=*/true).points;
   return s;
+}
+
+/// Truth perturbed by up to 1e-3 relative (absolute 1e-3 for the parameters whose truth is
+/// small), Su held (the scale gauge, docs/model.md: Su from the datasheet, held fixed).
+inline paper::Vector14d PerturbedTruth(const paper::Vector14d& truth, unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1e-3, 1e-3);
+  paper::Vector14d q = truth;
+  for (int j = 0; j < paper::kNumParams; ++j) {
+    q[j] = std::abs(truth[j]) > 1.0 ? truth[j] * (1.0 + u(rng)) : truth[j] + u(rng);
+  }
+  q[paper::kSu] = truth[paper::kSu];
+  return q;
+}
+
+/// Whether two vectors hold the same doubles to the bit.
+template <typename Vector>
+bool BitIdentical(const Vector& a, const Vector& b) {
+  return a.size() == b.size() &&
+         std::memcmp(a.data(), b.data(), sizeof(double) * static_cast<std::size_t>(a.size())) == 0;
 }
 
 }  // namespace hmlvs::test

@@ -3,18 +3,15 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
-#include <algorithm>
-#include <atomic>
-#include <limits>
 #include <memory>
-#include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "bindings.h"
 #include "hmlvs/model/paper_fitness.h"
 #include "hmlvs/solvers/lm.h"
-#include "hmlvs/solvers/parallel.h"
+#include "hmlvs/solvers/multistart.h"
 #include "hmlvs/solvers/search.h"
 
 namespace py = pybind11;
@@ -221,60 +218,18 @@ void BindSolvers(py::module_& m) {
         py::call_guard<py::gil_scoped_release>());
   m.def(
       "_run_lm_many",
-      [](const FitnessData& data,
-         const Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, kNumParams, Eigen::RowMajor>>&
-             initials,
-         const LmOptions& o, int threads, py::object progress) {
-        // Independent LM solves from many starts (the paper's 1000 runs), in parallel. The
-        // optional progress callable (done, total, best_cost) is called by member 0 (the
-        // caller's thread) after each of its solves; when it returns False or raises (Ctrl-C
-        // included), no further start is taken and the starts not solved get the error
-        // "cancelled". A solve under way runs to its end.
-        const Eigen::Index n = initials.rows();
-        std::vector<LmResult> out(n);
-        std::vector<std::string> errors(n);
+      [](const FitnessData& data, StartsRef initials, const LmOptions& o, int threads,
+         py::object progress) {
+        // RunLmMany (multistart.h); the progress callable (done, total, best_cost) may stop it.
         PyProgress wrapper(std::move(progress));
         ProgressCallback cb = wrapper.callback();
+        MultiStartResult r;
         {
           py::gil_scoped_release release;
-          const int team = std::max(1, std::min<int>(ResolveThreads(threads), static_cast<int>(n)));
-          std::atomic<Eigen::Index> next(0);
-          std::atomic<long long> done(0);
-          std::atomic<bool> cancel(false);
-          std::vector<std::atomic<bool>> started(n);
-          for (auto& s : started) s.store(false);
-          std::mutex best_mutex;
-          double best = std::numeric_limits<double>::infinity();
-          RunTeam(team, [&](int member, SpinBarrier&) {
-            for (Eigen::Index i = next.fetch_add(1); i < n && !cancel.load();
-                 i = next.fetch_add(1)) {
-              started[i].store(true);
-              try {
-                out[i] = RunLm(data, initials.row(i).transpose(), o);
-                std::lock_guard<std::mutex> lock(best_mutex);
-                best = std::min(best, out[i].final_cost);
-              } catch (const std::exception& e) {
-                errors[i] = e.what();
-              }
-              const long long d = done.fetch_add(1) + 1;
-              if (member == 0 && cb) {
-                Progress p;
-                p.done = d;
-                p.total = n;
-                {
-                  std::lock_guard<std::mutex> lock(best_mutex);
-                  p.best_fitness = best;
-                }
-                if (!cb(p)) cancel.store(true);
-              }
-            }
-          });
-          for (Eigen::Index i = 0; i < n; ++i) {
-            if (!started[i].load()) errors[i] = "cancelled";
-          }
+          r = RunLmMany(data, initials, o, threads, cb);
         }
         wrapper.rethrow();
-        return std::make_pair(out, errors);
+        return std::make_pair(std::move(r.results), std::move(r.errors));
       },
       py::arg("data"), py::arg("initials"), py::arg("options"), py::arg("threads") = 0,
       py::arg("progress") = py::none());

@@ -10,16 +10,9 @@
 #include <vector>
 
 #include "hmlvs/model/paper_fitness.h"
+#include "hmlvs/solvers/progress.h"
 
 namespace hmlvs::solvers {
-
-/// Progress of a long solve; a callback returning false stops the solve early (e.g. Ctrl-C).
-struct Progress {
-  long long done = 0;   ///< iterations (PSO, summed over runs) or evaluations done
-  long long total = 0;  ///< the same, when finished
-  double best_fitness = 0.0;
-};
-using ProgressCallback = std::function<bool(const Progress&)>;
 
 struct PsoOptions {
   int swarm_size = 50;
