@@ -113,7 +113,7 @@ int main(int argc, char** argv) {
         q[d] = lo[d] + std::uniform_real_distribution<double>(0, 1)(rng) * (hi[d] - lo[d]);
   }
   for (int threads : {1, hw}) {
-    hmlvs::solvers::PsoOptions o;
+    hmlvs::solvers::PsoOptions<hmlvs::paper::kNumParams> o;
     o.lower = lo;
     o.upper = hi;
     o.threads = threads;

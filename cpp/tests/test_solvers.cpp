@@ -28,8 +28,8 @@ using test::Generic;
 using test::MakeScene;
 using test::PerturbedTruth;
 
-PsoOptions SmallPso(int runs, int threads) {
-  PsoOptions o;
+PsoOptions<kNumParams> SmallPso(int runs, int threads) {
+  PsoOptions<kNumParams> o;
   test::Table2Bounds(&o.lower, &o.upper);
   o.swarm_size = 20;
   o.iterations = 150;
@@ -45,9 +45,9 @@ TEST(Solvers, PsoSameSeedSameResultForAnyThreadCount) {
   // runs = 1: the particles of one swarm are shared among the threads; runs = 3: whole runs are
   // spread over the threads. Both must not depend on the thread count, to the last bit.
   for (int runs : {1, 3}) {
-    const PsoResult reference = RunPso(data, SmallPso(runs, 1));
+    const PsoResult<kNumParams> reference = RunPso(data, SmallPso(runs, 1));
     ASSERT_EQ(static_cast<int>(reference.runs.size()), runs);
-    for (const PsoRun& run : reference.runs) {
+    for (const PsoRun<kNumParams>& run : reference.runs) {
       // A real search happened: the best fitness fell and is the fitness of the best vector.
       ASSERT_EQ(run.history.size(), 150u);
       EXPECT_LT(run.history.back(), run.history.front());
@@ -55,7 +55,7 @@ TEST(Solvers, PsoSameSeedSameResultForAnyThreadCount) {
       EXPECT_EQ(run.termination, "max_iterations");
     }
     for (int threads : {2, 3}) {
-      const PsoResult other = RunPso(data, SmallPso(runs, threads));
+      const PsoResult<kNumParams> other = RunPso(data, SmallPso(runs, threads));
       EXPECT_EQ(other.best_run, reference.best_run);
       for (int r = 0; r < runs; ++r) {
         EXPECT_TRUE(BitIdentical(other.runs[r].best, reference.runs[r].best))
@@ -66,7 +66,7 @@ TEST(Solvers, PsoSameSeedSameResultForAnyThreadCount) {
     }
   }
   // The seed matters: another seed gives another result.
-  PsoOptions o = SmallPso(1, 2);
+  PsoOptions<kNumParams> o = SmallPso(1, 2);
   o.seed = 12;
   EXPECT_FALSE(
       BitIdentical(RunPso(data, o).runs[0].best, RunPso(data, SmallPso(1, 2)).runs[0].best));
@@ -96,12 +96,12 @@ TEST(Solvers, UniformPairsAreTheSequentialDraws) {
 TEST(Solvers, RandomSearchSameSeedSameResultForAnyThreadCount) {
   const test::Scene s = MakeScene(Generic(), 50, 2);
   const FitnessData data(s.pixels, s.poses, s.points);
-  RandomSearchOptions o;
+  RandomSearchOptions<kNumParams> o;
   test::Table2Bounds(&o.lower, &o.upper);
   o.evaluations = 20000;  // not a multiple of the 4096-evaluation blocks
   o.seed = 5;
   o.threads = 1;
-  const RandomSearchResult reference = RunRandomSearch(data, o);
+  const RandomSearchResult<kNumParams> reference = RunRandomSearch(data, o);
   EXPECT_EQ(reference.evaluations, 20000);
   EXPECT_GE(reference.best_index, 0);
   EXPECT_EQ(reference.best_fitness, data.Evaluate(reference.best.data()));
@@ -110,7 +110,7 @@ TEST(Solvers, RandomSearchSameSeedSameResultForAnyThreadCount) {
           .all());
   for (int threads : {2, 3}) {
     o.threads = threads;
-    const RandomSearchResult other = RunRandomSearch(data, o);
+    const RandomSearchResult<kNumParams> other = RunRandomSearch(data, o);
     EXPECT_EQ(other.threads, threads);
     EXPECT_EQ(other.evaluations, 20000);
     EXPECT_EQ(other.best_index, reference.best_index) << threads << " threads";

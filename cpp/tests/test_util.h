@@ -46,9 +46,11 @@ struct Scene {
   RowMatX3 points;
 };
 
-inline Scene MakeScene(const paper::Vector14d& q, int m, unsigned seed) {
+/// m stripe pixels uniform in [0, u_max] x [v_min, v_max] and base_from_hand poses with generic
+/// rotations, positions within 600 mm; no points.
+inline Scene RandomPixelsAndPoses(int m, unsigned seed, double u_max, double v_min, double v_max) {
   std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> uu(0.0, 639.0), vv(0.0, 479.0), pos(-600.0, 600.0);
+  std::uniform_real_distribution<double> uu(0.0, u_max), vv(v_min, v_max), pos(-600.0, 600.0);
   std::normal_distribution<double> g(0.0, 1.0);
   Scene s;
   s.pixels.resize(m, 2);
@@ -62,6 +64,12 @@ inline Scene MakeScene(const paper::Vector14d& q, int m, unsigned seed) {
     t.topRightCorner<3, 1>() << pos(rng), pos(rng), pos(rng);
     for (int k = 0; k < 16; ++k) s.poses(i, k) = t(k / 4, k % 4);
   }
+  return s;
+}
+
+/// A 640 x 480 camera's scene under paper parameters q.
+inline Scene MakeScene(const paper::Vector14d& q, int m, unsigned seed) {
+  Scene s = RandomPixelsAndPoses(m, seed, 639.0, 0.0, 479.0);
   s.points = paper::BasePointsFromPixels(q, s.pixels, s.poses, /*throw_on_invalid=*/true).points;
   return s;
 }

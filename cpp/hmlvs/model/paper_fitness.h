@@ -5,34 +5,36 @@
 #include <Eigen/Core>
 #include <vector>
 
+#include "hmlvs/model/calibration_points.h"
 #include "hmlvs/model/paper.h"
+#include "hmlvs/solvers/fitness.h"
 
 namespace hmlvs::paper {
 
-/// Calibration points precomputed once per data set. Each reference point is stored in its
-/// hand frame, h_i = R_N^T (P_i - P_N); since R_N is a rotation, ||E_i|| = ||h_i - (R_C cP + t)||
-/// and an evaluation never touches the poses. Structure-of-arrays for the evaluation loop.
-class FitnessData {
+/// F over calibration points precomputed once per data set (calibration_points.h: reference
+/// points in their hand frames, ||E_i|| = ||h_i - (R_C cP + t)||). The objective of the global
+/// searches (solvers/search.h) for this model.
+class FitnessData final : public solvers::Fitness<kNumParams> {
  public:
   /// Validates shapes, finiteness and poses (std::invalid_argument on bad input).
   FitnessData(PixelsRef pixels, PosesRef base_from_hand, Points3Ref references);
 
-  Eigen::Index size() const { return static_cast<Eigen::Index>(u_.size()); }
+  Eigen::Index size() const override { return points_.size(); }
 
   /// F(q) = 1/2 sum ||E_i||^2; +inf if any pixel's ray misses the laser plane. No allocation.
-  double Evaluate(const double* q) const;
+  double Evaluate(const double* q) const override;
+
+  const std::string& ParameterName(int d) const override { return ParamNames()[d]; }
 
   /// Per-point ||E_i|| (mm); NaN where the ray misses the laser plane.
   Eigen::VectorXd PointErrors(const double* q) const;
 
-  double u(Eigen::Index i) const { return u_[i]; }
-  double v(Eigen::Index i) const { return v_[i]; }
-  Eigen::Vector3d ReferenceInHand(Eigen::Index i) const {
-    return Eigen::Vector3d(hx_[i], hy_[i], hz_[i]);
-  }
+  double u(Eigen::Index i) const { return points_.u[i]; }
+  double v(Eigen::Index i) const { return points_.v[i]; }
+  Eigen::Vector3d ReferenceInHand(Eigen::Index i) const { return points_.ReferenceInHand(i); }
 
  private:
-  std::vector<double> u_, v_, hx_, hy_, hz_;
+  CalibrationPoints points_;
 };
 
 }  // namespace hmlvs::paper
