@@ -23,6 +23,7 @@
 #include "hmlvs/model/paper_cost.h"
 #include "hmlvs/model/paper_fitness.h"
 #include "hmlvs/solvers/lm_costs.h"
+#include "hmlvs/solvers/point_lm.h"
 #include "test_util.h"
 
 namespace hmlvs {
@@ -209,10 +210,12 @@ TEST(Jacobians, ModernQuaternionCostOnItsManifold) {
   EXPECT_LT(WorstColumnError(j), 1e-6);
 }
 
-TEST(Jacobians, ModernEulerCost) {
+TEST(Jacobians, PointCostOfThePaperModel) {
   const Vector14d q = Generic();
   const OffsetScene s = MakeOffsetScene(q, 12);
-  const std::vector<ceres::CostFunction*> costs = CostsOf(s, 12, NewModernEulerCost);
+  // The point problem (point_lm.h) on the paper model: RunLm's modern mode with an Euler angle
+  // held.
+  const std::vector<ceres::CostFunction*> costs = CostsOf(s, 12, NewPointCost<Model>);
   const StackedJacobians j =
       Differentiate(costs, ScalarBlocks(q), std::vector<const ceres::Manifold*>(14, nullptr));
   EXPECT_LT(WorstColumnError(j), 1e-6);  // as above

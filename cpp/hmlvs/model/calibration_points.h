@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <limits>
 #include <vector>
 
 #include "hmlvs/model/arrays.h"
@@ -25,5 +26,22 @@ struct CalibrationPoints {
 
   std::vector<double> u, v, hx, hy, hz;
 };
+
+/// The objective F(x) = 1/2 sum_i ||h_i - hP_i(x)||^2 (= 1/2 sum_i ||P_i - bP_i(x)||^2) of a
+/// model trait (paper::Model, opencv::Model) over the points; +inf where a point has no
+/// residual (its ray misses the laser plane).
+template <class Model>
+double PointObjective(const CalibrationPoints& points, const double* x) {
+  double sum = 0.0;
+  for (Eigen::Index i = 0; i < points.size(); ++i) {
+    const double h[3] = {points.hx[i], points.hy[i], points.hz[i]};
+    double e[3];
+    if (!Model::Residual(x, points.u[i], points.v[i], h, e)) {
+      return std::numeric_limits<double>::infinity();
+    }
+    sum += e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+  }
+  return 0.5 * sum;
+}
 
 }  // namespace hmlvs

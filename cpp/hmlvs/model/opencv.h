@@ -10,10 +10,13 @@
 // formulation serves plain evaluation, calibration (ceres::Jet) and measurement.
 #pragma once
 
+#include <ceres/jet.h>
+
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 #include "hmlvs/geometry/geometry.h"
@@ -57,6 +60,37 @@ bool ProjectPoint(const T* in, const T* camera_point, T* pixel) {
 /// receives d(xd, yd)/d(x, y) at the solution.
 bool UndistortNormalized(const double* in, double u, double v, double* x, double* y,
                          double* jacobian = nullptr);
+
+/// The value of a scalar: a double itself, a Jet's real part.
+inline double ValueOf(double v) { return v; }
+template <typename S, int N>
+double ValueOf(const ceres::Jet<S, N>& v) {
+  return v.a;
+}
+
+/// UndistortNormalized on any scalar: the Newton iteration in plain doubles, then, on a Jet,
+/// one Newton step on the Jet from its solution, which changes no value there and carries the
+/// exact derivatives (those of the implicit function distort(x, y) = m(intrinsics)). On doubles
+/// the solution itself.
+template <typename T>
+bool UndistortPoint(const T* in, double u, double v, T* x, T* y) {
+  double values[kNumIntrinsics], x0, y0, jd[4];
+  for (int k = 0; k < kNumIntrinsics; ++k) values[k] = ValueOf(in[k]);
+  if (!UndistortNormalized(values, u, v, &x0, &y0, jd)) return false;
+  if constexpr (std::is_same_v<T, double>) {
+    *x = x0;
+    *y = y0;
+  } else {
+    T xd, yd;
+    Distort(in, x0, y0, &xd, &yd);
+    const T ex = xd - (T(u) - in[kCx]) / in[kFx];
+    const T ey = yd - (T(v) - in[kCy]) / in[kFy];
+    const double det = jd[0] * jd[3] - jd[1] * jd[2];
+    *x = T(x0) - (jd[3] * ex - jd[1] * ey) / det;
+    *y = T(y0) - (jd[0] * ey - jd[2] * ex) / det;
+  }
+  return true;
+}
 
 /// The point where the ray through normalised image point (x, y) meets the plane
 /// n . X + d = 0 (camera frame). Returns the depth Z = -d / (n . (x, y, 1)); the ray meets the

@@ -1,7 +1,6 @@
 #include "hmlvs/model/opencv_fitness.h"
 
 #include <cmath>
-#include <limits>
 
 #include "hmlvs/geometry/geometry.h"
 
@@ -36,23 +35,5 @@ Vector18d PointParams(const Vector9d& intrinsics, const Eigen::Vector4d& laser_p
 
 PointFitness::PointFitness(PixelsRef pixels, PosesRef poses, Points3Ref references)
     : points_(pixels, poses, references) {}
-
-double PointFitness::Evaluate(const double* x) const {
-  constexpr double kInf = std::numeric_limits<double>::infinity();
-  const Eigen::Vector4d plane = PlaneFromAngles(x[kPlaneAt], x[kPlaneAt + 1], x[kPlaneAt + 2]);
-  const double normal[3] = {plane[0], plane[1], plane[2]};
-  const Eigen::Matrix3d r = geometry::Rodrigues(x + kRotationAt);
-  const Eigen::Vector3d t(x[kTranslationAt], x[kTranslationAt + 1], x[kTranslationAt + 2]);
-  double sum = 0.0;
-  for (Eigen::Index i = 0; i < size(); ++i) {
-    double xn, yn, cp[3];
-    if (!UndistortNormalized(x, points_.u[i], points_.v[i], &xn, &yn)) return kInf;
-    if (!(RayPlanePoint(xn, yn, normal, plane[3], cp) > 0.0)) return kInf;
-    const Eigen::Vector3d e =
-        points_.ReferenceInHand(i) - (r * Eigen::Vector3d(cp[0], cp[1], cp[2]) + t);
-    sum += e.squaredNorm();
-  }
-  return 0.5 * sum;
-}
 
 }  // namespace hmlvs::opencv

@@ -12,6 +12,7 @@
 #include <array>
 #include <string>
 
+#include "hmlvs/geometry/geometry.h"
 #include "hmlvs/model/calibration_points.h"
 #include "hmlvs/model/opencv.h"
 #include "hmlvs/solvers/fitness.h"
@@ -36,6 +37,36 @@ Eigen::Vector4d PlaneFromAngles(double alpha, double beta, double h);
 Vector18d PointParams(const Vector9d& intrinsics, const Eigen::Vector4d& laser_plane,
                       const Eigen::Matrix4d& hand_from_camera);
 
+/// The general model as a model trait (as paper::Model, paper.h): its 18 parameters and its
+/// hand-frame residual on any scalar.
+struct Model {
+  static constexpr int kNumParams = kNumPointParams;
+  static const std::array<std::string, kNumParams>& Names() { return PointParamNames(); }
+
+  /// e = h - hP of pixel (u, v) whose reference point in its hand frame is h, with
+  /// hP = R (rx, ry, rz) cP + t and cP the point where the pixel's ray meets the laser plane.
+  /// Returns false when the pixel cannot be undistorted or its ray meets the plane behind the
+  /// camera (or not at all).
+  template <typename T>
+  static bool Residual(const T* x, double u, double v, const double* h, T* e) {
+    using std::cos;
+    using std::sin;
+    T xn, yn;
+    if (!UndistortPoint(x, u, v, &xn, &yn)) return false;
+    const T alpha = x[kPlaneAt], beta = x[kPlaneAt + 1];
+    const T normal[3] = {sin(alpha), cos(alpha) * cos(beta), cos(alpha) * sin(beta)};
+    T cp[3];
+    if (!(RayPlanePoint(xn, yn, normal, T(-x[kPlaneAt + 2]), cp) > T(0.0))) return false;
+    const geometry::Mat3<T> r = geometry::Rodrigues(x + kRotationAt);
+    for (int k = 0; k < 3; ++k) {
+      e[k] =
+          T(h[k]) - (r(k, 0) * cp[0] + r(k, 1) * cp[1] + r(k, 2) * cp[2] + x[kTranslationAt + k]);
+    }
+    return true;
+  }
+};
+
+/// The objective for the global searches: PointObjective<Model>.
 class PointFitness final : public solvers::Fitness<kNumPointParams> {
  public:
   /// Validates shapes, finiteness and poses (std::invalid_argument on bad input).
@@ -43,9 +74,10 @@ class PointFitness final : public solvers::Fitness<kNumPointParams> {
 
   /// F(x); +inf where a pixel cannot be undistorted or its ray does not meet the laser plane in
   /// front of the camera.
-  double Evaluate(const double* x) const override;
+  double Evaluate(const double* x) const override { return PointObjective<Model>(points_, x); }
   Eigen::Index size() const override { return points_.size(); }
   const std::string& ParameterName(int d) const override { return PointParamNames()[d]; }
+  const CalibrationPoints& points() const { return points_; }
 
  private:
   CalibrationPoints points_;

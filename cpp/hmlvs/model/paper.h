@@ -158,6 +158,23 @@ T HandResidual(const T* q, const Rotation& hand_from_camera_rot, const T& tan_th
   return plane;
 }
 
+/// The paper model as a model trait (the general model's: opencv::Model, opencv_fitness.h): its
+/// parameters and its hand-frame residual on any scalar. The point LM (solvers/point_lm.h) and
+/// the point objective (calibration_points.h) are written once over such a trait.
+struct Model {
+  static constexpr int kNumParams = paper::kNumParams;
+  static const std::array<std::string, kNumParams>& Names() { return ParamNames(); }
+
+  /// HandResidual with R_C from the Euler angles: e = h - (R_C cP + t) of pixel (u, v) whose
+  /// reference point in its hand frame is h. Returns false when the ray misses the laser plane.
+  template <typename T>
+  static bool Residual(const T* q, double u, double v, const double* h, T* e) {
+    using std::tan;
+    return HandResidual(q, geometry::RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), tan(q[kTheta]), u,
+                        v, h, e) > T(0.0);
+  }
+};
+
 // ---------------------------------------------------------------------------------------------
 // Batch evaluation on plain doubles (the array types of arrays.h).
 

@@ -32,6 +32,7 @@ class FitnessData final : public solvers::Fitness<kNumParams> {
   double u(Eigen::Index i) const { return points_.u[i]; }
   double v(Eigen::Index i) const { return points_.v[i]; }
   Eigen::Vector3d ReferenceInHand(Eigen::Index i) const { return points_.ReferenceInHand(i); }
+  const CalibrationPoints& points() const { return points_; }
 
  private:
   CalibrationPoints points_;

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "hmlvs/solvers/lm_costs.h"
+#include "hmlvs/solvers/point_lm.h"
 
 namespace hmlvs::solvers {
 
@@ -184,24 +185,15 @@ class LmProblem {
     problem_->SetManifold(quat_.data(), new ceres::EigenQuaternionManifold());
   }
 
-  // Modern mode with an Euler angle held: 14 scalar blocks, each held or bounded.
+  // Modern mode with an Euler angle held: the point problem of either model (point_lm.h) on
+  // the paper model, 14 scalar blocks, each held or bounded.
   void AddEulerBlocks() {
-    for (Eigen::Index i = 0; i < data_.size(); ++i) {
-      std::vector<double*> blocks;
-      for (int p = 0; p < kNumParams; ++p) blocks.push_back(&q_[p]);
-      problem_->AddResidualBlock(
-          NewModernEulerCost(data_.u(i), data_.v(i), data_.ReferenceInHand(i)), loss_.get(),
-          blocks);
-    }
-    for (int i = 0; i < kNumParams; ++i) {
-      double* block = &q_[i];
-      if (o_.fixed[i]) {
-        problem_->SetParameterBlockConstant(block);
-      } else if (o_.use_bounds) {
-        problem_->SetParameterLowerBound(block, 0, o_.lower[i]);
-        problem_->SetParameterUpperBound(block, 0, o_.upper[i]);
-      }
-    }
+    PointLmOptions<kNumParams> po;
+    po.fixed = o_.fixed;
+    po.use_bounds = o_.use_bounds;
+    po.lower = o_.lower;
+    po.upper = o_.upper;
+    AddPointBlocks<Model>(problem_.get(), data_.points(), q_.data(), loss_.get(), po);
   }
 
   const FitnessData& data_;

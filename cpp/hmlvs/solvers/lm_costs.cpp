@@ -20,21 +20,6 @@ namespace {
 // HandResidual (model/model.h): E_h = h - (R_C cP + t) in the hand frame, which has the norm of the
 // base-frame E.
 
-// Euler-angle variant for when an Euler angle is held fixed (14 scalar blocks).
-struct EulerResidual {
-  double u, v;
-  Eigen::Vector3d h;
-
-  template <typename T>
-  bool operator()(const T* const* p, T* residual) const {
-    using std::tan;
-    T q[kNumParams];
-    for (int i = 0; i < kNumParams; ++i) q[i] = p[i][0];
-    return HandResidual(q, geometry::RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), tan(q[kTheta]), u,
-                        v, h.data(), residual) > T(0.0);
-  }
-};
-
 // The paper's scalar residual ||E_i|| over the 14-vector (forward differences).
 struct PaperResidual {
   double u, v;
@@ -394,15 +379,6 @@ ceres::CostFunction* NewModernBatchCost(const FitnessData& data) {
 ceres::CostFunction* NewModernBatchCost(const FitnessData& data, const Vector14d& held,
                                         const std::array<bool, kNumParams>& held_mask) {
   return new ModernBatchCost(data, held, held_mask);
-}
-
-ceres::CostFunction* NewModernEulerCost(double u, double v,
-                                        const Eigen::Vector3d& reference_in_hand) {
-  auto* cost = new ceres::DynamicAutoDiffCostFunction<EulerResidual, 16>(
-      new EulerResidual{u, v, reference_in_hand});
-  for (int p = 0; p < kNumParams; ++p) cost->AddParameterBlock(1);
-  cost->SetNumResiduals(3);
-  return cost;
 }
 
 }  // namespace hmlvs::solvers

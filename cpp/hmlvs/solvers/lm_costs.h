@@ -80,9 +80,4 @@ ceres::CostFunction* NewModernBatchCost(const paper::FitnessData& data,
 std::vector<int> PackedEntries(const std::array<bool, paper::kNumParams>& held_mask, int first,
                                int size);
 
-/// Modern mode when an Euler angle is held fixed: the three components of E_h over 14 scalar
-/// blocks (paper order), Jacobian by automatic differentiation.
-ceres::CostFunction* NewModernEulerCost(double u, double v,
-                                        const Eigen::Vector3d& reference_in_hand);
-
 }  // namespace hmlvs::solvers

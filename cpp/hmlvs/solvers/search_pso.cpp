@@ -6,9 +6,9 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
-#include <stdexcept>
 
 #include "hmlvs/model/opencv_fitness.h"
 #include "hmlvs/model/paper.h"

@@ -1,17 +1,24 @@
-// The global searches on the general model (model "opencv", 18 parameters): its point
-// objective (opencv_fitness.h) is zero at the truth, and PSO and random search over it are
-// deterministic for a seed whatever the thread count, as on the paper model (test_solvers.cpp).
+// The general model (model "opencv", 18 parameters) from calibration points: its point
+// objective (opencv_fitness.h) is zero at the truth; PSO and random search over it are
+// deterministic for a seed whatever the thread count, as on the paper model (test_solvers.cpp);
+// the point problem (point_lm.h) on it has the Jacobian of central differences and its LM
+// reaches a zero cost from a perturbed start.
+#include <ceres/cost_function.h>
 #include <gtest/gtest.h>
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "hmlvs/geometry/geometry.h"
 #include "hmlvs/model/opencv.h"
 #include "hmlvs/model/opencv_fitness.h"
+#include "hmlvs/solvers/point_lm.h"
 #include "hmlvs/solvers/search.h"
 #include "test_util.h"
 
@@ -132,6 +139,59 @@ TEST_F(OpencvSearch, RandomSearchSameSeedSameResultForAnyThreadCount) {
     EXPECT_TRUE(BitIdentical(other.best, reference.best)) << threads << " threads";
     EXPECT_EQ(other.best_index, reference.best_index);
   }
+}
+
+TEST_F(OpencvSearch, PointCostMatchesCentralDifferences) {
+  Vector18d x = Truth();
+  x[kK1] += 0.01;  // off the truth: residuals not zero
+  x[kPlaneAt + 2] += 1.0;
+  const CalibrationPoints& p = fitness_.points();
+  for (Eigen::Index i = 0; i < 5; ++i) {
+    const std::unique_ptr<ceres::CostFunction> cost(
+        solvers::NewPointCost<Model>(p.u[i], p.v[i], p.ReferenceInHand(i)));
+    std::vector<const double*> blocks;
+    for (int k = 0; k < N; ++k) blocks.push_back(&x[k]);
+    double e[3], jac[N][3];
+    double* jacobians[N];
+    for (int k = 0; k < N; ++k) jacobians[k] = jac[k];
+    ASSERT_TRUE(cost->Evaluate(blocks.data(), e, jacobians));
+    for (int k = 0; k < N; ++k) {
+      // central differences, step relative to the parameter's size
+      const double step = 1e-6 * std::max(1.0, std::abs(x[k]));
+      Vector18d xp = x, xm = x;
+      xp[k] += step;
+      xm[k] -= step;
+      double ep[3], em[3];
+      const double h[3] = {p.hx[i], p.hy[i], p.hz[i]};
+      ASSERT_TRUE(Model::Residual(xp.data(), p.u[i], p.v[i], h, ep));
+      ASSERT_TRUE(Model::Residual(xm.data(), p.u[i], p.v[i], h, em));
+      for (int r = 0; r < 3; ++r) {
+        const double numeric = (ep[r] - em[r]) / (2.0 * step);
+        EXPECT_NEAR(jac[k][r], numeric, 1e-5 * std::max(1.0, std::abs(numeric)))
+            << "point " << i << ", " << PointParamNames()[k] << ", residual " << r;
+      }
+    }
+  }
+}
+
+TEST_F(OpencvSearch, PointLmFromAPerturbedStartReachesZeroCost) {
+  const Vector18d truth = Truth();
+  Vector18d start = truth;
+  for (int k = 0; k < N; ++k)
+    start[k] += 1e-3 * std::max(1.0, std::abs(truth[k])) * ((k % 3) - 1.0);
+  solvers::PointLmOptions<N> o;
+  start[kK3] = truth[kK3];
+  o.fixed[kK3] = true;  // held: stays at its value
+  const solvers::PointLmResult<N> r = solvers::RunPointLm<Model>(fitness_.points(), start, o);
+  EXPECT_EQ(r.params[kK3], truth[kK3]);
+  EXPECT_TRUE(r.usable) << r.message;
+  EXPECT_GT(r.initial_cost, 1.0);
+  EXPECT_EQ(r.initial_cost, fitness_.Evaluate(start.data()));
+  EXPECT_EQ(r.final_cost, fitness_.Evaluate(r.params.data()));
+  EXPECT_LT(r.final_cost, 1e-12) << r.message;  // mm^2, noise-free points
+  // A start whose rays miss the plane is refused, naming the point.
+  start[kPlaneAt + 1] = -1.4;
+  EXPECT_THROW(solvers::RunPointLm<Model>(fitness_.points(), start, o), std::invalid_argument);
 }
 
 }  // namespace
