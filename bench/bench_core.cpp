@@ -70,15 +70,8 @@ void Emit(const std::string& name, double value, const std::string& unit, int re
   std::fflush(stdout);
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  const int reps = argc > 1 ? std::atoi(argv[1]) : 5;
-  const int hw = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  const hmlvs::paper::FitnessData data = MakeData(50, 1, 0.0);
-  hmlvs::paper::Vector14d lo, hi;
-  Table2(&lo, &hi);
-
+void BenchFitness(const hmlvs::paper::FitnessData& data, const hmlvs::paper::Vector14d& lo,
+                  const hmlvs::paper::Vector14d& hi, int reps) {
   // 1. The fitness kernel alone: point evaluations per second.
   {
     std::mt19937_64 rng(2);
@@ -98,6 +91,10 @@ int main(int argc, char** argv) {
     Emit("fitness_point_evaluations_per_second", Median(rates), "1/s", reps,
          sink == 42.0 ? ", \"sink\": 1" : "");
   }
+}
+
+void BenchPso(const hmlvs::paper::FitnessData& data, const hmlvs::paper::Vector14d& lo,
+              const hmlvs::paper::Vector14d& hi, int reps, int hw) {
   // 2. One full PSO run (paper workload) on 1 thread and on all threads, each beside the bare
   // loop: the same number of fitness evaluations (swarm x (iterations + 1)) of in-bounds vectors
   // on the same threads, split evenly, with no swarm update and no synchronisation (the compute
@@ -149,6 +146,10 @@ int main(int argc, char** argv) {
          ", \"threads\": " + std::to_string(threads) + ", \"lowest\": " +
              std::to_string(ratios.front()) + ", \"highest\": " + std::to_string(ratios.back()));
   }
+}
+
+void BenchLm(const hmlvs::paper::FitnessData& data, const hmlvs::paper::Vector14d& lo,
+             const hmlvs::paper::Vector14d& hi, int reps) {
   // 3. LM solves from a perturbed start (s = 0.01 around the truth): modern mode, paper mode, and
   // paper mode with Ceres' NumericDiffCostFunction (the reference its cost matches bit for bit),
   // interleaved so that the three see the same machine load.
@@ -195,5 +196,18 @@ int main(int argc, char** argv) {
     Emit(c.name, Median(c.times) * 1e3, "ms", std::max(reps, 20),
          ", \"last_iterations\": " + std::to_string(c.iterations));
   }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const int reps = argc > 1 ? std::atoi(argv[1]) : 5;
+  const int hw = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  const hmlvs::paper::FitnessData data = MakeData(50, 1, 0.0);
+  hmlvs::paper::Vector14d lo, hi;
+  Table2(&lo, &hi);
+  BenchFitness(data, lo, hi, reps);
+  BenchPso(data, lo, hi, reps, hw);
+  BenchLm(data, lo, hi, reps);
   return 0;
 }

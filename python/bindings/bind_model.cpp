@@ -29,6 +29,7 @@ void BindModel(py::module_& m) {
   const auto release = py::call_guard<py::gil_scoped_release>();
   m.def("_validate_params", &ValidateParams, py::arg("params"));
   m.def("_validate_poses", &geometry::ValidatePoses, py::arg("poses"), release);
+  m.attr("RIGID_TOLERANCE") = geometry::kRigidTolerance;
   m.attr("MIN_RAY_SINE") = kMinRaySine;
   m.def("_camera_points", &CameraPointsFromPixels, py::arg("params"), py::arg("pixels"),
         py::arg("throw_on_invalid"), py::arg("min_ray_sine") = 0.0, release);
