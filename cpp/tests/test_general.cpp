@@ -9,11 +9,15 @@
 #include <utility>
 #include <vector>
 
-#include "hmlvs/model/general.h"
+#include "hmlvs/geometry/hand_eye.h"
+#include "hmlvs/model/opencv.h"
 #include "hmlvs/solvers/joint.h"
 
-namespace hmlvs::general {
+namespace hmlvs::opencv {
 namespace {
+
+using geometry::HandEyeParkMartin;
+using namespace hmlvs::solvers;
 
 Vector9d Intrinsics() {
   Vector9d in;
@@ -304,4 +308,4 @@ TEST(GeneralModel, JointSolveRecoversTheTruthOnExactData) {
 }
 
 }  // namespace
-}  // namespace hmlvs::general
+}  // namespace hmlvs::opencv

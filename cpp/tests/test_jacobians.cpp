@@ -19,14 +19,18 @@
 #include <random>
 #include <vector>
 
-#include "hmlvs/model/cost.h"
-#include "hmlvs/model/model.h"
-#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/model/paper.h"
+#include "hmlvs/model/paper_cost.h"
+#include "hmlvs/model/paper_fitness.h"
 #include "hmlvs/solvers/lm_costs.h"
+#include "hmlvs/solvers/point_lm.h"
 #include "test_util.h"
 
 namespace hmlvs {
 namespace {
+
+using namespace hmlvs::paper;
+using namespace hmlvs::solvers;
 
 using test::Generic;
 using test::MakeScene;
@@ -48,8 +52,8 @@ OffsetScene MakeOffsetScene(const Vector14d& q, int m) {
 }
 
 Eigen::Vector3d ReferenceInHand(const OffsetScene& s, Eigen::Index i) {
-  return test::PoseRotation(s.scene.poses, i).transpose() *
-         (s.references.row(i).transpose() - test::PosePosition(s.scene.poses, i));
+  return geometry::PoseRotation(s.scene.poses, i).transpose() *
+         (s.references.row(i).transpose() - geometry::PosePosition(s.scene.poses, i));
 }
 
 // One residual block per point of the scene, made by `make(u, v, reference_in_hand)`.
@@ -190,7 +194,7 @@ std::vector<std::vector<double>> ScalarBlocks(const Vector14d& q) {
 TEST(Jacobians, ModernQuaternionCostOnItsManifold) {
   const Vector14d q = Generic();
   const OffsetScene s = MakeOffsetScene(q, 12);
-  const Eigen::Quaterniond rot(RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]));
+  const Eigen::Quaterniond rot(geometry::RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]));
   const std::vector<std::vector<double>> blocks = {
       std::vector<double>(q.data() + kF, q.data() + kTheta + 1),
       {rot.x(), rot.y(), rot.z(), rot.w()},
@@ -206,10 +210,12 @@ TEST(Jacobians, ModernQuaternionCostOnItsManifold) {
   EXPECT_LT(WorstColumnError(j), 1e-6);
 }
 
-TEST(Jacobians, ModernEulerCost) {
+TEST(Jacobians, PointCostOfThePaperModel) {
   const Vector14d q = Generic();
   const OffsetScene s = MakeOffsetScene(q, 12);
-  const std::vector<ceres::CostFunction*> costs = CostsOf(s, 12, NewModernEulerCost);
+  // The point problem (point_lm.h) on the paper model: RunLm's modern mode with an Euler angle
+  // held.
+  const std::vector<ceres::CostFunction*> costs = CostsOf(s, 12, NewPointCost<Model>);
   const StackedJacobians j =
       Differentiate(costs, ScalarBlocks(q), std::vector<const ceres::Manifold*>(14, nullptr));
   EXPECT_LT(WorstColumnError(j), 1e-6);  // as above
@@ -286,7 +292,7 @@ TEST(Jacobians, ModernBatchCostStacksThePointCostsBitForBit) {
   const Vector14d q = Generic();
   const OffsetScene s = MakeOffsetScene(q, 12);
   const FitnessData data(s.scene.pixels, s.scene.poses, s.references);
-  const Eigen::Quaterniond rot(RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]));
+  const Eigen::Quaterniond rot(geometry::RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]));
   const double quat[4] = {rot.x(), rot.y(), rot.z(), rot.w()};
   const double* params[] = {q.data() + kF, quat, q.data() + kTx};
   const std::unique_ptr<ceres::CostFunction> batch(NewModernBatchCost(data));
@@ -314,7 +320,7 @@ TEST(Jacobians, ModernBatchCostPackedBlocksAreTheFreeColumns) {
   const Vector14d q = Generic();
   const OffsetScene s = MakeOffsetScene(q, 12);
   const FitnessData data(s.scene.pixels, s.scene.poses, s.references);
-  const Eigen::Quaterniond rot(RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]));
+  const Eigen::Quaterniond rot(geometry::RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]));
   const double quat[4] = {rot.x(), rot.y(), rot.z(), rot.w()};
   std::array<bool, kNumParams> held{};
   held[kSu] = held[kK] = held[kTy] = true;

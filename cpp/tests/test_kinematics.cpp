@@ -6,11 +6,14 @@
 #include <limits>
 #include <stdexcept>
 
-#include "hmlvs/model/kinematics.h"
+#include "hmlvs/geometry/kinematics.h"
 #include "hmlvs/solvers/ik.h"
 
 namespace hmlvs {
 namespace {
+
+using namespace hmlvs::geometry;
+using namespace hmlvs::solvers;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 

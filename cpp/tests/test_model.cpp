@@ -9,14 +9,17 @@
 #include <stdexcept>
 #include <string>
 
-#include "hmlvs/model/cost.h"
-#include "hmlvs/model/model.h"
-#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/model/paper.h"
+#include "hmlvs/model/paper_cost.h"
+#include "hmlvs/model/paper_fitness.h"
 #include "hmlvs/solvers/lm.h"
 #include "test_util.h"
 
 namespace hmlvs {
 namespace {
+
+using namespace hmlvs::paper;
+using namespace hmlvs::solvers;
 
 using test::Generic;
 using test::kPi;
@@ -158,7 +161,7 @@ TEST(Model, BatchFunctionsAgreeWithSinglePointFunctions) {
   const PointsResult base = BasePointsFromPixels(q, s.pixels, s.poses, true);
   const RowMatX3 residuals = Residuals(q, s.pixels, s.poses, refs);
   const RowMatX3 rays = CameraRaysFromPixels(q, s.pixels);
-  const Eigen::Matrix3d rc = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
+  const Eigen::Matrix3d rc = geometry::RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
   const double tan_theta = std::tan(q[kTheta]);
   const FitnessData data(s.pixels, s.poses, refs);
   const Eigen::VectorXd errors = data.PointErrors(q.data());
@@ -172,14 +175,14 @@ TEST(Model, BatchFunctionsAgreeWithSinglePointFunctions) {
     const double u = s.pixels(i, 0), v = s.pixels(i, 1);
     double cp[3], bp[3], e[3], eh[3];
     EXPECT_GT(PixelToCamera(q.data(), tan_theta, u, v, cp), 0.0);
-    EXPECT_GT(PixelToBase(q.data(), rc, tan_theta, u, v, test::PoseRotation(s.poses, i),
-                          test::PosePosition(s.poses, i), bp),
+    EXPECT_GT(PixelToBase(q.data(), rc, tan_theta, u, v, geometry::PoseRotation(s.poses, i),
+                          geometry::PosePosition(s.poses, i), bp),
               0.0);
-    EXPECT_GT(PointResidual(q.data(), rc, tan_theta, u, v, test::PoseRotation(s.poses, i),
-                            test::PosePosition(s.poses, i), refs.row(i).transpose(), e),
+    EXPECT_GT(PointResidual(q.data(), rc, tan_theta, u, v, geometry::PoseRotation(s.poses, i),
+                            geometry::PosePosition(s.poses, i), refs.row(i).transpose(), e),
               0.0);
-    const Eigen::Vector3d h = test::PoseRotation(s.poses, i).transpose() *
-                              (refs.row(i).transpose() - test::PosePosition(s.poses, i));
+    const Eigen::Vector3d h = geometry::PoseRotation(s.poses, i).transpose() *
+                              (refs.row(i).transpose() - geometry::PosePosition(s.poses, i));
     EXPECT_GT(HandResidual(q.data(), rc, tan_theta, u, v, h.data(), eh), 0.0);
     for (int c = 0; c < 3; ++c) {
       EXPECT_NEAR(camera.points(i, c), cp[c], tol);

@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
-#include "hmlvs/model/model.h"
-#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/model/paper.h"
+#include "hmlvs/model/paper_fitness.h"
 #include "hmlvs/solvers/lm.h"
 #include "hmlvs/solvers/random.h"
 #include "hmlvs/solvers/search.h"
@@ -20,15 +20,16 @@
 namespace hmlvs {
 namespace {
 
+using namespace hmlvs::paper;
+using namespace hmlvs::solvers;
+
+using test::BitIdentical;
 using test::Generic;
 using test::MakeScene;
+using test::PerturbedTruth;
 
-bool BitIdentical(const Vector14d& a, const Vector14d& b) {
-  return std::memcmp(a.data(), b.data(), sizeof(double) * kNumParams) == 0;
-}
-
-PsoOptions SmallPso(int runs, int threads) {
-  PsoOptions o;
+PsoOptions<kNumParams> SmallPso(int runs, int threads) {
+  PsoOptions<kNumParams> o;
   test::Table2Bounds(&o.lower, &o.upper);
   o.swarm_size = 20;
   o.iterations = 150;
@@ -44,9 +45,9 @@ TEST(Solvers, PsoSameSeedSameResultForAnyThreadCount) {
   // runs = 1: the particles of one swarm are shared among the threads; runs = 3: whole runs are
   // spread over the threads. Both must not depend on the thread count, to the last bit.
   for (int runs : {1, 3}) {
-    const PsoResult reference = RunPso(data, SmallPso(runs, 1));
+    const PsoResult<kNumParams> reference = RunPso(data, SmallPso(runs, 1));
     ASSERT_EQ(static_cast<int>(reference.runs.size()), runs);
-    for (const PsoRun& run : reference.runs) {
+    for (const PsoRun<kNumParams>& run : reference.runs) {
       // A real search happened: the best fitness fell and is the fitness of the best vector.
       ASSERT_EQ(run.history.size(), 150u);
       EXPECT_LT(run.history.back(), run.history.front());
@@ -54,7 +55,7 @@ TEST(Solvers, PsoSameSeedSameResultForAnyThreadCount) {
       EXPECT_EQ(run.termination, "max_iterations");
     }
     for (int threads : {2, 3}) {
-      const PsoResult other = RunPso(data, SmallPso(runs, threads));
+      const PsoResult<kNumParams> other = RunPso(data, SmallPso(runs, threads));
       EXPECT_EQ(other.best_run, reference.best_run);
       for (int r = 0; r < runs; ++r) {
         EXPECT_TRUE(BitIdentical(other.runs[r].best, reference.runs[r].best))
@@ -65,7 +66,7 @@ TEST(Solvers, PsoSameSeedSameResultForAnyThreadCount) {
     }
   }
   // The seed matters: another seed gives another result.
-  PsoOptions o = SmallPso(1, 2);
+  PsoOptions<kNumParams> o = SmallPso(1, 2);
   o.seed = 12;
   EXPECT_FALSE(
       BitIdentical(RunPso(data, o).runs[0].best, RunPso(data, SmallPso(1, 2)).runs[0].best));
@@ -95,12 +96,12 @@ TEST(Solvers, UniformPairsAreTheSequentialDraws) {
 TEST(Solvers, RandomSearchSameSeedSameResultForAnyThreadCount) {
   const test::Scene s = MakeScene(Generic(), 50, 2);
   const FitnessData data(s.pixels, s.poses, s.points);
-  RandomSearchOptions o;
+  RandomSearchOptions<kNumParams> o;
   test::Table2Bounds(&o.lower, &o.upper);
   o.evaluations = 20000;  // not a multiple of the 4096-evaluation blocks
   o.seed = 5;
   o.threads = 1;
-  const RandomSearchResult reference = RunRandomSearch(data, o);
+  const RandomSearchResult<kNumParams> reference = RunRandomSearch(data, o);
   EXPECT_EQ(reference.evaluations, 20000);
   EXPECT_GE(reference.best_index, 0);
   EXPECT_EQ(reference.best_fitness, data.Evaluate(reference.best.data()));
@@ -109,25 +110,13 @@ TEST(Solvers, RandomSearchSameSeedSameResultForAnyThreadCount) {
           .all());
   for (int threads : {2, 3}) {
     o.threads = threads;
-    const RandomSearchResult other = RunRandomSearch(data, o);
+    const RandomSearchResult<kNumParams> other = RunRandomSearch(data, o);
     EXPECT_EQ(other.threads, threads);
     EXPECT_EQ(other.evaluations, 20000);
     EXPECT_EQ(other.best_index, reference.best_index) << threads << " threads";
     EXPECT_TRUE(BitIdentical(other.best, reference.best)) << threads << " threads";
     EXPECT_EQ(other.best_fitness, reference.best_fitness);
   }
-}
-
-// Truth perturbed by up to 1e-3 relative (absolute 1e-3 for the parameters whose truth is small).
-Vector14d PerturbedTruth(const Vector14d& truth, unsigned seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(-1e-3, 1e-3);
-  Vector14d q = truth;
-  for (int j = 0; j < kNumParams; ++j) {
-    q[j] = std::abs(truth[j]) > 1.0 ? truth[j] * (1.0 + u(rng)) : truth[j] + u(rng);
-  }
-  q[kSu] = truth[kSu];  // the scale gauge (docs/model.md): Su from the datasheet, held fixed
-  return q;
 }
 
 double HeldOutRms(const Vector14d& q, const test::Scene& held_out) {

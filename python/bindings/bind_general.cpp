@@ -7,7 +7,8 @@
 #include <vector>
 
 #include "bindings.h"
-#include "hmlvs/model/general.h"
+#include "hmlvs/geometry/hand_eye.h"
+#include "hmlvs/model/opencv.h"
 #include "hmlvs/solvers/joint.h"
 
 namespace py = pybind11;
@@ -15,7 +16,8 @@ namespace py = pybind11;
 namespace hmlvs::python {
 
 void BindGeneral(py::module_& m) {
-  using namespace hmlvs::general;
+  using namespace hmlvs::opencv;
+  using namespace hmlvs::solvers;
   const auto release = py::call_guard<py::gil_scoped_release>();
   m.def("_general_project", &ProjectCameraPoints, py::arg("intrinsics"), py::arg("points"),
         release);
@@ -62,15 +64,9 @@ void BindGeneral(py::module_& m) {
       .def_readwrite("function_tolerance", &JointOptions::function_tolerance)
       .def_readwrite("parameter_tolerance", &JointOptions::parameter_tolerance)
       .def_readwrite("gradient_tolerance", &JointOptions::gradient_tolerance);
-  py::class_<JointResult>(m, "_JointResult")
-      .def_readonly("state", &JointResult::state)
-      .def_readonly("initial_cost", &JointResult::initial_cost)
-      .def_readonly("final_cost", &JointResult::final_cost)
-      .def_readonly("iterations", &JointResult::iterations)
-      .def_readonly("termination", &JointResult::termination)
-      .def_readonly("message", &JointResult::message)
-      .def_readonly("usable", &JointResult::usable)
-      .def_readonly("seconds", &JointResult::seconds);
+  // _SolveSummary: bound by BindSolvers, which runs first (main.cpp)
+  py::class_<JointResult, SolveSummary>(m, "_JointResult")
+      .def_readonly("state", &JointResult::state);
   m.def("_solve_joint", &SolveJoint, py::arg("views"), py::arg("initial"), py::arg("options"),
         release);
   m.def(
@@ -94,9 +90,9 @@ void BindGeneral(py::module_& m) {
         return std::make_pair(std::move(j), std::move(names));
       },
       py::arg("views"), py::arg("state"), py::arg("options"), release);
-  m.def("_hand_eye_park_martin", &HandEyeParkMartin, py::arg("base_from_hand"),
+  m.def("_hand_eye_park_martin", &geometry::HandEyeParkMartin, py::arg("base_from_hand"),
         py::arg("camera_from_board"), py::arg("min_angle") = 0.05, release);
-  m.def("_mean_transform", &MeanTransform, py::arg("transforms"), release);
+  m.def("_mean_transform", &geometry::MeanTransform, py::arg("transforms"), release);
 }
 
 }  // namespace hmlvs::python

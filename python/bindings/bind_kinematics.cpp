@@ -6,7 +6,7 @@
 #include <utility>
 
 #include "bindings.h"
-#include "hmlvs/model/kinematics.h"
+#include "hmlvs/geometry/kinematics.h"
 #include "hmlvs/solvers/ik.h"
 
 namespace py = pybind11;
@@ -14,6 +14,8 @@ namespace py = pybind11;
 namespace hmlvs::python {
 
 void BindKinematics(py::module_& m) {
+  using namespace hmlvs::geometry;
+  using namespace hmlvs::solvers;
   py::enum_<DHConvention>(m, "_DHConvention")
       .value("standard", DHConvention::kStandard)
       .value("modified", DHConvention::kModified);

@@ -3,14 +3,16 @@
 #include <pybind11/stl.h>
 
 #include "bindings.h"
-#include "hmlvs/model/cost.h"
-#include "hmlvs/model/model.h"
+#include "hmlvs/geometry/geometry.h"
+#include "hmlvs/model/paper.h"
+#include "hmlvs/model/paper_cost.h"
 
 namespace py = pybind11;
 
 namespace hmlvs::python {
 
 void BindModel(py::module_& m) {
+  using namespace hmlvs::paper;
   m.attr("NUM_PARAMS") = kNumParams;
   m.def("_param_names", &ParamNames);
   m.def("_param_index", &ParamIndexFromName, py::arg("name"));
@@ -26,7 +28,8 @@ void BindModel(py::module_& m) {
 
   const auto release = py::call_guard<py::gil_scoped_release>();
   m.def("_validate_params", &ValidateParams, py::arg("params"));
-  m.def("_validate_poses", &ValidatePoses, py::arg("poses"), release);
+  m.def("_validate_poses", &geometry::ValidatePoses, py::arg("poses"), release);
+  m.attr("RIGID_TOLERANCE") = geometry::kRigidTolerance;
   m.attr("MIN_RAY_SINE") = kMinRaySine;
   m.def("_camera_points", &CameraPointsFromPixels, py::arg("params"), py::arg("pixels"),
         py::arg("throw_on_invalid"), py::arg("min_ray_sine") = 0.0, release);

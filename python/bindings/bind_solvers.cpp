@@ -3,23 +3,23 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
-#include <algorithm>
-#include <atomic>
-#include <limits>
 #include <memory>
-#include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "bindings.h"
-#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/model/paper_fitness.h"
 #include "hmlvs/solvers/lm.h"
-#include "hmlvs/solvers/parallel.h"
+#include "hmlvs/solvers/multistart.h"
 #include "hmlvs/solvers/search.h"
 
 namespace py = pybind11;
 
 namespace hmlvs::python {
+
+using namespace hmlvs::paper;
+using namespace hmlvs::solvers;
 
 namespace {
 
@@ -79,23 +79,28 @@ class PyProgress {
   std::unique_ptr<py::error_already_set> error_;
 };
 
-template <typename Result, typename Options, typename Fn>
-Result SolveWithProgress(const FitnessData& data, const Options& options, py::object progress,
-                         Fn solve) {
+// Runs solve(progress callback) with the GIL released, then re-raises the callable's error.
+template <typename Fn>
+auto SolveWithProgress(py::object progress, Fn solve) {
   PyProgress wrapper(std::move(progress));
   ProgressCallback cb = wrapper.callback();
-  Result r;
+  decltype(solve(cb)) r;
   {
     py::gil_scoped_release release;
-    r = solve(data, options, cb);
+    r = solve(cb);
   }
   wrapper.rethrow();
   return r;
 }
 
-}  // namespace
+// The paper model's searches (N = 14).
+using Pso = PsoOptions<kNumParams>;
+using PsoRun14 = PsoRun<kNumParams>;
+using PsoResult14 = PsoResult<kNumParams>;
+using RandomSearch = RandomSearchOptions<kNumParams>;
+using RandomSearchResult14 = RandomSearchResult<kNumParams>;
 
-void BindSolvers(py::module_& m) {
+void BindFitness(py::module_& m) {
   py::class_<FitnessData>(m, "_FitnessData")
       .def(py::init<PixelsRef, PosesRef, Points3Ref>(), py::arg("pixels"), py::arg("poses"),
            py::arg("references"))
@@ -117,74 +122,75 @@ void BindSolvers(py::module_& m) {
             return out;
           },
           py::arg("params"));
+}
 
-  py::class_<PsoOptions>(m, "_PsoOptions")
+void BindPso(py::module_& m) {
+  py::class_<Pso>(m, "_PsoOptions")
       .def(py::init<>())
-      .def_readwrite("swarm_size", &PsoOptions::swarm_size)
-      .def_readwrite("iterations", &PsoOptions::iterations)
-      .def_readwrite("w_max", &PsoOptions::w_max)
-      .def_readwrite("w_min", &PsoOptions::w_min)
-      .def_readwrite("c1", &PsoOptions::c1)
-      .def_readwrite("c2", &PsoOptions::c2)
-      .def_readwrite("vmax", &PsoOptions::vmax)
-      .def_readwrite("target_fitness", &PsoOptions::target_fitness)
-      .def_readwrite("runs", &PsoOptions::runs)
-      .def_readwrite("threads", &PsoOptions::threads)
-      .def_readwrite("seed", &PsoOptions::seed)
-      .def_readwrite("lower", &PsoOptions::lower)
-      .def_readwrite("upper", &PsoOptions::upper)
-      .def_readwrite("init_lower", &PsoOptions::init_lower)
-      .def_readwrite("init_upper", &PsoOptions::init_upper)
-      .def_readwrite("progress_every", &PsoOptions::progress_every);
-  py::class_<PsoRun>(m, "_PsoRun")
-      .def_readonly("best", &PsoRun::best)
-      .def_readonly("best_fitness", &PsoRun::best_fitness)
-      .def_readonly("iterations", &PsoRun::iterations)
-      .def_readonly("termination", &PsoRun::termination)
-      .def_readonly("history", &PsoRun::history);
-  py::class_<PsoResult>(m, "_PsoResult")
-      .def_readonly("runs", &PsoResult::runs)
-      .def_readonly("best_run", &PsoResult::best_run)
-      .def_readonly("threads", &PsoResult::threads)
-      .def_readonly("seconds", &PsoResult::seconds)
-      .def_readonly("cancelled", &PsoResult::cancelled);
+      .def_readwrite("swarm_size", &Pso::swarm_size)
+      .def_readwrite("iterations", &Pso::iterations)
+      .def_readwrite("w_max", &Pso::w_max)
+      .def_readwrite("w_min", &Pso::w_min)
+      .def_readwrite("c1", &Pso::c1)
+      .def_readwrite("c2", &Pso::c2)
+      .def_readwrite("vmax", &Pso::vmax)
+      .def_readwrite("target_fitness", &Pso::target_fitness)
+      .def_readwrite("runs", &Pso::runs)
+      .def_readwrite("threads", &Pso::threads)
+      .def_readwrite("seed", &Pso::seed)
+      .def_readwrite("lower", &Pso::lower)
+      .def_readwrite("upper", &Pso::upper)
+      .def_readwrite("init_lower", &Pso::init_lower)
+      .def_readwrite("init_upper", &Pso::init_upper)
+      .def_readwrite("progress_every", &Pso::progress_every);
+  py::class_<PsoRun14>(m, "_PsoRun")
+      .def_readonly("best", &PsoRun14::best)
+      .def_readonly("best_fitness", &PsoRun14::best_fitness)
+      .def_readonly("iterations", &PsoRun14::iterations)
+      .def_readonly("termination", &PsoRun14::termination)
+      .def_readonly("history", &PsoRun14::history);
+  py::class_<PsoResult14>(m, "_PsoResult")
+      .def_readonly("runs", &PsoResult14::runs)
+      .def_readonly("best_run", &PsoResult14::best_run)
+      .def_readonly("threads", &PsoResult14::threads)
+      .def_readonly("seconds", &PsoResult14::seconds)
+      .def_readonly("cancelled", &PsoResult14::cancelled);
   m.def(
       "_run_pso",
-      [](const FitnessData& data, const PsoOptions& o, py::object progress) {
-        return SolveWithProgress<PsoResult>(
-            data, o, std::move(progress),
-            [](const FitnessData& d, const PsoOptions& opt, const ProgressCallback& cb) {
-              return RunPso(d, opt, cb);
-            });
+      [](const FitnessData& data, const Pso& o, py::object progress) {
+        return SolveWithProgress(std::move(progress),
+                                 [&](const ProgressCallback& cb) { return RunPso(data, o, cb); });
       },
       py::arg("data"), py::arg("options"), py::arg("progress") = py::none());
+}
 
-  py::class_<RandomSearchOptions>(m, "_RandomSearchOptions")
+void BindRandomSearch(py::module_& m) {
+  py::class_<RandomSearch>(m, "_RandomSearchOptions")
       .def(py::init<>())
-      .def_readwrite("evaluations", &RandomSearchOptions::evaluations)
-      .def_readwrite("threads", &RandomSearchOptions::threads)
-      .def_readwrite("seed", &RandomSearchOptions::seed)
-      .def_readwrite("lower", &RandomSearchOptions::lower)
-      .def_readwrite("upper", &RandomSearchOptions::upper);
-  py::class_<RandomSearchResult>(m, "_RandomSearchResult")
-      .def_readonly("best", &RandomSearchResult::best)
-      .def_readonly("best_fitness", &RandomSearchResult::best_fitness)
-      .def_readonly("evaluations", &RandomSearchResult::evaluations)
-      .def_readonly("best_index", &RandomSearchResult::best_index)
-      .def_readonly("threads", &RandomSearchResult::threads)
-      .def_readonly("seconds", &RandomSearchResult::seconds)
-      .def_readonly("cancelled", &RandomSearchResult::cancelled);
+      .def_readwrite("evaluations", &RandomSearch::evaluations)
+      .def_readwrite("threads", &RandomSearch::threads)
+      .def_readwrite("seed", &RandomSearch::seed)
+      .def_readwrite("lower", &RandomSearch::lower)
+      .def_readwrite("upper", &RandomSearch::upper);
+  py::class_<RandomSearchResult14>(m, "_RandomSearchResult")
+      .def_readonly("best", &RandomSearchResult14::best)
+      .def_readonly("best_fitness", &RandomSearchResult14::best_fitness)
+      .def_readonly("evaluations", &RandomSearchResult14::evaluations)
+      .def_readonly("best_index", &RandomSearchResult14::best_index)
+      .def_readonly("threads", &RandomSearchResult14::threads)
+      .def_readonly("seconds", &RandomSearchResult14::seconds)
+      .def_readonly("cancelled", &RandomSearchResult14::cancelled);
   m.def(
       "_run_random_search",
-      [](const FitnessData& data, const RandomSearchOptions& o, py::object progress) {
-        return SolveWithProgress<RandomSearchResult>(
-            data, o, std::move(progress),
-            [](const FitnessData& d, const RandomSearchOptions& opt, const ProgressCallback& cb) {
-              return RunRandomSearch(d, opt, cb);
-            });
+      [](const FitnessData& data, const RandomSearch& o, py::object progress) {
+        return SolveWithProgress(std::move(progress), [&](const ProgressCallback& cb) {
+          return RunRandomSearch(data, o, cb);
+        });
       },
       py::arg("data"), py::arg("options"), py::arg("progress") = py::none());
+}
 
+void BindLm(py::module_& m) {
   py::enum_<LmMode>(m, "_LmMode").value("modern", LmMode::kModern).value("paper", LmMode::kPaper);
   py::enum_<LossKind>(m, "_LossKind")
       .value("none", LossKind::kNone)
@@ -203,76 +209,40 @@ void BindSolvers(py::module_& m) {
       .def_readwrite("function_tolerance", &LmOptions::function_tolerance)
       .def_readwrite("parameter_tolerance", &LmOptions::parameter_tolerance)
       .def_readwrite("gradient_tolerance", &LmOptions::gradient_tolerance);
-  py::class_<LmResult>(m, "_LmResult")
-      .def_readonly("params", &LmResult::params)
-      .def_readonly("initial_cost", &LmResult::initial_cost)
-      .def_readonly("final_cost", &LmResult::final_cost)
-      .def_readonly("iterations", &LmResult::iterations)
-      .def_readonly("termination", &LmResult::termination)
-      .def_readonly("message", &LmResult::message)
-      .def_readonly("usable", &LmResult::usable)
-      .def_readonly("seconds", &LmResult::seconds);
+  // The summary of a Ceres solve, the base of _LmResult and of _JointResult (bind_general.cpp,
+  // bound after this).
+  py::class_<SolveSummary>(m, "_SolveSummary")
+      .def_readonly("initial_cost", &SolveSummary::initial_cost)
+      .def_readonly("final_cost", &SolveSummary::final_cost)
+      .def_readonly("iterations", &SolveSummary::iterations)
+      .def_readonly("termination", &SolveSummary::termination)
+      .def_readonly("message", &SolveSummary::message)
+      .def_readonly("usable", &SolveSummary::usable)
+      .def_readonly("seconds", &SolveSummary::seconds);
+  py::class_<LmResult, SolveSummary>(m, "_LmResult").def_readonly("params", &LmResult::params);
   m.def("_run_lm", &RunLm, py::arg("data"), py::arg("initial"), py::arg("options"),
         py::call_guard<py::gil_scoped_release>());
   m.def(
       "_run_lm_many",
-      [](const FitnessData& data,
-         const Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, kNumParams, Eigen::RowMajor>>&
-             initials,
-         const LmOptions& o, int threads, py::object progress) {
-        // Independent LM solves from many starts (the paper's 1000 runs), in parallel. The
-        // optional progress callable (done, total, best_cost) is called by member 0 (the
-        // caller's thread) after each of its solves; when it returns False or raises (Ctrl-C
-        // included), no further start is taken and the starts not solved get the error
-        // "cancelled". A solve under way runs to its end.
-        const Eigen::Index n = initials.rows();
-        std::vector<LmResult> out(n);
-        std::vector<std::string> errors(n);
-        PyProgress wrapper(std::move(progress));
-        ProgressCallback cb = wrapper.callback();
-        {
-          py::gil_scoped_release release;
-          const int team = std::max(1, std::min<int>(ResolveThreads(threads), static_cast<int>(n)));
-          std::atomic<Eigen::Index> next(0);
-          std::atomic<long long> done(0);
-          std::atomic<bool> cancel(false);
-          std::vector<std::atomic<bool>> started(n);
-          for (auto& s : started) s.store(false);
-          std::mutex best_mutex;
-          double best = std::numeric_limits<double>::infinity();
-          RunTeam(team, [&](int member, SpinBarrier&) {
-            for (Eigen::Index i = next.fetch_add(1); i < n && !cancel.load();
-                 i = next.fetch_add(1)) {
-              started[i].store(true);
-              try {
-                out[i] = RunLm(data, initials.row(i).transpose(), o);
-                std::lock_guard<std::mutex> lock(best_mutex);
-                best = std::min(best, out[i].final_cost);
-              } catch (const std::exception& e) {
-                errors[i] = e.what();
-              }
-              const long long d = done.fetch_add(1) + 1;
-              if (member == 0 && cb) {
-                Progress p;
-                p.done = d;
-                p.total = n;
-                {
-                  std::lock_guard<std::mutex> lock(best_mutex);
-                  p.best_fitness = best;
-                }
-                if (!cb(p)) cancel.store(true);
-              }
-            }
-          });
-          for (Eigen::Index i = 0; i < n; ++i) {
-            if (!started[i].load()) errors[i] = "cancelled";
-          }
-        }
-        wrapper.rethrow();
-        return std::make_pair(out, errors);
+      [](const FitnessData& data, StartsRef initials, const LmOptions& o, int threads,
+         py::object progress) {
+        // RunLmMany (multistart.h); the progress callable (done, total, best_cost) may stop it.
+        MultiStartResult r = SolveWithProgress(
+            std::move(progress),
+            [&](const ProgressCallback& cb) { return RunLmMany(data, initials, o, threads, cb); });
+        return std::make_pair(std::move(r.results), std::move(r.errors));
       },
       py::arg("data"), py::arg("initials"), py::arg("options"), py::arg("threads") = 0,
       py::arg("progress") = py::none());
+}
+
+}  // namespace
+
+void BindSolvers(py::module_& m) {
+  BindFitness(m);
+  BindPso(m);
+  BindRandomSearch(m);
+  BindLm(m);
 }
 
 }  // namespace hmlvs::python

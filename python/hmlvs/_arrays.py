@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from . import _core
 from .models.params import NUM_PARAMS, Parameters
 
 
@@ -55,9 +56,10 @@ def same_rows(**arrays: np.ndarray) -> int:
     return a0.shape[0]
 
 
-def check_transform(t: Any, name: str, tol: float = 1e-6) -> np.ndarray:
+def check_transform(t: Any, name: str, tol: float = _core.RIGID_TOLERANCE) -> np.ndarray:
     """A 4x4 rigid transform (float64 copy): finite, orthonormal rotation with det +1 (to
-    ``tol``), last row [0 0 0 1]; a ValueError naming ``name`` otherwise."""
+    ``tol``; by default the C++ core's, 1e-6, which its own checks use), last row [0 0 0 1]; a
+    ValueError naming ``name`` otherwise."""
     try:
         m = np.array(t, dtype=np.float64)
     except (TypeError, ValueError):

@@ -1,38 +1,52 @@
-// The calibration objective F(q) = 1/2 sum_i ||E_i||^2 over m reference points (paper Eq. 13),
-// laid out for the optimizers' hot loop.
+// What the global searches (search.h) minimise: an objective over N parameters. The sensor
+// models' calibration objectives implement it (paper::FitnessData, 14 parameters;
+// opencv::PointFitness, 18), so that PSO and random search serve both.
 #pragma once
 
 #include <Eigen/Core>
-#include <vector>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+#include <string>
 
-#include "hmlvs/model/model.h"
+namespace hmlvs::solvers {
 
-namespace hmlvs {
-
-/// Calibration points precomputed once per data set. Each reference point is stored in its
-/// hand frame, h_i = R_N^T (P_i - P_N); since R_N is a rotation, ||E_i|| = ||h_i - (R_C cP + t)||
-/// and an evaluation never touches the poses. Structure-of-arrays for the evaluation loop.
-class FitnessData {
+template <int N>
+class Fitness {
  public:
-  /// Validates shapes, finiteness and poses (std::invalid_argument on bad input).
-  FitnessData(PixelsRef pixels, PosesRef base_from_hand, Points3Ref references);
+  static constexpr int kDim = N;
+  using Vector = Eigen::Matrix<double, N, 1>;
 
-  Eigen::Index size() const { return static_cast<Eigen::Index>(u_.size()); }
+  virtual ~Fitness() = default;
 
-  /// F(q) = 1/2 sum ||E_i||^2; +inf if any pixel's ray misses the laser plane. No allocation.
-  double Evaluate(const double* q) const;
+  /// The objective at x (N numbers); +inf where it has no value (e.g. a ray that misses the
+  /// laser plane). Called by several threads at once: it must not change any state.
+  virtual double Evaluate(const double* x) const = 0;
 
-  /// Per-point ||E_i|| (mm); NaN where the ray misses the laser plane.
-  Eigen::VectorXd PointErrors(const double* q) const;
+  /// How many data points it sums over (a search refuses none).
+  virtual Eigen::Index size() const = 0;
 
-  double u(Eigen::Index i) const { return u_[i]; }
-  double v(Eigen::Index i) const { return v_[i]; }
-  Eigen::Vector3d ReferenceInHand(Eigen::Index i) const {
-    return Eigen::Vector3d(hx_[i], hy_[i], hz_[i]);
-  }
-
- private:
-  std::vector<double> u_, v_, hx_, hy_, hz_;
+  /// The name of parameter d (0 <= d < N), for messages.
+  virtual const std::string& ParameterName(int d) const = 0;
 };
 
-}  // namespace hmlvs
+/// Throws std::invalid_argument "<what> of <name> ..." for the first parameter whose bounds
+/// [lower, upper] are not finite or reversed.
+template <int N>
+void CheckBounds(const Fitness<N>& fitness, const typename Fitness<N>::Vector& lower,
+                 const typename Fitness<N>::Vector& upper, const char* what) {
+  for (int d = 0; d < N; ++d) {
+    if (!std::isfinite(lower[d]) || !std::isfinite(upper[d])) {
+      throw std::invalid_argument(std::string(what) + " of " + fitness.ParameterName(d) +
+                                  " are not finite");
+    }
+    if (lower[d] > upper[d]) {
+      std::ostringstream msg;
+      msg << what << " of " << fitness.ParameterName(d) << ": lower " << lower[d] << " > upper "
+          << upper[d];
+      throw std::invalid_argument(msg.str());
+    }
+  }
+}
+
+}  // namespace hmlvs::solvers

@@ -7,9 +7,12 @@
 #include <utility>
 #include <vector>
 
-namespace hmlvs {
+namespace hmlvs::solvers {
 
 namespace {
+
+using geometry::BaseFromHand;
+using geometry::DHRobot;
 
 using Vec = std::vector<double>;
 
@@ -95,7 +98,7 @@ Vec Solve(std::vector<Vec> m, const Vec& g) {
 
 }  // namespace
 
-LookAtResult SolveLookAt(const DHRobot& robot, const LookAtTarget& target,
+LookAtResult SolveLookAt(const geometry::DHRobot& robot, const LookAtTarget& target,
                          const Eigen::VectorXd& start, const Eigen::VectorXd& lower,
                          const Eigen::VectorXd& upper, const LookAtOptions& options) {
   const std::size_t n = robot.joints.size();
@@ -176,4 +179,4 @@ LookAtResult SolveLookAt(const DHRobot& robot, const LookAtTarget& target,
   return finish();
 }
 
-}  // namespace hmlvs
+}  // namespace hmlvs::solvers

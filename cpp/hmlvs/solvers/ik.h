@@ -7,9 +7,9 @@
 
 #include <Eigen/Core>
 
-#include "hmlvs/model/kinematics.h"
+#include "hmlvs/geometry/kinematics.h"
 
-namespace hmlvs {
+namespace hmlvs::solvers {
 
 /// Where the camera is wanted. Residuals (mm): position - `position`, 300 (z axis - `axis`)
 /// and, with `has_x`, 100 (x axis - `x`), the camera's axes taken in the base frame.
@@ -35,8 +35,8 @@ struct LookAtResult {
 /// none). Central-difference Jacobian (steps of 1e-6 rad), damping scaled by the normal
 /// matrix's diagonal; stops when a step lowers the cost by less than 1e-14 of it, or when no
 /// step lowers it. Throws std::invalid_argument on mismatched sizes or non-finite joints.
-LookAtResult SolveLookAt(const DHRobot& robot, const LookAtTarget& target,
+LookAtResult SolveLookAt(const geometry::DHRobot& robot, const LookAtTarget& target,
                          const Eigen::VectorXd& start, const Eigen::VectorXd& lower,
                          const Eigen::VectorXd& upper, const LookAtOptions& options = {});
 
-}  // namespace hmlvs
+}  // namespace hmlvs::solvers

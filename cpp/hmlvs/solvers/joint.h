@@ -1,5 +1,5 @@
-// Joint calibration of the general sensor (model "opencv") from board corners and laser stripe
-// pixels: one Levenberg-Marquardt solve (Ceres) of
+// Joint calibration of the general sensor (model "opencv", hmlvs::opencv) from board corners and
+// laser stripe pixels: one Levenberg-Marquardt solve (Ceres) of
 //   - corner residuals: projected board corner - detected corner (pixels), and
 //   - laser residuals: the signed distance (mm) from the laser plane of the point where a stripe
 //     pixel's ray meets the board plane of its view,
@@ -19,10 +19,10 @@
 #include <string>
 #include <vector>
 
-#include "hmlvs/model/general.h"
-#include "hmlvs/solvers/lm.h"
+#include "hmlvs/model/opencv.h"
+#include "hmlvs/solvers/solve.h"
 
-namespace hmlvs::general {
+namespace hmlvs::solvers {
 
 using Vector6d = Eigen::Matrix<double, 6, 1>;
 
@@ -36,7 +36,7 @@ struct JointView {
 
 /// Everything the joint solve estimates.
 struct JointState {
-  Vector9d intrinsics = Vector9d::Zero();
+  opencv::Vector9d intrinsics = opencv::Vector9d::Zero();
   Eigen::Vector4d laser_plane = Eigen::Vector4d(0, 1, 0, -100);    ///< (a, b, c, d), unit normal
   Eigen::Matrix4d hand_from_camera = Eigen::Matrix4d::Identity();  ///< chain mode
   Eigen::Matrix4d base_from_board = Eigen::Matrix4d::Identity();   ///< chain mode
@@ -57,9 +57,9 @@ struct JointOptions {
   /// (rotation vector / pose_sigma_r, translation / pose_sigma_t, in the hand frame).
   double pose_sigma_t = 0.0;
   double pose_sigma_r = 0.0;
-  std::array<bool, kNumIntrinsics> fixed{};  ///< intrinsics held at their initial values
-  double corner_sigma = 0.1;                 ///< pixels
-  double laser_sigma = 0.05;                 ///< mm
+  std::array<bool, opencv::kNumIntrinsics> fixed{};  ///< intrinsics held at their initial values
+  double corner_sigma = 0.1;                         ///< pixels
+  double laser_sigma = 0.05;                         ///< mm
   LossKind loss = LossKind::kNone;
   double loss_scale = 3.0;  ///< in units of sigma
   int max_iterations = 100;
@@ -68,15 +68,9 @@ struct JointOptions {
   double gradient_tolerance = 1e-14;
 };
 
-struct JointResult {
+/// The solve's summary (Ceres' costs: 1/2 sum of squared weighted residuals) and its result.
+struct JointResult : SolveSummary {
   JointState state;
-  double initial_cost = 0.0;  ///< Ceres' cost (1/2 sum of squared weighted residuals)
-  double final_cost = 0.0;
-  int iterations = 0;
-  std::string termination;
-  std::string message;
-  bool usable = false;
-  double seconds = 0.0;
 };
 
 /// Solves the joint problem from `initial`. Throws std::invalid_argument for bad input (views
@@ -109,19 +103,4 @@ JointResiduals EvaluateJoint(const std::vector<JointView>& views, const JointSta
 Eigen::MatrixXd JointJacobian(const std::vector<JointView>& views, const JointState& state,
                               const JointOptions& options, std::vector<std::string>* names);
 
-// ---------------------------------------------------------------------------------------------
-// Closed-form starting values.
-
-/// Hand-eye calibration AX = XB by Park and Martin (1994): X = hand_from_camera from the robot's
-/// base_from_hand poses and the camera's camera_from_board poses of the same views (all pairs
-/// of views whose relative rotation exceeds `min_angle` radians). Throws std::invalid_argument
-/// when the motions do not determine X (fewer than two pairs, or rotations about one axis only).
-Eigen::Matrix4d HandEyeParkMartin(const std::vector<Eigen::Matrix4d>& base_from_hand,
-                                  const std::vector<Eigen::Matrix4d>& camera_from_board,
-                                  double min_angle = 0.05);
-
-/// The mean of rigid transforms: the rotation closest (Frobenius) to the sum of rotations,
-/// and the mean translation.
-Eigen::Matrix4d MeanTransform(const std::vector<Eigen::Matrix4d>& transforms);
-
-}  // namespace hmlvs::general
+}  // namespace hmlvs::solvers

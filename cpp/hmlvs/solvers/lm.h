@@ -1,4 +1,4 @@
-// Levenberg-Marquardt identification with Ceres, in two modes:
+// Levenberg-Marquardt identification of the paper model with Ceres, in two modes:
 //  - kPaper: the paper's NLSO: one scalar residual ||E_i|| per point, forward-difference
 //    Jacobian, the 14 parameters with ZYZ Euler angles, no bounds, at most 300 x (free parameters)
 //    iterations.
@@ -12,20 +12,20 @@
 #include <array>
 #include <string>
 
-#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/model/paper_fitness.h"
+#include "hmlvs/solvers/solve.h"
 
-namespace hmlvs {
+namespace hmlvs::solvers {
 
 enum class LmMode { kModern, kPaper };
-enum class LossKind { kNone, kHuber, kCauchy };
 
 struct LmOptions {
   LmMode mode = LmMode::kModern;
-  int max_iterations = 0;                ///< <= 0: 300 x (number of free parameters)
-  std::array<bool, kNumParams> fixed{};  ///< held at the initial value
-  bool use_bounds = true;                ///< modern mode: keep parameters in [lower, upper]
-  Vector14d lower = Vector14d::Constant(-1e300);
-  Vector14d upper = Vector14d::Constant(1e300);
+  int max_iterations = 0;                       ///< <= 0: 300 x (number of free parameters)
+  std::array<bool, paper::kNumParams> fixed{};  ///< held at the initial value
+  bool use_bounds = true;                       ///< modern mode: keep parameters in [lower, upper]
+  paper::Vector14d lower = paper::Vector14d::Constant(-1e300);
+  paper::Vector14d upper = paper::Vector14d::Constant(1e300);
   LossKind loss = LossKind::kNone;
   double loss_scale = 1.0;  ///< mm
   double function_tolerance = 1e-14;
@@ -37,23 +37,15 @@ struct LmOptions {
   bool paper_fast_cost = true;
 };
 
-struct LmResult {
-  Vector14d params = Vector14d::Zero();
-  double initial_cost = 0.0;  ///< F at the start (1/2 sum ||E||^2, before any robust loss)
-  double final_cost = 0.0;    ///< F at the end
-  int iterations = 0;
-  std::string termination;  ///< Ceres' termination type, e.g. "CONVERGENCE"
-  std::string message;      ///< Ceres' explanation
-  bool usable = false;      ///< Ceres' IsSolutionUsable()
-  double seconds = 0.0;
+/// The solve's summary, with initial_cost and final_cost the objective F before and after
+/// (1/2 sum ||E||^2, without any robust loss), and the parameters found.
+struct LmResult : SolveSummary {
+  paper::Vector14d params = paper::Vector14d::Zero();
 };
 
 /// Throws std::invalid_argument for an initial vector that is not valid (a ray misses the laser
 /// plane, outside bounds in modern mode) or fewer residuals than free parameters.
-LmResult RunLm(const FitnessData& data, const Vector14d& initial, const LmOptions& options);
+LmResult RunLm(const paper::FitnessData& data, const paper::Vector14d& initial,
+               const LmOptions& options);
 
-/// ZYZ Euler angles of a rotation, choosing among the two equivalent solutions (and, at gimbal
-/// lock, the split of omega + varphi) the one closest to `hint`.
-Eigen::Vector3d EulerZYZFromRotation(const Eigen::Matrix3d& r, const Eigen::Vector3d& hint);
-
-}  // namespace hmlvs
+}  // namespace hmlvs::solvers

@@ -1,16 +1,18 @@
-// The residual blocks of the LM solves (RunLm), one per calibration point. Each evaluates the
-// model's HandResidual (model/model.h); they differ in parametrisation and differentiation.
-// Exposed so that their Jacobians can be tested; the caller owns the returned object.
+// The residual blocks of the paper model's LM solves (RunLm), one per calibration point. Each
+// evaluates the model's HandResidual (model/paper.h); they differ in parametrisation and
+// differentiation. Exposed so that their Jacobians can be tested; the caller owns the returned
+// object.
 #pragma once
 
 #include <ceres/cost_function.h>
 
 #include <Eigen/Core>
 #include <array>
+#include <vector>
 
-#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/model/paper_fitness.h"
 
-namespace hmlvs {
+namespace hmlvs::solvers {
 
 /// The trigonometry of the paper-mode residual: R_C (ZYZ Euler angles) and tan(theta), which
 /// depend on 4 of the 14 parameters, at a parameter vector x and, for its forward differences,
@@ -63,17 +65,19 @@ ceres::CostFunction* NewModernQuaternionCost(double u, double v,
 
 /// The same for all points of `data` in one residual block (3 m residuals, rows in point
 /// order), used when no robust loss is set.
-ceres::CostFunction* NewModernBatchCost(const FitnessData& data);
+ceres::CostFunction* NewModernBatchCost(const paper::FitnessData& data);
 
 /// The same with the intrinsics and translation blocks holding only the parameters of their group
 /// that `held_mask` leaves free (all of the group when none is), in paper order; the held ones
 /// take their values from `held`. The Jacobian columns are the full cost's free columns.
-ceres::CostFunction* NewModernBatchCost(const FitnessData& data, const Vector14d& held,
-                                        const std::array<bool, kNumParams>& held_mask);
+ceres::CostFunction* NewModernBatchCost(const paper::FitnessData& data,
+                                        const paper::Vector14d& held,
+                                        const std::array<bool, paper::kNumParams>& held_mask);
 
-/// Modern mode when an Euler angle is held fixed: the three components of E_h over 14 scalar
-/// blocks (paper order), Jacobian by automatic differentiation.
-ceres::CostFunction* NewModernEulerCost(double u, double v,
-                                        const Eigen::Vector3d& reference_in_hand);
+/// Which parameters of the group [first, first + size) (paper order) the packed block of the cost
+/// above holds, 0-based within the group: those `held_mask` leaves free, all of the group when
+/// none is.
+std::vector<int> PackedEntries(const std::array<bool, paper::kNumParams>& held_mask, int first,
+                               int size);
 
-}  // namespace hmlvs
+}  // namespace hmlvs::solvers

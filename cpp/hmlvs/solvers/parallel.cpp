@@ -3,7 +3,7 @@
 #include <exception>
 #include <mutex>
 
-namespace hmlvs {
+namespace hmlvs::solvers {
 
 int ResolveThreads(int threads) {
   if (threads > 0) return threads;
@@ -32,4 +32,4 @@ void RunTeam(int threads, const std::function<void(int, SpinBarrier&)>& body) {
   if (error) std::rethrow_exception(error);
 }
 
-}  // namespace hmlvs
+}  // namespace hmlvs::solvers

@@ -8,7 +8,7 @@
 #include <thread>
 #include <vector>
 
-namespace hmlvs {
+namespace hmlvs::solvers {
 
 /// Sense-reversing spin barrier that yields the CPU after a short spin (the machine may have
 /// fewer cores than threads).
@@ -41,4 +41,4 @@ void RunTeam(int threads, const std::function<void(int member, SpinBarrier& barr
 /// Number of threads to use for a request of `threads` (<= 0: all hardware threads).
 int ResolveThreads(int threads);
 
-}  // namespace hmlvs
+}  // namespace hmlvs::solvers

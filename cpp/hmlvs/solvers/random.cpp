@@ -5,7 +5,7 @@
 #define HMLVS_AVX2_DRAWS 1
 #endif
 
-namespace hmlvs {
+namespace hmlvs::solvers {
 
 namespace {
 
@@ -82,4 +82,4 @@ void UniformPairs(Rng& rng, int n, double* r1, double* r2) {
   ScalarPairs(rng, n, r1, r2);
 }
 
-}  // namespace hmlvs
+}  // namespace hmlvs::solvers

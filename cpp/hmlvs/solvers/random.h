@@ -4,7 +4,7 @@
 
 #include <cstdint>
 
-namespace hmlvs {
+namespace hmlvs::solvers {
 
 inline std::uint64_t SplitMix64(std::uint64_t x) {
   x += 0x9e3779b97f4a7c15ULL;
@@ -47,4 +47,4 @@ class Rng {
 /// rng.Uniform() (bit for bit); with AVX2, where the CPU has it, four pairs at a time.
 void UniformPairs(Rng& rng, int n, double* r1, double* r2);
 
-}  // namespace hmlvs
+}  // namespace hmlvs::solvers

@@ -1,27 +1,22 @@
 // Global searches: the particle swarm optimizer (paper Eq. 19-21) and random search
-// (paper section 4). Both are multithreaded and deterministic for a seed whatever the thread
-// count.
+// (paper section 4), over any objective of N parameters (fitness.h; instantiated for the
+// paper model's N = 14 and the general model's N = 18). Both are multithreaded and
+// deterministic for a seed whatever the thread count.
 #pragma once
 
 #include <Eigen/Core>
 #include <cstdint>
-#include <functional>
 #include <string>
 #include <vector>
 
 #include "hmlvs/solvers/fitness.h"
+#include "hmlvs/solvers/progress.h"
 
-namespace hmlvs {
+namespace hmlvs::solvers {
 
-/// Progress of a long solve; a callback returning false stops the solve early (e.g. Ctrl-C).
-struct Progress {
-  long long done = 0;   ///< iterations (PSO, summed over runs) or evaluations done
-  long long total = 0;  ///< the same, when finished
-  double best_fitness = 0.0;
-};
-using ProgressCallback = std::function<bool(const Progress&)>;
-
+template <int N>
 struct PsoOptions {
+  using Vector = typename Fitness<N>::Vector;
   int swarm_size = 50;
   int iterations = 5000;        ///< T
   double w_max = 0.9;           ///< inertia at t = 0 (Eq. 20)
@@ -33,25 +28,28 @@ struct PsoOptions {
   int runs = 1;                 ///< independent runs (different random streams)
   int threads = 0;              ///< <= 0: all hardware threads
   std::uint64_t seed = 0;
-  Vector14d lower = Vector14d::Zero();  ///< search bounds (lower == upper holds it fixed)
-  Vector14d upper = Vector14d::Zero();
+  Vector lower = Vector::Zero();  ///< search bounds (lower == upper holds it fixed)
+  Vector upper = Vector::Zero();
   /// Box the initial swarm is drawn from (e.g. Eq. 22 around a nominal vector); it is
   /// intersected with the search bounds. Unset (lower > upper): the search bounds.
-  Vector14d init_lower = Vector14d::Constant(1.0);
-  Vector14d init_upper = Vector14d::Constant(-1.0);
+  Vector init_lower = Vector::Constant(1.0);
+  Vector init_upper = Vector::Constant(-1.0);
   int progress_every = 100;  ///< iterations between progress callbacks
 };
 
+template <int N>
 struct PsoRun {
-  Vector14d best = Vector14d::Zero();
+  using Vector = typename Fitness<N>::Vector;
+  Vector best = Vector::Zero();
   double best_fitness = 0.0;
   int iterations = 0;
   std::string termination;      ///< "max_iterations", "target_fitness" or "cancelled"
   std::vector<double> history;  ///< best fitness after each iteration
 };
 
+template <int N>
 struct PsoResult {
-  std::vector<PsoRun> runs;
+  std::vector<PsoRun<N>> runs;
   int best_run = 0;
   int threads = 1;
   double seconds = 0.0;
@@ -59,19 +57,24 @@ struct PsoResult {
 };
 
 /// Throws std::invalid_argument for bad options (bounds reversed or not finite, swarm < 2, ...).
-PsoResult RunPso(const FitnessData& data, const PsoOptions& options,
-                 const ProgressCallback& progress = {});
+template <int N>
+PsoResult<N> RunPso(const Fitness<N>& fitness, const PsoOptions<N>& options,
+                    const ProgressCallback& progress = {});
 
+template <int N>
 struct RandomSearchOptions {
+  using Vector = typename Fitness<N>::Vector;
   long long evaluations = 1000000;
   int threads = 0;
   std::uint64_t seed = 0;
-  Vector14d lower = Vector14d::Zero();  ///< candidates are uniform in [lower, upper] (Eq. 22)
-  Vector14d upper = Vector14d::Zero();
+  Vector lower = Vector::Zero();  ///< candidates are uniform in [lower, upper] (Eq. 22)
+  Vector upper = Vector::Zero();
 };
 
+template <int N>
 struct RandomSearchResult {
-  Vector14d best = Vector14d::Zero();
+  using Vector = typename Fitness<N>::Vector;
+  Vector best = Vector::Zero();
   double best_fitness = 0.0;
   long long evaluations = 0;
   long long best_index = -1;  ///< which evaluation found the best
@@ -80,7 +83,10 @@ struct RandomSearchResult {
   bool cancelled = false;
 };
 
-RandomSearchResult RunRandomSearch(const FitnessData& data, const RandomSearchOptions& options,
-                                   const ProgressCallback& progress = {});
+/// Throws std::invalid_argument for bad options (bounds reversed or not finite, no evaluation).
+template <int N>
+RandomSearchResult<N> RunRandomSearch(const Fitness<N>& fitness,
+                                      const RandomSearchOptions<N>& options,
+                                      const ProgressCallback& progress = {});
 
-}  // namespace hmlvs
+}  // namespace hmlvs::solvers

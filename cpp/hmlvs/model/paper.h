@@ -1,4 +1,6 @@
-// The hand-mounted laser-vision sensor model (see docs/model.md).
+// The paper's sensor model (model "paper", namespace hmlvs::paper; see docs/model.md): the
+// division-model camera, a laser plane with two degrees of freedom (H, theta) and a hand-eye
+// transform with ZYZ Euler angles.
 //
 // Units: mm, rad, pixels. Parameter order is the paper's (Eq. 10):
 //   q = [f, Su, Sv, Cu, Cv, k, H, theta, omega, phi, varphi, tx, ty, tz]
@@ -14,15 +16,12 @@
 #include <cstdint>
 #include <string>
 
-namespace hmlvs {
+#include "hmlvs/geometry/geometry.h"
+#include "hmlvs/model/arrays.h"
+
+namespace hmlvs::paper {
 
 constexpr int kNumParams = 14;
-
-/// Measurement (hmlvs.measure) refuses pixels whose ray meets the laser plane at less than 0.5
-/// degrees (the sine below): such points lie hundreds of baselines away, where a tenth of a
-/// pixel moves them by metres. The batch functions apply it when asked (`min_ray_sine`); the
-/// objective and the solvers do not.
-constexpr double kMinRaySine = 0.0087265354983739347;  // sin(0.5 deg)
 
 enum Param : int {
   kF = 0,
@@ -48,27 +47,6 @@ const std::array<std::string, kNumParams>& ParamNames();
 int ParamIndexFromName(const std::string& name);
 
 using Vector14d = Eigen::Matrix<double, kNumParams, 1>;
-
-/// R_C = Rz(omega) Ry(phi) Rz(varphi): hand_from_camera rotation (paper Eq. 6).
-template <typename T>
-Eigen::Matrix<T, 3, 3> RotationZYZ(const T& omega, const T& phi, const T& varphi) {
-  using std::cos;
-  using std::sin;
-  const T co = cos(omega), so = sin(omega);
-  const T cp = cos(phi), sp = sin(phi);
-  const T cw = cos(varphi), sw = sin(varphi);
-  Eigen::Matrix<T, 3, 3> r;
-  r(0, 0) = co * cp * cw - so * sw;
-  r(0, 1) = -co * cp * sw - so * cw;
-  r(0, 2) = co * sp;
-  r(1, 0) = so * cp * cw + co * sw;
-  r(1, 1) = -so * cp * sw + co * cw;
-  r(1, 2) = so * sp;
-  r(2, 0) = -sp * cw;
-  r(2, 1) = sp * sw;
-  r(2, 2) = cp;
-  return r;
-}
 
 // ---------------------------------------------------------------------------------------------
 // The one formulation of docs/model.md steps 1-5. Every evaluation of the model (the batch
@@ -109,8 +87,8 @@ T PixelToCamera(const T* q, const T& tan_theta, const T& u, const T& v, T* camer
 }
 
 /// docs/model.md step 4 and the hand part of step 5 (paper Eq. 5-6): a camera-frame point in the
-/// hand frame, R_C cP + t, with R_C from RotationZYZ and t = (q[kTx], q[kTy], q[kTz]), written out
-/// term by term and summed left to right.
+/// hand frame, R_C cP + t, with R_C from geometry::RotationZYZ and t = (q[kTx], q[kTy], q[kTz]),
+/// written out term by term and summed left to right.
 template <typename T>
 Eigen::Matrix<T, 3, 1> CameraToHand(const T* q, const Eigen::Matrix<T, 3, 3>& hand_from_camera_rot,
                                     const T* camera_point) {
@@ -180,40 +158,29 @@ T HandResidual(const T* q, const Rotation& hand_from_camera_rot, const T& tan_th
   return plane;
 }
 
+/// The paper model as a model trait (the general model's: opencv::Model, opencv_fitness.h): its
+/// parameters and its hand-frame residual on any scalar. The point LM (solvers/point_lm.h) and
+/// the point objective (calibration_points.h) are written once over such a trait.
+struct Model {
+  static constexpr int kNumParams = paper::kNumParams;
+  static const std::array<std::string, kNumParams>& Names() { return ParamNames(); }
+
+  /// HandResidual with R_C from the Euler angles: e = h - (R_C cP + t) of pixel (u, v) whose
+  /// reference point in its hand frame is h. Returns false when the ray misses the laser plane.
+  template <typename T>
+  static bool Residual(const T* q, double u, double v, const double* h, T* e) {
+    using std::tan;
+    return HandResidual(q, geometry::RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]), tan(q[kTheta]), u,
+                        v, h, e) > T(0.0);
+  }
+};
+
 // ---------------------------------------------------------------------------------------------
-// Batch evaluation on plain doubles. Arrays come in as row-major Eigen::Ref views so that numpy
-// buffers can be passed without a copy. Poses are base_from_hand 4x4 transforms flattened to
-// 16 row-major numbers per row.
-
-using RowMatX2 = Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>;
-using RowMatX3 = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
-using RowMatX16 = Eigen::Matrix<double, Eigen::Dynamic, 16, Eigen::RowMajor>;
-using PixelsRef = Eigen::Ref<const RowMatX2>;
-using Points3Ref = Eigen::Ref<const RowMatX3>;
-using PosesRef = Eigen::Ref<const RowMatX16>;
-using Mask = Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1>;
-
-/// Points computed from pixels, with a per-point validity mask. Invalid rows hold NaN.
-struct PointsResult {
-  RowMatX3 points;
-  Mask valid;
-  Eigen::Index num_invalid = 0;
-};
-
-/// Pixels computed from points, with a per-point validity mask. Invalid rows hold NaN.
-struct PixelsResult {
-  RowMatX2 pixels;
-  Mask valid;
-  Eigen::Index num_invalid = 0;
-};
+// Batch evaluation on plain doubles (the array types of arrays.h).
 
 /// Throws std::invalid_argument unless q is finite and physically meaningful
 /// (f, Su, Sv, H > 0, |theta| < pi/2).
 void ValidateParams(const Vector14d& q);
-
-/// Throws std::invalid_argument naming the first pose that is not finite, whose rotation is not
-/// orthonormal (tolerance 1e-6) or whose last row is not [0 0 0 1].
-void ValidatePoses(PosesRef base_from_hand);
 
 /// Stripe pixels -> camera-frame points (mm), docs/model.md steps 1-3. Pixels whose ray misses the
 /// laser plane are marked invalid; with `throw_on_invalid` the first one raises
@@ -258,4 +225,4 @@ RowMatX3 CameraRaysFromPixels(const Vector14d& q, PixelsRef pixels);
 /// The hand_from_camera transform (4x4) of parameters q.
 Eigen::Matrix4d HandFromCamera(const Vector14d& q);
 
-}  // namespace hmlvs
+}  // namespace hmlvs::paper

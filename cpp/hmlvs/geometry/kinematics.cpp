@@ -1,10 +1,10 @@
-#include "hmlvs/model/kinematics.h"
+#include "hmlvs/geometry/kinematics.h"
 
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
 
-namespace hmlvs {
+namespace hmlvs::geometry {
 
 Eigen::Matrix4d DHLinkTransform(const DHJoint& joint, double reading, DHConvention convention) {
   const double theta = joint.prismatic ? joint.theta : reading + joint.offset;
@@ -64,4 +64,4 @@ RowMatX16 ForwardKinematics(
   return poses;
 }
 
-}  // namespace hmlvs
+}  // namespace hmlvs::geometry

@@ -1,13 +1,11 @@
-#include "hmlvs/model/general.h"
+#include "hmlvs/model/opencv.h"
 
 #include <cmath>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
 
-#include "hmlvs/model/checks.h"
-
-namespace hmlvs::general {
+namespace hmlvs::opencv {
 
 namespace {
 
@@ -87,17 +85,16 @@ Eigen::Vector4d UnitPlane(const Eigen::Vector4d& plane) {
   return plane / n;
 }
 
-}  // namespace
-
-PixelsResult ProjectCameraPoints(const Vector9d& in, Points3Ref points) {
-  ValidateIntrinsics(in);
-  RequireFinite(points.data(), points.rows(), 3, "camera points");
+// Pixels of `rows` inputs with a validity mask: `pixel_of(i, pixel)` writes input i's two
+// numbers and says whether they are valid; invalid rows hold NaN.
+template <typename PixelOf>
+PixelsResult MapToPixels(Eigen::Index rows, PixelOf pixel_of) {
   PixelsResult out;
-  out.pixels.resize(points.rows(), 2);
-  out.valid.resize(points.rows());
-  for (Eigen::Index i = 0; i < points.rows(); ++i) {
+  out.pixels.resize(rows, 2);
+  out.valid.resize(rows);
+  for (Eigen::Index i = 0; i < rows; ++i) {
     double px[2];
-    const bool ok = ProjectPoint(in.data(), points.row(i).data(), px);
+    const bool ok = pixel_of(i, px);
     out.valid[i] = ok ? 1 : 0;
     if (ok) {
       out.pixels.row(i) << px[0], px[1];
@@ -109,24 +106,22 @@ PixelsResult ProjectCameraPoints(const Vector9d& in, Points3Ref points) {
   return out;
 }
 
+}  // namespace
+
+PixelsResult ProjectCameraPoints(const Vector9d& in, Points3Ref points) {
+  ValidateIntrinsics(in);
+  RequireFinite(points.data(), points.rows(), 3, "camera points");
+  return MapToPixels(points.rows(), [&](Eigen::Index i, double* px) {
+    return ProjectPoint(in.data(), points.row(i).data(), px);
+  });
+}
+
 PixelsResult UndistortPixels(const Vector9d& in, PixelsRef pixels) {
   ValidateIntrinsics(in);
   RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
-  PixelsResult out;
-  out.pixels.resize(pixels.rows(), 2);
-  out.valid.resize(pixels.rows());
-  for (Eigen::Index i = 0; i < pixels.rows(); ++i) {
-    double x, y;
-    const bool ok = UndistortNormalized(in.data(), pixels(i, 0), pixels(i, 1), &x, &y);
-    out.valid[i] = ok ? 1 : 0;
-    if (ok) {
-      out.pixels.row(i) << x, y;
-    } else {
-      out.pixels.row(i).setConstant(kNaN);
-      ++out.num_invalid;
-    }
-  }
-  return out;
+  return MapToPixels(pixels.rows(), [&](Eigen::Index i, double* xy) {
+    return UndistortNormalized(in.data(), pixels(i, 0), pixels(i, 1), &xy[0], &xy[1]);
+  });
 }
 
 namespace {
@@ -198,14 +193,14 @@ PointsResult LaserPointsInBase(const Vector9d& in, const Eigen::Vector4d& laser_
                                const Eigen::Matrix4d& hand_from_camera, PixelsRef pixels,
                                PosesRef base_from_hand, bool throw_on_invalid) {
   RequireSameRows(pixels.rows(), "pixels", base_from_hand.rows(), "poses");
-  ValidatePoses(base_from_hand);
+  geometry::ValidatePoses(base_from_hand);
   const Eigen::Matrix3d r_hc = hand_from_camera.topLeftCorner<3, 3>();
   const Eigen::Vector3d t_hc = hand_from_camera.topRightCorner<3, 1>();
   return MapLaserPixels(
       in, laser_plane, pixels, throw_on_invalid, [&](Eigen::Index i, const Eigen::Vector3d& p) {
-        return Eigen::Vector3d(PoseRotation(base_from_hand, i) * (r_hc * p + t_hc) +
-                               PosePosition(base_from_hand, i));
+        return Eigen::Vector3d(geometry::PoseRotation(base_from_hand, i) * (r_hc * p + t_hc) +
+                               geometry::PosePosition(base_from_hand, i));
       });
 }
 
-}  // namespace hmlvs::general
+}  // namespace hmlvs::opencv

@@ -1,11 +1,11 @@
-#include "hmlvs/model/cost.h"
+#include "hmlvs/model/paper_cost.h"
 
 #include <ceres/autodiff_cost_function.h>
 
 #include <sstream>
 #include <stdexcept>
 
-namespace hmlvs {
+namespace hmlvs::paper {
 
 void ResidualJacobian(
     const Vector14d& q, PixelsRef pixels, PosesRef poses, Points3Ref references,
@@ -17,11 +17,8 @@ void ResidualJacobian(
   residuals->resize(3 * m);
   jacobian->resize(3 * m, kNumParams);
   for (Eigen::Index i = 0; i < m; ++i) {
-    const double* p = poses.row(i).data();
-    PointResidualFunctor f{pixels(i, 0), pixels(i, 1), Eigen::Matrix3d(), Eigen::Vector3d(),
-                           references.row(i).transpose()};
-    f.base_from_hand_rot << p[0], p[1], p[2], p[4], p[5], p[6], p[8], p[9], p[10];
-    f.base_from_hand_pos << p[3], p[7], p[11];
+    const PointResidualFunctor f{pixels(i, 0), pixels(i, 1), geometry::PoseRotation(poses, i),
+                                 geometry::PosePosition(poses, i), references.row(i).transpose()};
     ceres::AutoDiffCostFunction<PointResidualFunctor, 3, kNumParams> cost(
         new PointResidualFunctor(f));
     const double* params[] = {q.data()};
@@ -34,4 +31,4 @@ void ResidualJacobian(
   }
 }
 
-}  // namespace hmlvs
+}  // namespace hmlvs::paper

@@ -1,4 +1,4 @@
-#include "hmlvs/model/model.h"
+#include "hmlvs/model/paper.h"
 
 #include <Eigen/Geometry>
 #include <cmath>
@@ -6,29 +6,11 @@
 #include <sstream>
 #include <stdexcept>
 
-#include "hmlvs/model/checks.h"
+namespace hmlvs::paper {
 
-namespace hmlvs {
-
-void RequireSameRows(Eigen::Index a, const char* name_a, Eigen::Index b, const char* name_b) {
-  if (a != b) {
-    std::ostringstream msg;
-    msg << name_a << " has " << a << " rows but " << name_b << " has " << b;
-    throw std::invalid_argument(msg.str());
-  }
-}
-
-void RequireFinite(const double* data, Eigen::Index rows, int cols, const char* name) {
-  for (Eigen::Index i = 0; i < rows; ++i) {
-    for (int j = 0; j < cols; ++j) {
-      if (!std::isfinite(data[i * cols + j])) {
-        std::ostringstream msg;
-        msg << name << " row " << i << " is not finite (NaN or inf in column " << j << ")";
-        throw std::invalid_argument(msg.str());
-      }
-    }
-  }
-}
+using geometry::PosePosition;
+using geometry::PoseRotation;
+using geometry::RotationZYZ;
 
 namespace {
 
@@ -97,28 +79,6 @@ void ValidateParams(const Vector14d& q) {
   }
 }
 
-void ValidatePoses(PosesRef poses) {
-  RequireFinite(poses.data(), poses.rows(), 16, "poses");
-  for (Eigen::Index i = 0; i < poses.rows(); ++i) {
-    const double* p = poses.row(i).data();
-    if (p[12] != 0.0 || p[13] != 0.0 || p[14] != 0.0 || p[15] != 1.0) {
-      std::ostringstream msg;
-      msg << "pose " << i << " is not a homogeneous transform: its last row is [" << p[12] << " "
-          << p[13] << " " << p[14] << " " << p[15] << "], expected [0 0 0 1]";
-      throw std::invalid_argument(msg.str());
-    }
-    const Eigen::Matrix3d r = PoseRotation(poses, i);
-    const double err = (r.transpose() * r - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
-    if (err > 1e-6 || r.determinant() < 0.0) {
-      std::ostringstream msg;
-      msg << "pose " << i
-          << " has a rotation part that is not a proper rotation (|R^T R - I| = " << err
-          << ", det = " << r.determinant() << "); poses must be base_from_hand transforms";
-      throw std::invalid_argument(msg.str());
-    }
-  }
-}
-
 namespace {
 
 // Pixels -> points with a validity mask: `point_of(i, u, v, point)` writes pixel i's point and
@@ -172,7 +132,7 @@ PointsResult CameraPointsFromPixels(const Vector14d& q, PixelsRef pixels, bool t
 PointsResult BasePointsFromPixels(const Vector14d& q, PixelsRef pixels, PosesRef poses,
                                   bool throw_on_invalid, double min_ray_sine) {
   RequireSameRows(pixels.rows(), "pixels", poses.rows(), "poses");
-  ValidatePoses(poses);
+  geometry::ValidatePoses(poses);
   ValidateParams(q);
   RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
   const Eigen::Matrix3d hand_from_camera_rot = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
@@ -211,10 +171,8 @@ RowMatX3 CameraRaysFromPixels(const Vector14d& q, PixelsRef pixels) {
 }
 
 Eigen::Matrix4d HandFromCamera(const Vector14d& q) {
-  Eigen::Matrix4d t = Eigen::Matrix4d::Identity();
-  t.topLeftCorner<3, 3>() = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
-  t.topRightCorner<3, 1>() << q[kTx], q[kTy], q[kTz];
-  return t;
+  return geometry::Transform(RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]),
+                             Eigen::Vector3d(q[kTx], q[kTy], q[kTz]));
 }
 
 PixelsResult PixelsFromCameraPoints(const Vector14d& q, Points3Ref camera_points) {
@@ -262,7 +220,7 @@ namespace {
 RowMatX3 CameraFromBase(const Vector14d& q, Points3Ref base_points, PosesRef poses) {
   RequireSameRows(base_points.rows(), "points", poses.rows(), "poses");
   RequireFinite(base_points.data(), base_points.rows(), 3, "points");
-  ValidatePoses(poses);
+  geometry::ValidatePoses(poses);
   const Eigen::Matrix4d hfc = HandFromCamera(q);
   const Eigen::Matrix3d rc = hfc.topLeftCorner<3, 3>();
   const Eigen::Vector3d tc = hfc.topRightCorner<3, 1>();
@@ -314,4 +272,4 @@ PixelsResult PixelsFromBasePoints(const Vector14d& q, Points3Ref base_points, Po
   return out;
 }
 
-}  // namespace hmlvs
+}  // namespace hmlvs::paper

@@ -4,9 +4,9 @@
 #include <Eigen/Core>
 #include <vector>
 
-#include "hmlvs/model/model.h"
+#include "hmlvs/model/arrays.h"
 
-namespace hmlvs {
+namespace hmlvs::geometry {
 
 enum class DHConvention {
   kStandard,  ///< T_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)
@@ -45,4 +45,4 @@ RowMatX16 ForwardKinematics(
     const Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>&
         joints);
 
-}  // namespace hmlvs
+}  // namespace hmlvs::geometry

@@ -1,24 +1,28 @@
-// The general sensor model (model "opencv"): OpenCV's pinhole camera with Brown-Conrady
-// distortion, a laser plane with three degrees of freedom and a hand-eye transform with any
-// rotation.
+// The general sensor model (model "opencv", namespace hmlvs::opencv): OpenCV's pinhole camera
+// with Brown-Conrady distortion, a laser plane with three degrees of freedom and a hand-eye
+// transform with any rotation.
 //
 // Units: mm and pixels; pixel centres at integer coordinates (u = column, v = row), as in
 // cv2.projectPoints. Intrinsics are 9 numbers [fx, fy, cx, cy, k1, k2, p1, p2, k3]. The laser
 // plane is n . X + d = 0 in the camera frame, with n a unit vector.
 //
-// As in model.h, the single-point functions are templates on the scalar, so that one
+// As in paper.h, the single-point functions are templates on the scalar, so that one
 // formulation serves plain evaluation, calibration (ceres::Jet) and measurement.
 #pragma once
+
+#include <ceres/jet.h>
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
-#include "hmlvs/model/model.h"
+#include "hmlvs/geometry/geometry.h"
+#include "hmlvs/model/arrays.h"
 
-namespace hmlvs::general {
+namespace hmlvs::opencv {
 
 constexpr int kNumIntrinsics = 9;
 enum Intrinsic : int { kFx = 0, kFy, kCx, kCy, kK1, kK2, kP1, kP2, kK3 };
@@ -57,6 +61,37 @@ bool ProjectPoint(const T* in, const T* camera_point, T* pixel) {
 bool UndistortNormalized(const double* in, double u, double v, double* x, double* y,
                          double* jacobian = nullptr);
 
+/// The value of a scalar: a double itself, a Jet's real part.
+inline double ValueOf(double v) { return v; }
+template <typename S, int N>
+double ValueOf(const ceres::Jet<S, N>& v) {
+  return v.a;
+}
+
+/// UndistortNormalized on any scalar: the Newton iteration in plain doubles, then, on a Jet,
+/// one Newton step on the Jet from its solution, which changes no value there and carries the
+/// exact derivatives (those of the implicit function distort(x, y) = m(intrinsics)). On doubles
+/// the solution itself.
+template <typename T>
+bool UndistortPoint(const T* in, double u, double v, T* x, T* y) {
+  double values[kNumIntrinsics], x0, y0, jd[4];
+  for (int k = 0; k < kNumIntrinsics; ++k) values[k] = ValueOf(in[k]);
+  if (!UndistortNormalized(values, u, v, &x0, &y0, jd)) return false;
+  if constexpr (std::is_same_v<T, double>) {
+    *x = x0;
+    *y = y0;
+  } else {
+    T xd, yd;
+    Distort(in, x0, y0, &xd, &yd);
+    const T ex = xd - (T(u) - in[kCx]) / in[kFx];
+    const T ey = yd - (T(v) - in[kCy]) / in[kFy];
+    const double det = jd[0] * jd[3] - jd[1] * jd[2];
+    *x = T(x0) - (jd[3] * ex - jd[1] * ey) / det;
+    *y = T(y0) - (jd[0] * ey - jd[2] * ex) / det;
+  }
+  return true;
+}
+
 /// The point where the ray through normalised image point (x, y) meets the plane
 /// n . X + d = 0 (camera frame). Returns the depth Z = -d / (n . (x, y, 1)); the ray meets the
 /// plane in front of the camera iff it is > 0.
@@ -81,14 +116,8 @@ void CameraFromBoard(const T* hand_from_camera_q, const T* hand_from_camera_t,
                      Eigen::Matrix<T, 3, 1>* translation) {
   using Mat3 = Eigen::Matrix<T, 3, 3>;
   using Vec3 = Eigen::Matrix<T, 3, 1>;
-  const Mat3 r_hc = Eigen::Quaternion<T>(hand_from_camera_q[3], hand_from_camera_q[0],
-                                         hand_from_camera_q[1], hand_from_camera_q[2])
-                        .normalized()
-                        .toRotationMatrix();
-  const Mat3 r_bb = Eigen::Quaternion<T>(base_from_board_q[3], base_from_board_q[0],
-                                         base_from_board_q[1], base_from_board_q[2])
-                        .normalized()
-                        .toRotationMatrix();
+  const Mat3 r_hc = geometry::QuaternionRotation(hand_from_camera_q);
+  const Mat3 r_bb = geometry::QuaternionRotation(base_from_board_q);
   const Mat3 r_hand_base = base_from_hand_r.transpose().cast<T>();
   const Vec3 t_hc(hand_from_camera_t[0], hand_from_camera_t[1], hand_from_camera_t[2]);
   const Vec3 t_bb(base_from_board_t[0], base_from_board_t[1], base_from_board_t[2]);
@@ -124,4 +153,4 @@ PointsResult LaserPointsInBase(const Vector9d& intrinsics, const Eigen::Vector4d
                                const Eigen::Matrix4d& hand_from_camera, PixelsRef pixels,
                                PosesRef base_from_hand, bool throw_on_invalid);
 
-}  // namespace hmlvs::general
+}  // namespace hmlvs::opencv

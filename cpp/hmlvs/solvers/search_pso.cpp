@@ -1,51 +1,40 @@
-#include "hmlvs/solvers/search.h"
-
 #include <algorithm>
 #include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <limits>
-#include <sstream>
+#include <memory>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
+#include "hmlvs/model/opencv_fitness.h"
+#include "hmlvs/model/paper.h"
 #include "hmlvs/solvers/parallel.h"
 #include "hmlvs/solvers/random.h"
+#include "hmlvs/solvers/search.h"
+#include "hmlvs/solvers/solve.h"
 
-namespace hmlvs {
+namespace hmlvs::solvers {
 
 namespace {
 
-double Seconds(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-void CheckBounds(const Vector14d& lower, const Vector14d& upper, const char* what) {
-  const auto& names = ParamNames();
-  for (int d = 0; d < kNumParams; ++d) {
-    if (!std::isfinite(lower[d]) || !std::isfinite(upper[d])) {
-      throw std::invalid_argument(std::string(what) + " of " + names[d] + " are not finite");
-    }
-    if (lower[d] > upper[d]) {
-      std::ostringstream msg;
-      msg << what << " of " << names[d] << ": lower " << lower[d] << " > upper " << upper[d];
-      throw std::invalid_argument(msg.str());
-    }
-  }
-}
-
 // The best personal best among one team member's particles after a generation. Cache-line
 // aligned: each member writes its own entry every generation.
+template <int N>
 struct alignas(64) MemberBest {
   double fit = std::numeric_limits<double>::infinity();
-  Vector14d best = Vector14d::Zero();
+  typename Fitness<N>::Vector best = Fitness<N>::Vector::Zero();
   bool stop = false;  // member 0: cancellation requested before this generation
 };
 
 // One particle: position, velocity, personal best and random stream. Cache-line aligned, so
 // that team members updating neighbouring particles never write to the same line.
+template <int N>
 struct alignas(64) Particle {
-  Vector14d x, v, pbest;
+  typename Fitness<N>::Vector x, v, pbest;
   double fit = 0.0, pbest_fit = 0.0;
   Rng rng{0};
 };
@@ -54,13 +43,14 @@ struct alignas(64) Particle {
 // Cache-line aligned, its global best on lines of its own: team member 0 writes it every
 // generation, while every member reads the fields before it (the particles' and the member
 // bests' buffers), which so never share a line with that write.
+template <int N>
 struct alignas(64) Swarm {
   int n;
-  std::vector<Particle> p;
+  std::vector<Particle<N>> p;
   // Per team member, double-buffered by generation parity: a member may write generation
   // t + 1's entry while the others still read generation t's.
-  std::array<std::vector<MemberBest>, 2> member_best;
-  alignas(64) Vector14d gbest;
+  std::array<std::vector<MemberBest<N>>, 2> member_best;
+  alignas(64) typename Fitness<N>::Vector gbest;
   double gbest_fit = std::numeric_limits<double>::infinity();
   explicit Swarm(int size) : n(size), p(size) {}
 };
@@ -77,19 +67,20 @@ struct Motion {
 // stream); the update is element-wise, so it vectorises without reordering any floating-point
 // operation of an element. On x86-64 an AVX2 clone is chosen at load time when the CPU has it
 // (not FMA, which would fuse the multiply-adds and change the results); both give the same bits.
+template <int N>
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__AVX2__)
 __attribute__((target_clones("avx2", "default")))
 #endif
-void Move(const Motion& m, Particle& p) {
-  double r1[kNumParams], r2[kNumParams];
-  UniformPairs(p.rng, kNumParams, r1, r2);
+void Move(const Motion& m, Particle<N>& p) {
+  double r1[N], r2[N];
+  UniformPairs(p.rng, N, r1, r2);
   double* x = p.x.data();
   double* v = p.v.data();
   const double* pbest = p.pbest.data();
   const double w = m.w, c1 = m.c1, c2 = m.c2;
   const double *lower = m.lower, *upper = m.upper, *g = m.gbest;
 #pragma omp simd
-  for (int d = 0; d < kNumParams; ++d) {
+  for (int d = 0; d < N; ++d) {
     double vd = w * v[d] + c1 * r1[d] * (pbest[d] - x[d]) + c2 * r2[d] * (g[d] - x[d]);
     // std::clamp(vd, -vmax, vmax): the same comparisons, as selects (no branches).
     const double hi = m.vmax[d], lo = m.neg_vmax[d];
@@ -107,9 +98,14 @@ void Move(const Motion& m, Particle& p) {
   }
 }
 
+template <int N>
 class PsoRunner {
  public:
-  PsoRunner(const FitnessData& data, const PsoOptions& o) : data_(data), o_(o) {
+  using Vector = typename Fitness<N>::Vector;
+  using Swarm = hmlvs::solvers::Swarm<N>;
+  using Particle = hmlvs::solvers::Particle<N>;
+
+  PsoRunner(const Fitness<N>& data, const PsoOptions<N>& o) : data_(data), o_(o) {
     range_ = o.upper - o.lower;
     vmax_ = o.vmax * range_;
     neg_vmax_ = -vmax_;
@@ -118,9 +114,9 @@ class PsoRunner {
     if ((o.init_lower.array() <= o.init_upper.array()).all()) {
       init_lo_ = o.init_lower.cwiseMax(o.lower);
       init_hi_ = o.init_upper.cwiseMin(o.upper);
-      for (int d = 0; d < kNumParams; ++d) {
+      for (int d = 0; d < N; ++d) {
         if (init_lo_[d] > init_hi_[d]) {
-          throw std::invalid_argument("the initial box of " + ParamNames()[d] +
+          throw std::invalid_argument("the initial box of " + data.ParameterName(d) +
                                       " lies outside the search bounds");
         }
       }
@@ -132,7 +128,7 @@ class PsoRunner {
       Particle& p = s.p[i];
       p.rng =
           Rng(StreamKey(o_.seed, static_cast<std::uint64_t>(run), static_cast<std::uint64_t>(i)));
-      for (int d = 0; d < kNumParams; ++d) {
+      for (int d = 0; d < N; ++d) {
         p.x[d] = init_lo_[d] + p.rng.Uniform() * (init_hi_[d] - init_lo_[d]);
         p.v[d] = (2.0 * p.rng.Uniform() - 1.0) * vmax_[d];
       }
@@ -142,7 +138,7 @@ class PsoRunner {
     }
   }
 
-  void Step(Swarm& s, int t, int first, int last, const Vector14d& gbest) const {
+  void Step(Swarm& s, int t, int first, int last, const Vector& gbest) const {
     Motion m;
     m.w = o_.w_max - (o_.w_max - o_.w_min) * t / o_.iterations;  // Eq. 20
     m.c1 = o_.c1;
@@ -154,7 +150,7 @@ class PsoRunner {
     m.gbest = gbest.data();
     for (int i = first; i < last; ++i) {
       Particle& p = s.p[i];
-      Move(m, p);
+      Move<N>(m, p);
       p.fit = data_.Evaluate(p.x.data());
       if (p.fit < p.pbest_fit) {
         p.pbest_fit = p.fit;
@@ -179,7 +175,7 @@ class PsoRunner {
   // index order, ties to the lowest index, as UpdateGlobal does), so all hold the same global
   // best without a second barrier. A cancellation seen by member 0 before a generation is
   // passed with its result, so that all members stop after the same generation.
-  void RunSwarm(int run, int member, int members, SpinBarrier* barrier, PsoRun* out,
+  void RunSwarm(int run, int member, int members, SpinBarrier* barrier, PsoRun<N>* out,
                 std::atomic<bool>* cancel, const std::function<void(int)>& tick) const {
     Swarm& s = *swarms_[run];
     const int chunk = (s.n + members - 1) / members;
@@ -189,7 +185,7 @@ class PsoRunner {
     if (barrier) barrier->Wait();
     if (member == 0) UpdateGlobal(s);
     if (barrier) barrier->Wait();
-    Vector14d gbest = s.gbest;  // this member's copy: the same on every member
+    Vector gbest = s.gbest;  // this member's copy: the same on every member
     double gbest_fit = s.gbest_fit;
     int t = 0;
     std::string termination = "max_iterations";
@@ -209,7 +205,7 @@ class PsoRunner {
       } else {
         const bool stop = member == 0 && cancel->load(std::memory_order_relaxed);
         Step(s, t, first, last, gbest);
-        MemberBest& mine = s.member_best[t & 1][member];
+        MemberBest<N>& mine = s.member_best[t & 1][member];
         mine.fit = std::numeric_limits<double>::infinity();
         int best = -1;
         for (int i = first; i < last; ++i) {
@@ -221,7 +217,7 @@ class PsoRunner {
         if (best >= 0) mine.best = s.p[best].pbest;
         mine.stop = stop;
         barrier->Wait();
-        const std::vector<MemberBest>& all = s.member_best[t & 1];
+        const std::vector<MemberBest<N>>& all = s.member_best[t & 1];
         if (all[0].stop) {
           termination = "cancelled";
           break;
@@ -253,29 +249,31 @@ class PsoRunner {
   std::vector<std::unique_ptr<Swarm>> swarms_;
 
  private:
-  const FitnessData& data_;
-  const PsoOptions& o_;
-  Vector14d range_, vmax_, neg_vmax_, init_lo_, init_hi_;
+  const Fitness<N>& data_;
+  const PsoOptions<N>& o_;
+  Vector range_, vmax_, neg_vmax_, init_lo_, init_hi_;
 };
 
 }  // namespace
 
-PsoResult RunPso(const FitnessData& data, const PsoOptions& o, const ProgressCallback& progress) {
+template <int N>
+PsoResult<N> RunPso(const Fitness<N>& data, const PsoOptions<N>& o,
+                    const ProgressCallback& progress) {
   if (data.size() < 1) throw std::invalid_argument("PSO needs at least one calibration point");
   if (o.swarm_size < 2) throw std::invalid_argument("the swarm needs at least 2 particles");
   if (o.iterations < 0) throw std::invalid_argument("iterations must be >= 0");
   if (o.runs < 1) throw std::invalid_argument("runs must be >= 1");
   if (!(o.vmax > 0.0)) throw std::invalid_argument("vmax must be > 0");
-  CheckBounds(o.lower, o.upper, "search bounds");
+  CheckBounds<N>(data, o.lower, o.upper, "search bounds");
   const auto start = std::chrono::steady_clock::now();
   const int threads = ResolveThreads(o.threads);
 
-  PsoRunner runner(data, o);
-  PsoResult result;
+  PsoRunner<N> runner(data, o);
+  PsoResult<N> result;
   result.runs.resize(o.runs);
   for (int r = 0; r < o.runs; ++r) {
-    runner.swarms_.push_back(std::make_unique<Swarm>(o.swarm_size));
-    for (auto& buffer : runner.swarms_.back()->member_best) buffer.assign(threads, MemberBest());
+    runner.swarms_.push_back(std::make_unique<Swarm<N>>(o.swarm_size));
+    for (auto& buffer : runner.swarms_.back()->member_best) buffer.assign(threads, MemberBest<N>());
     result.runs[r].history.reserve(o.iterations);
   }
   std::atomic<bool> cancel(false);
@@ -323,80 +321,15 @@ PsoResult RunPso(const FitnessData& data, const PsoOptions& o, const ProgressCal
       result.best_run = r;
     }
   }
-  result.seconds = Seconds(start);
+  result.seconds = SecondsSince(start);
   return result;
 }
 
-RandomSearchResult RunRandomSearch(const FitnessData& data, const RandomSearchOptions& o,
-                                   const ProgressCallback& progress) {
-  if (data.size() < 1) {
-    throw std::invalid_argument("random search needs at least one calibration point");
-  }
-  if (o.evaluations < 1) throw std::invalid_argument("evaluations must be >= 1");
-  CheckBounds(o.lower, o.upper, "search bounds");
-  const auto start = std::chrono::steady_clock::now();
-  const int threads =
-      static_cast<int>(std::min<long long>(ResolveThreads(o.threads), o.evaluations));
-  constexpr long long kBlock = 4096;  // evaluations between cancellation checks
-  const long long blocks = (o.evaluations + kBlock - 1) / kBlock;
-  std::vector<double> best_fit(threads, std::numeric_limits<double>::infinity());
-  std::vector<long long> best_idx(threads, -1);
-  std::vector<Vector14d> best(threads, Vector14d::Zero());
-  std::atomic<long long> next_block(0), done(0);
-  std::atomic<bool> cancel(false);
-  const Vector14d range = o.upper - o.lower;
+template PsoResult<paper::kNumParams> RunPso(const Fitness<paper::kNumParams>&,
+                                             const PsoOptions<paper::kNumParams>&,
+                                             const ProgressCallback&);
+template PsoResult<opencv::kNumPointParams> RunPso(const Fitness<opencv::kNumPointParams>&,
+                                                   const PsoOptions<opencv::kNumPointParams>&,
+                                                   const ProgressCallback&);
 
-  RunTeam(threads, [&](int member, SpinBarrier&) {
-    Vector14d q;
-    long long own_blocks = 0;  // member 0 reports after its 1st, 9th, 17th, ... block
-    for (;;) {
-      const long long b = next_block.fetch_add(1);
-      if (b >= blocks || cancel.load(std::memory_order_relaxed)) break;
-      const long long end = std::min(o.evaluations, (b + 1) * kBlock);
-      for (long long e = b * kBlock; e < end; ++e) {
-        // Candidate e depends only on (seed, e): identical for any thread count.
-        Rng r(StreamKey(o.seed, 0x5253ULL, static_cast<std::uint64_t>(e)));
-        for (int d = 0; d < kNumParams; ++d) q[d] = o.lower[d] + r.Uniform() * range[d];
-        const double f = data.Evaluate(q.data());
-        if (f < best_fit[member] || (f == best_fit[member] && e < best_idx[member])) {
-          best_fit[member] = f;
-          best_idx[member] = e;
-          best[member] = q;
-        }
-      }
-      done.fetch_add(end - b * kBlock, std::memory_order_relaxed);
-      if (member == 0 && progress && (own_blocks++ % 8 == 0)) {
-        Progress p;
-        p.done = done.load();
-        p.total = o.evaluations;
-        p.best_fitness = best_fit[0];
-        if (!progress(p)) cancel.store(true);
-      }
-    }
-  });
-  RandomSearchResult result;
-  result.threads = threads;
-  result.best_fitness = std::numeric_limits<double>::infinity();
-  for (int t = 0; t < threads; ++t) {
-    if (best_idx[t] < 0) continue;
-    if (best_fit[t] < result.best_fitness ||
-        (best_fit[t] == result.best_fitness && best_idx[t] < result.best_index)) {
-      result.best_fitness = best_fit[t];
-      result.best_index = best_idx[t];
-      result.best = best[t];
-    }
-  }
-  result.evaluations = done.load();
-  result.cancelled = cancel.load();
-  if (progress && !result.cancelled) {  // the last count, whichever member did the work
-    Progress p;
-    p.done = result.evaluations;
-    p.total = o.evaluations;
-    p.best_fitness = result.best_fitness;
-    progress(p);
-  }
-  result.seconds = Seconds(start);
-  return result;
-}
-
-}  // namespace hmlvs
+}  // namespace hmlvs::solvers

@@ -1,46 +1,12 @@
-#include "hmlvs/solvers/fitness.h"
+#include "hmlvs/model/paper_fitness.h"
 
 #include <cmath>
 #include <limits>
-#include <sstream>
-#include <stdexcept>
 
-namespace hmlvs {
+namespace hmlvs::paper {
 
-FitnessData::FitnessData(PixelsRef pixels, PosesRef poses, Points3Ref references) {
-  const Eigen::Index m = pixels.rows();
-  if (poses.rows() != m || references.rows() != m) {
-    std::ostringstream msg;
-    msg << "pixels has " << m << " rows, poses " << poses.rows() << " and reference points "
-        << references.rows() << "; they must match";
-    throw std::invalid_argument(msg.str());
-  }
-  ValidatePoses(poses);
-  for (Eigen::Index i = 0; i < m; ++i) {
-    if (!pixels.row(i).allFinite() || !references.row(i).allFinite()) {
-      std::ostringstream msg;
-      msg << "calibration point " << i << " has a non-finite pixel or reference point";
-      throw std::invalid_argument(msg.str());
-    }
-  }
-  u_.resize(m);
-  v_.resize(m);
-  hx_.resize(m);
-  hy_.resize(m);
-  hz_.resize(m);
-  for (Eigen::Index i = 0; i < m; ++i) {
-    const double* p = poses.row(i).data();
-    Eigen::Matrix3d r;
-    r << p[0], p[1], p[2], p[4], p[5], p[6], p[8], p[9], p[10];
-    const Eigen::Vector3d h =
-        r.transpose() * (references.row(i).transpose() - Eigen::Vector3d(p[3], p[7], p[11]));
-    u_[i] = pixels(i, 0);
-    v_[i] = pixels(i, 1);
-    hx_[i] = h[0];
-    hy_[i] = h[1];
-    hz_[i] = h[2];
-  }
-}
+FitnessData::FitnessData(PixelsRef pixels, PosesRef poses, Points3Ref references)
+    : points_(pixels, poses, references) {}
 
 namespace {
 
@@ -88,21 +54,22 @@ double Kernel(const double* q, const Eigen::Matrix3d& hand_from_camera_rot, doub
 }  // namespace
 
 double FitnessData::Evaluate(const double* q) const {
-  const Eigen::Matrix3d rc = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
+  const Eigen::Matrix3d rc = geometry::RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
   double min_plane = 0.0;
-  const double sum = Kernel(q, rc, std::tan(q[kTheta]), u_.data(), v_.data(), hx_.data(),
-                            hy_.data(), hz_.data(), size(), &min_plane);
+  const double sum =
+      Kernel(q, rc, std::tan(q[kTheta]), points_.u.data(), points_.v.data(), points_.hx.data(),
+             points_.hy.data(), points_.hz.data(), size(), &min_plane);
   if (!(min_plane > 0.0)) return std::numeric_limits<double>::infinity();
   return 0.5 * sum;
 }
 
 Eigen::VectorXd FitnessData::PointErrors(const double* q) const {
-  const Eigen::Matrix3d rc = RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
+  const Eigen::Matrix3d rc = geometry::RotationZYZ(q[kOmega], q[kPhi], q[kVarphi]);
   const double tan_theta = std::tan(q[kTheta]);
   Eigen::VectorXd out(size());
   for (Eigen::Index i = 0; i < size(); ++i) {
     double e[3];
-    if (HandResidual(q, rc, tan_theta, u_[i], v_[i], ReferenceInHand(i).data(), e) > 0.0) {
+    if (HandResidual(q, rc, tan_theta, u(i), v(i), ReferenceInHand(i).data(), e) > 0.0) {
       out[i] = Eigen::Vector3d(e[0], e[1], e[2]).norm();
     } else {
       out[i] = std::numeric_limits<double>::quiet_NaN();
@@ -111,4 +78,4 @@ Eigen::VectorXd FitnessData::PointErrors(const double* q) const {
   return out;
 }
 
-}  // namespace hmlvs
+}  // namespace hmlvs::paper

@@ -1,0 +1,285 @@
+#include "hmlvs/solvers/joint_costs.h"
+
+#include <ceres/ceres.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <vector>
+
+#include "hmlvs/geometry/geometry.h"
+
+namespace hmlvs::solvers {
+
+using namespace hmlvs::opencv;
+using geometry::Mat3;
+using geometry::QuaternionPose;
+using geometry::Vec3;
+
+namespace {
+
+// CornerResiduals (joint_costs.h) on any scalar.
+template <typename T>
+bool Corners(const T* in, const Mat3<T>& r, const Vec3<T>& t, const JointView& view,
+             double inv_sigma, T* residuals) {
+  bool ok = true;
+  for (Eigen::Index i = 0; i < view.corner_points.rows(); ++i) {
+    const Vec3<T> p = r * view.corner_points.row(i).transpose().cast<T>() + t;
+    T px[2];
+    ok = ProjectPoint(in, p.data(), px) && ok;
+    residuals[2 * i] = (px[0] - view.corner_pixels(i, 0)) * inv_sigma;
+    residuals[2 * i + 1] = (px[1] - view.corner_pixels(i, 1)) * inv_sigma;
+  }
+  return ok;
+}
+
+struct ChainCorners {
+  const JointView* view;
+  double inv_sigma;
+  template <typename T>
+  bool operator()(const T* in, const T* q_hc, const T* t_hc, const T* q_bb, const T* t_bb,
+                  T* residuals) const {
+    Mat3<T> r;
+    Vec3<T> t;
+    CameraFromBoard(q_hc, t_hc, view->base_from_hand.topLeftCorner<3, 3>().eval(),
+                    view->base_from_hand.topRightCorner<3, 1>().eval(), q_bb, t_bb, &r, &t);
+    return Corners(in, r, t, *view, inv_sigma, residuals);
+  }
+};
+
+// The robot pose error a view's own board pose implies (JointOptions::pose_sigma_t):
+// E = hand_from_camera camera_from_board_chain inv(camera_from_board) inv(hand_from_camera),
+// as (rotation vector, translation) in the hand frame.
+template <typename T>
+void PoseErrorOf(const T* q_cb, const T* t_cb, const T* q_hc, const T* t_hc, const T* q_bb,
+                 const T* t_bb, const Eigen::Matrix4d& base_from_hand, T* out) {
+  Mat3<T> rp, rf, rh;
+  Vec3<T> tp, tf, th;
+  CameraFromBoard(q_hc, t_hc, base_from_hand.topLeftCorner<3, 3>().eval(),
+                  base_from_hand.topRightCorner<3, 1>().eval(), q_bb, t_bb, &rp, &tp);
+  QuaternionPose(q_cb, t_cb, &rf, &tf);
+  QuaternionPose(q_hc, t_hc, &rh, &th);
+  // chain * inv(free): rotation rp rf^T, translation tp - rp rf^T tf
+  const Mat3<T> rd = rp * rf.transpose();
+  const Vec3<T> td = tp - rd * tf;
+  // hand_from_camera * D * inv(hand_from_camera)
+  const Mat3<T> re = rh * rd * rh.transpose();
+  const Vec3<T> te = rh * td + th - re * th;
+  const Vec3<T> w = geometry::RotationVector(re);
+  for (int k = 0; k < 3; ++k) {
+    out[k] = w[k];
+    out[3 + k] = te[k];
+  }
+}
+
+struct PosePrior {
+  const JointView* view;
+  double w_r, w_t;
+  template <typename T>
+  bool operator()(const T* q_cb, const T* t_cb, const T* q_hc, const T* t_hc, const T* q_bb,
+                  const T* t_bb, T* residuals) const {
+    PoseErrorOf(q_cb, t_cb, q_hc, t_hc, q_bb, t_bb, view->base_from_hand, residuals);
+    for (int k = 0; k < 3; ++k) {
+      residuals[k] *= w_r;
+      residuals[3 + k] *= w_t;
+    }
+    return true;
+  }
+};
+
+struct FreeCorners {
+  const JointView* view;
+  double inv_sigma;
+  template <typename T>
+  bool operator()(const T* in, const T* q_cb, const T* t_cb, T* residuals) const {
+    Mat3<T> r;
+    Vec3<T> t;
+    QuaternionPose(q_cb, t_cb, &r, &t);
+    return Corners(in, r, t, *view, inv_sigma, residuals);
+  }
+};
+
+// One stripe pixel's row of d(residual)/d(intrinsics), times w, from the residual's derivatives
+// drdx, drdy with respect to the undistorted point (x, y) and the distortion's Jacobian jd
+// there (row-major 2x2), through the implicit function theorem (LaserCost).
+void IntrinsicsRow(const double* in, double u, double v, double x, double y, const double* jd,
+                   double drdx, double drdy, double w, double* row) {
+  const double det = jd[0] * jd[3] - jd[1] * jd[2];
+  // g = (dr/dx, dr/dy) Jd^-1, so that dr/din = -g (d distort/d in - d m/d in)
+  const double g0 = (drdx * jd[3] - drdy * jd[2]) / det;
+  const double g1 = (-drdx * jd[1] + drdy * jd[0]) / det;
+  const double r2 = x * x + y * y;
+  const double mx = (u - in[kCx]) / in[kFx], my = (v - in[kCy]) / in[kFy];
+  row[kFx] = -g0 * (mx / in[kFx]) * w;  // -(g . (0 - dm/dfx)), dm_x/dfx = -mx/fx
+  row[kFy] = -g1 * (my / in[kFy]) * w;
+  row[kCx] = -g0 / in[kFx] * w;  // dm_x/dcx = -1/fx
+  row[kCy] = -g1 / in[kFy] * w;
+  row[kK1] = -(g0 * x + g1 * y) * r2 * w;
+  row[kK2] = -(g0 * x + g1 * y) * r2 * r2 * w;
+  row[kK3] = -(g0 * x + g1 * y) * r2 * r2 * r2 * w;
+  row[kP1] = -(g0 * 2.0 * x * y + g1 * (r2 + 2.0 * y * y)) * w;
+  row[kP2] = -(g0 * (r2 + 2.0 * x * x) + g1 * 2.0 * x * y) * w;
+}
+
+// The laser residuals of one view with an analytic Jacobian (the autodiff version of
+// the same residual costs ~10x more: a Jet of 27 numbers through every pixel's arithmetic).
+//
+// With ray = (x, y, 1) the undistorted pixel, the board plane nb . X + ob = 0 and the laser
+// plane n . X + d = 0 (n not necessarily unit), the residual is
+//   r = (n . X) / |n| + d,  X = ray * depth,  depth = -ob / (nb . ray),
+// i.e. r = -ob a / (b |n|) + d with a = n . ray, b = nb . ray. Its derivatives:
+//   - intrinsics: through (x, y) by the implicit function theorem on distort(x, y) = m(in),
+//     m = ((u - cx) / fx, (v - cy) / fy): d(x, y)/d in = -Jd^-1 (d distort/d in - d m/d in);
+//   - the board pose blocks: through (nb, ob), whose derivatives come from one Jet evaluation
+//     of the view's camera_from_board (CameraFromBoard or QuaternionPose);
+//   - n and d directly.
+// The residual values are LaserResidual's.
+template <bool kChain>
+class LaserCost final : public ceres::CostFunction {
+ public:
+  static constexpr int kPose = kChain ? 14 : 7;
+
+  LaserCost(const JointView* view, double inv_sigma) : view_(view), w_(inv_sigma) {
+    set_num_residuals(static_cast<int>(view->laser_pixels.rows()));
+    auto* sizes = mutable_parameter_block_sizes();
+    sizes->push_back(kNumIntrinsics);
+    for (int b : kChain ? std::vector<int>{4, 3, 4, 3} : std::vector<int>{4, 3}) {
+      sizes->push_back(b);
+    }
+    sizes->push_back(3);
+    sizes->push_back(1);
+  }
+
+  bool Evaluate(double const* const* p, double* residuals, double** jacobians) const override {
+    using J = ceres::Jet<double, kPose>;
+    constexpr int kPoseBlocks = kChain ? 4 : 2;
+    const double* in = p[0];
+    const double* n = p[1 + kPoseBlocks];
+    const double d = p[2 + kPoseBlocks][0];
+    // The board plane (nb, ob) in the camera frame and its derivatives w.r.t. the pose blocks.
+    J pose[kPose];
+    {
+      int k = 0;
+      for (int b = 0; b < kPoseBlocks; ++b) {
+        const int size = (b % 2 == 0) ? 4 : 3;
+        for (int e = 0; e < size; ++e, ++k) pose[k] = J(p[1 + b][e], k);
+      }
+    }
+    Mat3<J> r;
+    Vec3<J> t;
+    if constexpr (kChain) {
+      CameraFromBoard(pose, pose + 4, view_->base_from_hand.topLeftCorner<3, 3>().eval(),
+                      view_->base_from_hand.topRightCorner<3, 1>().eval(), pose + 7, pose + 11, &r,
+                      &t);
+    } else {
+      QuaternionPose(pose, pose + 4, &r, &t);
+    }
+    const Vec3<J> nbj = r.col(2);
+    const J obj = -nbj.dot(t);
+    const double nb[3] = {nbj[0].a, nbj[1].a, nbj[2].a};
+    const double ob = obj.a;
+    const double nn = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    const double unit[3] = {n[0] / nn, n[1] / nn, n[2] / nn};
+    for (Eigen::Index i = 0; i < view_->laser_pixels.rows(); ++i) {
+      const double u = view_->laser_pixels(i, 0), v = view_->laser_pixels(i, 1);
+      double x, y, jd[4], res;
+      if (!LaserResidual(in, nb, ob, unit, d, u, v, &x, &y, jd, &res)) return false;
+      residuals[i] = res * w_;
+      if (jacobians == nullptr) continue;
+      const double ray[3] = {x, y, 1.0};
+      const double a = n[0] * x + n[1] * y + n[2];
+      const double b = nb[0] * x + nb[1] * y + nb[2];
+      // dr/dx, dr/dy
+      const double drdx = -ob / nn * (n[0] * b - a * nb[0]) / (b * b);
+      const double drdy = -ob / nn * (n[1] * b - a * nb[1]) / (b * b);
+      if (jacobians[0] != nullptr) {
+        IntrinsicsRow(in, u, v, x, y, jd, drdx, drdy, w_, jacobians[0] + i * kNumIntrinsics);
+      }
+      // dr/d(nb, ob)
+      const double k_nb = ob * a / (nn * b * b);
+      const double dnb[3] = {k_nb * ray[0], k_nb * ray[1], k_nb * ray[2]};
+      const double dob = -a / (b * nn);
+      int col = 0;
+      for (int blk = 0; blk < kPoseBlocks; ++blk) {
+        const int size = (blk % 2 == 0) ? 4 : 3;
+        double* jb = jacobians[1 + blk];
+        for (int e = 0; e < size; ++e, ++col) {
+          if (jb == nullptr) continue;
+          jb[i * size + e] = (dnb[0] * nbj[0].v[col] + dnb[1] * nbj[1].v[col] +
+                              dnb[2] * nbj[2].v[col] + dob * obj.v[col]) *
+                             w_;
+        }
+      }
+      if (jacobians[1 + kPoseBlocks] != nullptr) {
+        double* jn = jacobians[1 + kPoseBlocks] + 3 * i;
+        const double f = -ob / b;
+        for (int e = 0; e < 3; ++e) jn[e] = f * (ray[e] / nn - a * n[e] / (nn * nn * nn)) * w_;
+      }
+      if (jacobians[2 + kPoseBlocks] != nullptr) jacobians[2 + kPoseBlocks][i] = w_;
+    }
+    return true;
+  }
+
+ private:
+  const JointView* view_;
+  double w_;
+};
+
+}  // namespace
+
+PoseBlocks::PoseBlocks(const Eigen::Matrix4d& m) {
+  const Eigen::Quaterniond rq(Eigen::Matrix3d(m.topLeftCorner<3, 3>()));
+  q = {rq.x(), rq.y(), rq.z(), rq.w()};
+  t = {m(0, 3), m(1, 3), m(2, 3)};
+}
+
+Eigen::Matrix4d PoseBlocks::Matrix() const {
+  return geometry::Transform(geometry::QuaternionRotation(q.data()),
+                             Eigen::Vector3d(t[0], t[1], t[2]));
+}
+
+bool CornerResiduals(const double* intrinsics, const Eigen::Matrix3d& r, const Eigen::Vector3d& t,
+                     const JointView& view, double inv_sigma, double* residuals) {
+  return Corners(intrinsics, r, t, view, inv_sigma, residuals);
+}
+
+bool LaserResidual(const double* in, const double* nb, double ob, const double* unit, double d,
+                   double u, double v, double* x, double* y, double* jd, double* residual) {
+  if (!UndistortNormalized(in, u, v, x, y, jd)) return false;
+  double point[3];
+  if (!(RayPlanePoint(*x, *y, nb, ob, point) > 0.0)) return false;
+  *residual = unit[0] * point[0] + unit[1] * point[1] + unit[2] * point[2] + d;
+  return true;
+}
+
+Vector6d PoseError(const PoseBlocks& camera_from_board, const PoseBlocks& hand_from_camera,
+                   const PoseBlocks& base_from_board, const Eigen::Matrix4d& base_from_hand) {
+  Vector6d e;
+  PoseErrorOf(camera_from_board.q.data(), camera_from_board.t.data(), hand_from_camera.q.data(),
+              hand_from_camera.t.data(), base_from_board.q.data(), base_from_board.t.data(),
+              base_from_hand, e.data());
+  return e;
+}
+
+ceres::CostFunction* NewChainCornerCost(const JointView* view, double inv_sigma) {
+  const int n = 2 * static_cast<int>(view->corner_pixels.rows());
+  return new ceres::AutoDiffCostFunction<ChainCorners, ceres::DYNAMIC, 9, 4, 3, 4, 3>(
+      new ChainCorners{view, inv_sigma}, n);
+}
+
+ceres::CostFunction* NewFreeCornerCost(const JointView* view, double inv_sigma) {
+  const int n = 2 * static_cast<int>(view->corner_pixels.rows());
+  return new ceres::AutoDiffCostFunction<FreeCorners, ceres::DYNAMIC, 9, 4, 3>(
+      new FreeCorners{view, inv_sigma}, n);
+}
+
+ceres::CostFunction* NewLaserCost(const JointView* view, double inv_sigma, bool chain) {
+  if (chain) return new LaserCost<true>(view, inv_sigma);
+  return new LaserCost<false>(view, inv_sigma);
+}
+
+ceres::CostFunction* NewPosePriorCost(const JointView* view, double w_r, double w_t) {
+  return new ceres::AutoDiffCostFunction<PosePrior, 6, 4, 3, 4, 3, 4, 3>(
+      new PosePrior{view, w_r, w_t});
+}
+
+}  // namespace hmlvs::solvers

@@ -1,0 +1,61 @@
+// The residuals of the general model's joint calibration (SolveJoint) as Ceres cost functions,
+// and the plain evaluations of the same residuals (EvaluateJoint). The caller owns the returned
+// cost functions.
+#pragma once
+
+#include <ceres/cost_function.h>
+
+#include <Eigen/Core>
+#include <array>
+
+#include "hmlvs/solvers/joint.h"
+
+namespace hmlvs::solvers {
+
+/// A transform as the parameter blocks of the solve: Eigen quaternion [x, y, z, w] + translation.
+struct PoseBlocks {
+  std::array<double, 4> q{};
+  std::array<double, 3> t{};
+  explicit PoseBlocks(const Eigen::Matrix4d& m);
+  Eigen::Matrix4d Matrix() const;
+};
+
+/// The corner residuals of one view, (projected - detected) * inv_sigma (n x 2, row-major), for a
+/// board pose camera_from_board = (r, t). Returns false when a corner is not in front of the
+/// camera.
+bool CornerResiduals(const double* intrinsics, const Eigen::Matrix3d& r, const Eigen::Vector3d& t,
+                     const JointView& view, double inv_sigma, double* residuals);
+
+/// One stripe pixel's laser residual: the signed distance (mm) of the point where its ray meets
+/// the board plane nb . X + ob = 0 from the laser plane unit . X + d = 0 (unit normal). x, y
+/// receive the undistorted normalised point and jd (row-major 2x2) the distortion's Jacobian
+/// there. Returns false when the pixel cannot be undistorted or its ray does not meet the board
+/// plane in front of the camera.
+bool LaserResidual(const double* intrinsics, const double* nb, double ob, const double* unit,
+                   double d, double u, double v, double* x, double* y, double* jd,
+                   double* residual);
+
+/// The robot pose error a view's own board pose implies (JointOptions::pose_sigma_t):
+/// E = hand_from_camera camera_from_board_chain inv(camera_from_board) inv(hand_from_camera),
+/// as (rotation vector, translation) in the hand frame.
+Vector6d PoseError(const PoseBlocks& camera_from_board, const PoseBlocks& hand_from_camera,
+                   const PoseBlocks& base_from_board, const Eigen::Matrix4d& base_from_hand);
+
+/// Chain mode: the corner residuals of a view over the blocks intrinsics (9),
+/// hand_from_camera (4, 3) and base_from_board (4, 3).
+ceres::CostFunction* NewChainCornerCost(const JointView* view, double inv_sigma);
+
+/// A view with its own board pose: the corner residuals over the blocks intrinsics (9) and
+/// camera_from_board (4, 3).
+ceres::CostFunction* NewFreeCornerCost(const JointView* view, double inv_sigma);
+
+/// The laser residuals of a view (analytic Jacobian) over the blocks intrinsics (9), the board
+/// pose's blocks (chain: hand_from_camera (4, 3) and base_from_board (4, 3); else
+/// camera_from_board (4, 3)), the laser plane's normal (3) and offset (1).
+ceres::CostFunction* NewLaserCost(const JointView* view, double inv_sigma, bool chain);
+
+/// Uncertain robot poses: the pose error of a view, rotation * w_r and translation * w_t, over
+/// the blocks camera_from_board, hand_from_camera and base_from_board (4, 3 each).
+ceres::CostFunction* NewPosePriorCost(const JointView* view, double w_r, double w_t);
+
+}  // namespace hmlvs::solvers
