@@ -1,3 +1,7 @@
+import hashlib
+import os
+from pathlib import Path
+
 from hmlvs.models.params import TABLE2_LOWER, TABLE2_UPPER
 import numpy as np
 import pytest
@@ -42,3 +46,26 @@ def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
         main(argv)
     out = capsys.readouterr()
     return e.value.code, out.out, out.err
+
+
+@pytest.fixture(scope="module")
+def clean():
+    """8 poses of the paper's set-up rendered without sensor noise (the image tests' clean
+    session)."""
+    import hmlvs
+
+    return hmlvs.simulate.render_session(num_poses=8, seed=0)
+
+
+def tree_digest(folder: Path) -> dict[str, str]:
+    """Every file under ``folder`` (relative name -> sha256), links as their target's name."""
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        key = str(p.relative_to(folder))
+        if p.is_symlink():
+            out[key] = "link:" + os.readlink(p)
+        elif p.is_file():
+            out[key] = hashlib.sha256(p.read_bytes()).hexdigest()
+        else:
+            out[key] = "folder"
+    return out

@@ -12,3 +12,18 @@ def shows_block(px, board, image_size=(640, 480), k=3, margin=25.0):
           (px[:, 1] >= margin) & (px[:, 1] <= h - 1 - margin)).reshape(board.rows, board.cols)
     return any(ok[r:r + k, c:c + k].all() for r in range(board.rows - k + 1)
                for c in range(board.cols - k + 1))
+
+
+def stripe_errors(r, method, normalize=True, **kw):
+    """The stripe centres' errors against a rendered session's true centres (px), and the same
+    over their reported sigma: (errors, z-scores) over every view's found scan lines."""
+    import hmlvs
+
+    errs, z = [], []
+    for i in range(len(r.on)):
+        d = hmlvs.difference_image(r.on[i], r.off[i], normalize=normalize)
+        s = hmlvs.extract_stripe(d, method=method, **kw)
+        f = s.found & np.isfinite(r.stripe_v[i])
+        errs.append(s.centre[f] - r.stripe_v[i][f])
+        z.append((s.centre[f] - r.stripe_v[i][f]) / s.sigma[f])
+    return np.concatenate(errs), np.concatenate(z)
