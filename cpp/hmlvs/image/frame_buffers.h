@@ -179,7 +179,7 @@ struct Workspace {
   // laser-on frame alone, and EstimateBackground's buffers
   template <typename T>
   struct Buffers {
-    Scratch<T> frames, background, opening[3];
+    Scratch<T> frames, background, opening[2];
   };
   Buffers<std::uint8_t> u8;
   Buffers<std::uint16_t> u16;
