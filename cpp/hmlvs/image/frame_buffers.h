@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #if defined(__SSE2__)
@@ -88,7 +89,9 @@ struct Plane {
 };
 
 // (row, block) pairs to compute ahead, visited row by row: values computed in the order the
-// frames lie in memory, not scattered by the order scan lines read them.
+// frames lie in memory, not scattered by the order scan lines read them. Neighbouring scan
+// lines mark nearly the same rows: per block, the rows of the range marked last are not
+// marked again.
 class Marks {
  public:
   void Reset(int rows, int blocks) {
@@ -100,6 +103,7 @@ class Marks {
       std::fill(bits_.begin() + static_cast<std::ptrdiff_t>(lo_) * blocks,
                 bits_.begin() + static_cast<std::ptrdiff_t>(hi_ + 1) * blocks, 0);
     }
+    last_.assign(static_cast<size_t>(blocks), {0, -1});
     lo_ = rows;
     hi_ = -1;
   }
@@ -109,9 +113,19 @@ class Marks {
     r1 = std::min(r1, rows_ - 1);
     b0 = std::max(b0, 0);
     b1 = std::min(b1, blocks_ - 1);
-    for (int r = r0; r <= r1; ++r) {
-      std::uint8_t* row = bits_.data() + static_cast<std::ptrdiff_t>(r) * blocks_;
-      for (int b = b0; b <= b1; ++b) row[b] = 1;
+    if (r0 > r1) return;
+    for (int b = b0; b <= b1; ++b) {
+      auto& [lo, hi] = last_[static_cast<size_t>(b)];
+      if (lo <= hi && r0 <= hi + 1 && r1 >= lo - 1) {  // meets the last range: its new rows
+        Set(r0, std::min(r1, lo - 1), b);
+        Set(std::max(r0, hi + 1), r1, b);
+        lo = std::min(lo, r0);
+        hi = std::max(hi, r1);
+      } else {
+        Set(r0, r1, b);
+        lo = r0;
+        hi = r1;
+      }
     }
     lo_ = std::min(lo_, r0);
     hi_ = std::max(hi_, r1);
@@ -127,7 +141,12 @@ class Marks {
   }
 
  private:
+  void Set(int r0, int r1, int b) {
+    std::uint8_t* at = bits_.data() + static_cast<std::ptrdiff_t>(r0) * blocks_ + b;
+    for (int r = r0; r <= r1; ++r, at += blocks_) *at = 1;
+  }
   std::vector<std::uint8_t> bits_;
+  std::vector<std::pair<int, int>> last_;  // per block: the range of rows marked last
   int rows_ = 0, blocks_ = 0, lo_ = 0, hi_ = -1;
 };
 

@@ -296,6 +296,74 @@ class RefineImage {
   mutable std::vector<float> line_;
 };
 
+// Whether scan line s of `st` holds a found centre of finite width.
+bool FoundLine(const StripeResult& st, int s) {
+  return st.status[s] == static_cast<std::uint8_t>(StripeStatus::kFound) &&
+         std::isfinite(st.centre[s]) && std::isfinite(st.width[s]);
+}
+
+// Scan line s of a view read once over rows [first, last] (those RefineLine reads unless its
+// centre wanders off), the view itself beyond: the same values, each looked up once.
+template <class V>
+class LineWindow {
+ public:
+  using Pixel = float;
+  LineWindow(const V& v, int s, std::pair<int, int> rows, std::vector<double>* buffer)
+      : n_scan(v.n_scan),
+        n_prof(v.n_prof),
+        v_(v),
+        first_(std::max(rows.first, 0)),
+        last_(std::min(rows.second, v.n_prof - 1)) {
+    buffer->resize(static_cast<size_t>(std::max(0, last_ - first_ + 1)));
+    for (int p = first_; p <= last_; ++p) (*buffer)[static_cast<size_t>(p - first_)] = v.at(s, p);
+    values_ = buffer->data();
+  }
+  double at(int s, int p) const {
+    return p >= first_ && p <= last_ ? values_[p - first_] : v_.at(s, p);
+  }
+  int n_scan, n_prof;
+
+ private:
+  const V& v_;
+  int first_, last_;
+  const double* values_ = nullptr;
+};
+
+// The band of rows [lo, hi) the refinement's image is built on: every found scan line's
+// window (Steger's centre +- 4.5 profile sigmas plus a pixel), and the filter's 3 px more.
+// False when no scan line was found.
+bool RefineBand(const StripeResult& st, int n_prof, int* lo, int* hi) {
+  double lo_c = std::numeric_limits<double>::infinity(), hi_c = -lo_c;
+  bool any = false;
+  for (int s = 0; s < st.status.size(); ++s) {
+    if (!FoundLine(st, s)) continue;
+    const double c = st.centre[s], w = st.width[s];
+    const double reach = 4.5 * std::max(0.5, w / 2.3548) + 2.0;
+    lo_c = std::min(lo_c, c - reach);
+    hi_c = std::max(hi_c, c + reach);
+    any = true;
+  }
+  *lo = static_cast<int>(std::max(0.0, std::floor(lo_c) - 4));
+  *hi = static_cast<int>(std::min(static_cast<double>(n_prof), std::ceil(hi_c) + 5));
+  return any;
+}
+
+// The rows each scan line's refinement reads (first, last; first > last: none): the window
+// centre +- 4 profile sigmas about the rounded centre, which may move half a profile sigma
+// (RefineLine); none within `edge` scan lines of the image's ends.
+std::vector<std::pair<int, int>> RefineWindows(const StripeResult& st, int edge) {
+  const int n = static_cast<int>(st.status.size());
+  std::vector<std::pair<int, int>> windows(static_cast<size_t>(n), {0, -1});
+  for (int s = edge; s < n - edge; ++s) {
+    if (!FoundLine(st, s)) continue;
+    const double c = st.centre[s], w = st.width[s];
+    const double sp = std::max(0.5, w / (2.0 * std::sqrt(2.0 * std::log(2.0))));
+    const double reach = std::ceil(4.0 * sp) + 0.5 * sp + 1.0;
+    windows[s] = {static_cast<int>(std::floor(c - reach)), static_cast<int>(std::ceil(c + reach))};
+  }
+  return windows;
+}
+
 }  // namespace
 
 // session._weighted_centres: Steger's found centres refined (RefineStripeCentres) on the
@@ -303,54 +371,25 @@ class RefineImage {
 template <typename T>
 bool WeightedCentres(const Frames<T>& f, bool normalize, double offset, double mean, double noise,
                      double sigma_along, double blur_var, StripeResult* st) {
-  const int n = f.cols, n_prof = f.rows;
-  // the band of rows each scan line's window reaches (Steger's centre +- 4.5 profile sigmas
-  // plus a pixel), and the filter's 3 px more
-  double lo_c = std::numeric_limits<double>::infinity(), hi_c = -lo_c;
-  bool any = false;
-  for (int s = 0; s < n; ++s) {
-    const double c = st->centre[s], w = st->width[s];
-    if (st->status[s] != static_cast<std::uint8_t>(StripeStatus::kFound) || !std::isfinite(c) ||
-        !std::isfinite(w)) {
-      continue;
-    }
-    const double reach = 4.5 * std::max(0.5, w / 2.3548) + 2.0;
-    lo_c = std::min(lo_c, c - reach);
-    hi_c = std::max(hi_c, c + reach);
-    any = true;
-  }
-  if (!any) return false;
   typename RefineImage<T>::Setup o;
+  if (!RefineBand(*st, f.rows, &o.lo, &o.hi)) return false;
   o.normalize = normalize;
   o.offset = offset;
   o.mean = mean;
   o.blur_var = blur_var;
   o.frame_noise = noise / std::sqrt(2.0);  // one frame's noise, of the difference of two
   o.sigma_along = sigma_along;
-  o.lo = static_cast<int>(std::max(0.0, std::floor(lo_c) - 4));
-  o.hi = static_cast<int>(std::min(static_cast<double>(n_prof), std::ceil(hi_c) + 5));
   Workspace& ws = ThreadWorkspace();
   const RefineImage<T> image(f, o, &ws.a, &ws.b, &ws.c);
   // each scan line's additive noise: one frame's, times the gain at its centre (in single
   // precision, as NumPy multiplies a float by a float32 array); none within 3 sigma_along of
   // the image's ends, where the smoothing along reaches past them
-  const int edge = static_cast<int>(std::ceil(3.0 * sigma_along));
+  const int n = f.cols, edge = static_cast<int>(std::ceil(3.0 * sigma_along));
   const double factor = std::sqrt(1.0 / std::max(1.0, 2.0 * std::sqrt(M_PI) * sigma_along));
   const StripeRefineOptions ro;
-  // the rows each scan line's refinement reads: the window centre +- 4 profile sigmas about
-  // the rounded centre, which may move half a profile sigma (RefineLine)
-  std::vector<std::pair<int, int>> windows(static_cast<size_t>(n), {0, -1});
-  for (int s = edge; s < n - edge; ++s) {
-    const double c = st->centre[s], w = st->width[s];
-    if (st->status[s] != static_cast<std::uint8_t>(StripeStatus::kFound) || !std::isfinite(c) ||
-        !std::isfinite(w)) {
-      continue;
-    }
-    const double sp = std::max(0.5, w / (2.0 * std::sqrt(2.0 * std::log(2.0))));
-    const double reach = std::ceil(4.0 * sp) + 0.5 * sp + 1.0;
-    windows[s] = {static_cast<int>(std::floor(c - reach)), static_cast<int>(std::ceil(c + reach))};
-  }
+  const std::vector<std::pair<int, int>> windows = RefineWindows(*st, edge);
   image.Prepare(windows, &ws.marks, &ws.marks2);
+  std::vector<double> buffer;
   for (int s = edge; s < n - edge; ++s) {
     if (st->status[s] != static_cast<std::uint8_t>(StripeStatus::kFound)) continue;
     double line_noise = o.frame_noise;
@@ -361,7 +400,7 @@ bool WeightedCentres(const Frames<T>& f, bool normalize, double offset, double m
       line_noise =
           static_cast<double>(static_cast<float>(o.frame_noise) * image.Gain(s, pos + o.lo));
     }
-    RefineLine(image, s, line_noise, ro, st);
+    RefineLine(LineWindow<RefineImage<T>>(image, s, windows[s], &buffer), s, line_noise, ro, st);
     st->sigma[s] = st->sigma[s] * factor;
   }
   return true;
