@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <vector>
@@ -28,9 +29,12 @@ float MedianF(std::vector<float> v) {
 double AffineOffset(const std::vector<float>& peak, const std::vector<float>& level) {
   const size_t n = level.size();
   if (n < 20) return kNaN;
-  std::vector<float> sorted = level;
-  std::sort(sorted.begin(), sorted.end());
-  auto kth = [&](std::uint64_t k) { return static_cast<double>(sorted[k]); };
+  std::vector<float> sorted = level;  // partially: the k-th smallest where read
+  auto kth = [&](std::uint64_t k) {
+    const auto at = sorted.begin() + static_cast<std::ptrdiff_t>(k);
+    std::nth_element(sorted.begin(), at, sorted.end());
+    return static_cast<double>(*at);
+  };
   const double p2 = Percentile(n, 0.02, kth), p98 = Percentile(n, 0.98, kth);
   if (!(p98 > 2.0 * std::max(p2, 1.0))) return kNaN;
   const double split = std::sqrt(std::max(p2, 1.0) * p98);

@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -94,9 +95,10 @@ double MedianFoundWidth(const StripeResult& res) {
     if (res.status[s] == static_cast<std::uint8_t>(StripeStatus::kFound)) w.push_back(res.width[s]);
   }
   if (w.empty()) return kNaN;
-  std::sort(w.begin(), w.end());
   const size_t h = w.size() / 2;
-  return w.size() % 2 == 1 ? w[h] : (w[h - 1] + w[h]) / 2.0;
+  std::nth_element(w.begin(), w.begin() + static_cast<std::ptrdiff_t>(h), w.end());
+  if (w.size() % 2 == 1) return w[h];
+  return (*std::max_element(w.begin(), w.begin() + static_cast<std::ptrdiff_t>(h)) + w[h]) / 2.0;
 }
 
 // The stripe of a pair of frames in the working orientation. Its steps, in order: the
