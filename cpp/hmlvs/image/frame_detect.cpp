@@ -123,6 +123,15 @@ void DetectRuns(const Stats<T>& st, const DifferenceRule<T>& rule, const DView<T
         (smooth == nullptr || smooth->open_total == 0)) {
       continue;
     }
+    if (smooth) {  // the smoothed values of the row, each run of blocks at once
+      for (int b = 0; b < blocks; ++b) {
+        if (!(act[b] & 2)) continue;
+        int e = b;
+        while (e + 1 < blocks && (act[e + 1] & 2)) ++e;
+        s->Span(r, b, e);
+        b = e;
+      }
+    }
     for (int b = 0; b < blocks; ++b) {
       const int c0 = b * kSb, n = std::min(c0 + kSb, cols) - c0;
       if (plain && ((act[b] & 1) || plain->open[b] != 0)) {

@@ -32,6 +32,22 @@ class DView {
       return rule_.At(x, y);
     }
   }
+  // the values of row p over columns c0 .. c1 - 1 (clamped to the image) as floats
+  void Line(int p, int c0, int c1, float* out) const {
+    const int a = std::clamp(c0, 0, n_scan), z = std::clamp(c1, a, n_scan);
+    for (int c = c0; c < a; ++c)
+      *out++ = static_cast<float>(Value(std::clamp(c, 0, n_scan - 1), p));
+    if constexpr (sizeof(T) == 1) {
+      const T* x = f_.on + p * f_.on_rs;
+      const T* y = f_.off + p * f_.off_rs;
+      const T* t = table_.data();
+      for (int c = a; c < z; ++c) *out++ = static_cast<float>(t[(y[c] << 8) | x[c]]);
+    } else {
+      for (int c = a; c < z; ++c) *out++ = static_cast<float>(Value(c, p));
+    }
+    for (int c = z; c < c1; ++c)
+      *out++ = static_cast<float>(Value(std::clamp(c, 0, n_scan - 1), p));
+  }
   double at(int s, int p) const { return static_cast<double>(Value(s, p)); }
   double clamped(int s, int p) const {
     return at(std::clamp(s, 0, n_scan - 1), std::clamp(p, 0, n_prof - 1));
@@ -95,7 +111,7 @@ class SView {
   SView(const DView<T>& d, const Kernels& g, Plane* plane)
       : n_scan(d.n_scan), n_prof(d.n_prof), d_(d), w_(g.g0.begin(), g.g0.end()), plane_(plane) {
     r_ = g.radius;
-    line_.resize(static_cast<size_t>(kSb + 2 * r_));
+    line_.resize(static_cast<size_t>(n_scan + kSb + 2 * r_));
     plane_->Reset(n_prof, n_scan);
   }
   double at(int s, int p) const { return Value(s, p); }
@@ -104,26 +120,38 @@ class SView {
   }
   float Value(int s, int p) const {
     const int b = s / kSb;
-    if (!plane_->Has(p, b)) Compute(p, b);
+    if (!plane_->Has(p, b)) Compute(p, b, b);
     return plane_->Row(p)[s];
   }
   // the block's values (computed if not yet) from column b * kSb on
   const float* Block(int p, int b) const {
-    if (!plane_->Has(p, b)) Compute(p, b);
+    if (!plane_->Has(p, b)) Compute(p, b, b);
     return plane_->Row(p) + b * kSb;
+  }
+  // blocks b0 .. b1 of row p computed (those not yet), each run of consecutive ones at once:
+  // the difference read once per column of the run, not once per block it reaches
+  void Span(int p, int b0, int b1) const {
+    for (int b = b0; b <= b1;) {
+      if (plane_->Has(p, b)) {
+        ++b;
+        continue;
+      }
+      int e = b;
+      while (e < b1 && !plane_->Has(p, e + 1)) ++e;
+      Compute(p, b, e);
+      b = e + 1;
+    }
   }
   int radius() const { return r_; }
   int n_scan, n_prof;
 
  private:
-  void Compute(int p, int b) const {
-    const int c0 = b * kSb, c1 = std::min(c0 + kSb, n_scan);
-    const int n = c1 - c0 + 2 * r_;
-    for (int i = 0; i < n; ++i) {
-      line_[i] = static_cast<float>(d_.Value(std::clamp(c0 - r_ + i, 0, n_scan - 1), p));
-    }
+  // blocks b0 .. b1 of row p: per value the same sums as a block alone
+  void Compute(int p, int b0, int b1) const {
+    const int c0 = b0 * kSb, c1 = std::min((b1 + 1) * kSb, n_scan);
+    d_.Line(p, c0 - r_, c1 + r_, line_.data());
     SumShifted(line_.data(), w_.data(), 2 * r_ + 1, c1 - c0, plane_->Row(p) + c0);
-    plane_->Mark(p, b);
+    for (int b = b0; b <= b1; ++b) plane_->Mark(p, b);
   }
   const DView<T>& d_;
   std::vector<float> w_;
