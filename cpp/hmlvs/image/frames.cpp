@@ -342,6 +342,38 @@ FrameStripe AloneStripe(Frames<T>* f, const FrameStripeOptions& o, T* background
   return out;
 }
 
+// The median of each window of `size` (odd) values of c around each value, ends repeated
+// (scipy.ndimage.median_filter, mode "nearest").
+std::vector<double> WindowMedians(const std::vector<double>& c, int size) {
+  const int n = static_cast<int>(c.size()), half = size / 2;
+  std::vector<double> out(c.size()), win(static_cast<size_t>(size));
+  for (int i = 0; i < n; ++i) {
+    for (int k = -half; k <= half; ++k) win[k + half] = c[std::clamp(i + k, 0, n - 1)];
+    std::nth_element(win.begin(), win.begin() + half, win.end());
+    out[i] = win[half];
+  }
+  return out;
+}
+
+// WindowMedians of values without NaN, the window kept sorted as it slides (one value out,
+// one in): the same medians.
+std::vector<double> RunningMedian(const std::vector<double>& c, int size) {
+  const int n = static_cast<int>(c.size()), half = size / 2;
+  auto at = [&](int i) { return c[std::clamp(i, 0, n - 1)]; };
+  std::vector<double> out(c.size()), win;
+  for (int k = -half; k <= half; ++k) win.push_back(at(k));
+  std::sort(win.begin(), win.end());
+  for (int i = 0; i < n; ++i) {
+    if (i > 0) {
+      win.erase(std::lower_bound(win.begin(), win.end(), at(i - 1 - half)));
+      const double in = at(i + half);
+      win.insert(std::upper_bound(win.begin(), win.end(), in), in);
+    }
+    out[i] = win[half];
+  }
+  return out;
+}
+
 }  // namespace
 
 template <typename T>
@@ -371,16 +403,18 @@ void DropJumps(StripeResult* stripe, int window, double jump) {
   const int n = static_cast<int>(f.size());
   if (n < 5) return;
   // scipy.ndimage.median_filter(centres, size, mode="nearest"), size odd
-  const int size = std::min(window, n | 1), half = size / 2;
-  std::vector<double> c(static_cast<size_t>(n)), win(static_cast<size_t>(size));
+  const int size = std::min(window, n | 1);
+  std::vector<double> c(static_cast<size_t>(n));
   for (int i = 0; i < n; ++i) c[i] = stripe->centre[f[i]];
-  std::vector<int> bad;
+  const std::vector<double> median =
+      std::all_of(c.begin(), c.end(), [](double x) { return !std::isnan(x); })
+          ? RunningMedian(c, size)
+          : WindowMedians(c, size);
   for (int i = 0; i < n; ++i) {
-    for (int k = -half; k <= half; ++k) win[k + half] = c[std::clamp(i + k, 0, n - 1)];
-    std::nth_element(win.begin(), win.begin() + half, win.end());
-    if (std::abs(c[i] - win[half]) > jump) bad.push_back(f[i]);
+    if (std::abs(c[i] - median[i]) > jump) {
+      stripe->status[f[i]] = static_cast<std::uint8_t>(StripeStatus::kMultiple);
+    }
   }
-  for (const int s : bad) stripe->status[s] = static_cast<std::uint8_t>(StripeStatus::kMultiple);
 }
 
 template FrameStripe StripeFromFrames<std::uint8_t>(const ImageView<std::uint8_t>&,
