@@ -34,6 +34,10 @@ inline void LinePass(Src src, int rows, int cols, int h, Op op, T* buffer, T* ds
     std::copy(ext(b0), ext(b0) + cols, g);
     for (int i = b0 + 1; i < b1; ++i) {
       const T* x = ext(i);
+#if defined(__SSE2__)
+      const char* ahead = reinterpret_cast<const char*>(ext(i + 4));  // on its way from memory
+      for (size_t c = 0; c < cols * sizeof(T); c += 64) _mm_prefetch(ahead + c, _MM_HINT_T0);
+#endif
       const T* pg = at(g, i - 1 - b0);
       T* cg = at(g, i - b0);
       for (int c = 0; c < cols; ++c) cg[c] = op(pg[c], x[c]);

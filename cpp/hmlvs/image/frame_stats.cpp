@@ -274,6 +274,14 @@ class StatsPass {
     T* mno = st_->min_off.data() + static_cast<size_t>(r) * st_->blocks;
     int done = 0;  // columns whose difference, sum and blocks are done
 #if defined(__SSE2__)
+    if (r + 4 < f_.rows) {  // the rows ahead on their way from memory
+      const char* na = reinterpret_cast<const char*>(a + 4 * f_.on_rs);
+      const char* nb = reinterpret_cast<const char*>(b + 4 * f_.off_rs);
+      for (int c = 0; c < static_cast<int>(cols * sizeof(T)); c += 64) {
+        _mm_prefetch(na + c, _MM_HINT_T0);
+        _mm_prefetch(nb + c, _MM_HINT_T0);
+      }
+    }
     if constexpr (sizeof(T) == 1) {
       if (simd_) {
         total_ += Row8(a, b, full_, d_, mxd, mno);
