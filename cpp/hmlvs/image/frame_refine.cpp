@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <utility>
 #include <vector>
@@ -51,6 +52,12 @@ class RefineImage {
     for (int dv = 0; dv <= tmax; ++dv) {
       colour_[dv] = static_cast<float>(std::exp(dv * static_cast<double>(dv) * colour_coeff));
       if (colour_[dv] == 0.0f) break;
+    }
+    // the first 16 weights' bytes, plane by plane (least significant first)
+    for (int dv = 0; dv < 16; ++dv) {
+      std::uint32_t bits;
+      std::memcpy(&bits, &colour_[dv], 4);
+      for (int j = 0; j < 4; ++j) planes_[16 * j + dv] = static_cast<std::uint8_t>(bits >> (8 * j));
     }
     level_floor_ = static_cast<float>(std::max(1.0, 0.1 * o.mean));
     offset_f_ = static_cast<float>(o.offset);
@@ -149,23 +156,42 @@ class RefineImage {
     bg_->Mark(p, b);
   }
 #if defined(HMLVS_AVX2)
+  // The colour weights of 16 differences `idx` (bytes): with all below 16 from the table's
+  // first 16 entries held in four byte planes (a byte shuffle each), else gathered.
+  __attribute__((target("avx2"))) void ColourWeights(__m128i idx, __m256* k0, __m256* k1) const {
+    const __m128i fifteen = _mm_set1_epi8(15);
+    if (_mm_movemask_epi8(_mm_cmpeq_epi8(_mm_max_epu8(idx, fifteen), fifteen)) == 0xffff) {
+      const __m128i* planes = reinterpret_cast<const __m128i*>(planes_);
+      const __m128i b0 = _mm_shuffle_epi8(_mm_load_si128(planes), idx);
+      const __m128i b1 = _mm_shuffle_epi8(_mm_load_si128(planes + 1), idx);
+      const __m128i b2 = _mm_shuffle_epi8(_mm_load_si128(planes + 2), idx);
+      const __m128i b3 = _mm_shuffle_epi8(_mm_load_si128(planes + 3), idx);
+      const __m128i lo01 = _mm_unpacklo_epi8(b0, b1), hi01 = _mm_unpackhi_epi8(b0, b1);
+      const __m128i lo23 = _mm_unpacklo_epi8(b2, b3), hi23 = _mm_unpackhi_epi8(b2, b3);
+      *k0 = _mm256_castsi256_ps(
+          _mm256_set_m128i(_mm_unpackhi_epi16(lo01, lo23), _mm_unpacklo_epi16(lo01, lo23)));
+      *k1 = _mm256_castsi256_ps(
+          _mm256_set_m128i(_mm_unpackhi_epi16(hi01, hi23), _mm_unpacklo_epi16(hi01, hi23)));
+      return;
+    }
+    const float* colour = colour_.data();
+    *k0 = _mm256_i32gather_ps(colour, _mm256_cvtepu8_epi32(idx), 4);
+    *k1 = _mm256_i32gather_ps(colour, _mm256_cvtepu8_epi32(_mm_srli_si128(idx, 8)), 4);
+  }
   // BilateralBlock eight at a time, on CPUs with AVX2 (the same operations on each pixel, so
   // the same values: no fused multiply-add)
   __attribute__((target("avx2"))) void BilateralBlockAvx2(const T* const* rows, int x0,
                                                           float* out) const {
     const __m128i cc = _mm_loadu_si128(reinterpret_cast<const __m128i*>(rows[3] + x0));
-    const __m256i c0 = _mm256_cvtepu8_epi32(cc), c1 = _mm256_cvtepu8_epi32(_mm_srli_si128(cc, 8));
     __m256 s0 = _mm256_setzero_ps(), s1 = s0, w0 = s0, w1 = s0;
-    const float* colour = colour_.data();
     for (const Tap& t : taps_) {
       const __m128i vv =
           _mm_loadu_si128(reinterpret_cast<const __m128i*>(rows[t.di + 3] + x0 + t.dj));
       const __m256i v0 = _mm256_cvtepu8_epi32(vv), v1 = _mm256_cvtepu8_epi32(_mm_srli_si128(vv, 8));
       const __m256 space = _mm256_set1_ps(t.w);
-      const __m256 k0 = _mm256_mul_ps(
-          space, _mm256_i32gather_ps(colour, _mm256_abs_epi32(_mm256_sub_epi32(v0, c0)), 4));
-      const __m256 k1 = _mm256_mul_ps(
-          space, _mm256_i32gather_ps(colour, _mm256_abs_epi32(_mm256_sub_epi32(v1, c1)), 4));
+      __m256 g0, g1;  // |v - centre| as bytes: the colour weights' indices
+      ColourWeights(_mm_or_si128(_mm_subs_epu8(vv, cc), _mm_subs_epu8(cc, vv)), &g0, &g1);
+      const __m256 k0 = _mm256_mul_ps(space, g0), k1 = _mm256_mul_ps(space, g1);
       s0 = _mm256_add_ps(s0, _mm256_mul_ps(_mm256_cvtepi32_ps(v0), k0));
       s1 = _mm256_add_ps(s1, _mm256_mul_ps(_mm256_cvtepi32_ps(v1), k1));
       w0 = _mm256_add_ps(w0, k0);
@@ -268,7 +294,16 @@ class RefineImage {
     const int x0 = b * kSb, x1 = std::min(n_scan, x0 + kSb);
     float* out = fp_->Row(p);
     if (!with_blur_) {
-      for (int x = x0; x < x1; ++x) out[x] = P(p, x);
+      // P(p, x) over the block, the denoised frame's block computed first (vectorises)
+      if (!bg_->Has(p, b)) ComputeBackground(p, b);
+      const float* bg = bg_->Row(p);
+      const T* on = f_.on + p * f_.on_rs;
+      const bool normalize = o_.normalize;
+      const float offset = offset_f_, floor = level_floor_, num = gain_num_;
+      for (int x = x0; x < x1; ++x) {
+        const float diff = std::max(static_cast<float>(on[x]) - bg[x], 0.0f);
+        out[x] = normalize ? diff * (num / std::max(bg[x] + offset, floor)) : diff;
+      }
     } else {
       // to first order in the blur's variance s2 the normalised profile is
       // P + s2 grad(P) . grad(log albedo): subtracted
@@ -289,6 +324,7 @@ class RefineImage {
   Plane* ft_;
   std::vector<Tap> taps_;
   std::vector<float> colour_, along_;
+  alignas(16) std::uint8_t planes_[64] = {};
   std::vector<int> col_, band_;
   int radius_ = 0, pad_ = 0;
   bool with_blur_ = false;
