@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "hmlvs/image/frame_albedo.h"
+#include "hmlvs/image/refine_batch.h"
 #include "hmlvs/image/scan_checks.h"
 
 namespace hmlvs::scan {
@@ -338,33 +339,6 @@ bool FoundLine(const StripeResult& st, int s) {
          std::isfinite(st.centre[s]) && std::isfinite(st.width[s]);
 }
 
-// Scan line s of a view read once over rows [first, last] (those RefineLine reads unless its
-// centre wanders off), the view itself beyond: the same values, each looked up once.
-template <class V>
-class LineWindow {
- public:
-  using Pixel = float;
-  LineWindow(const V& v, int s, std::pair<int, int> rows, std::vector<double>* buffer)
-      : n_scan(v.n_scan),
-        n_prof(v.n_prof),
-        v_(v),
-        first_(std::max(rows.first, 0)),
-        last_(std::min(rows.second, v.n_prof - 1)) {
-    buffer->resize(static_cast<size_t>(std::max(0, last_ - first_ + 1)));
-    for (int p = first_; p <= last_; ++p) (*buffer)[static_cast<size_t>(p - first_)] = v.at(s, p);
-    values_ = buffer->data();
-  }
-  double at(int s, int p) const {
-    return p >= first_ && p <= last_ ? values_[p - first_] : v_.at(s, p);
-  }
-  int n_scan, n_prof;
-
- private:
-  const V& v_;
-  int first_, last_;
-  const double* values_ = nullptr;
-};
-
 // The band of rows [lo, hi) the refinement's image is built on: every found scan line's
 // window (Steger's centre +- 4.5 profile sigmas plus a pixel), and the filter's 3 px more.
 // False when no scan line was found.
@@ -425,7 +399,8 @@ bool WeightedCentres(const Frames<T>& f, bool normalize, double offset, double m
   const StripeRefineOptions ro;
   const std::vector<std::pair<int, int>> windows = RefineWindows(*st, edge);
   image.Prepare(windows, &ws.marks, &ws.marks2);
-  std::vector<double> buffer;
+  RefineLines<RefineImage<T>> lines(image, ro, st);
+  std::vector<int> refined;
   for (int s = edge; s < n - edge; ++s) {
     if (st->status[s] != static_cast<std::uint8_t>(StripeStatus::kFound)) continue;
     double line_noise = o.frame_noise;
@@ -436,9 +411,11 @@ bool WeightedCentres(const Frames<T>& f, bool normalize, double offset, double m
       line_noise =
           static_cast<double>(static_cast<float>(o.frame_noise) * image.Gain(s, pos + o.lo));
     }
-    RefineLine(LineWindow<RefineImage<T>>(image, s, windows[s], &buffer), s, line_noise, ro, st);
-    st->sigma[s] = st->sigma[s] * factor;
+    lines.Add(s, line_noise, windows[s]);
+    refined.push_back(s);
   }
+  lines.Flush();
+  for (const int s : refined) st->sigma[s] = st->sigma[s] * factor;
   return true;
 }
 

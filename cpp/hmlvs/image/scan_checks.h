@@ -100,16 +100,33 @@ StripeStatus AssessLine(const V& v, const VOn& von, const VOff& voff, bool with_
 // Throws std::invalid_argument for invalid refinement options.
 void ValidateRefineOptions(const StripeRefineOptions& o);
 
-// RefineStripeCentres on scan line s (kFound, additive noise `noise`): updates the centre,
-// sigma and status of `res` at s. `v` holds the image as floats.
+// RefineLine's state on one scan line: its setup (RefineStart) and the iteration's centre c
+// and sums.
+struct RefineState {
+  double c0 = 0.0, sp = 0.0, inv_s2 = 0.0, peak = 0.0, a2 = 0.0, k2 = 0.0, shrink = 0.0;
+  int hw = 0;
+  double c = 0.0, f_sum = 0.0, df_sum = 0.0, var_sum = 0.0;
+  bool converged = false;
+};
+
+inline void SetRefineFailed(int s, StripeResult* res) {
+  res->status[s] = static_cast<std::uint8_t>(StripeStatus::kFitFailed);
+  res->centre[s] = kNaN;
+  res->sigma[s] = kNaN;
+}
+
+// RefineLine's setup of scan line s: false when the scan line keeps its centre (no noise, or
+// the window leaves the image) or failed (kFitFailed: no peak or no weights).
 template <class V>
-void RefineLine(const V& v, int s, double noise, const StripeRefineOptions& o, StripeResult* res) {
-  const double k2 = o.speckle * o.speckle;
+bool RefineStart(const V& v, int s, double noise, const StripeRefineOptions& o, StripeResult* res,
+                 RefineState* st) {
+  st->k2 = o.speckle * o.speckle;
   const double c0 = res->centre[s];
   const double sp = std::max(0.5, res->width[s] / (2.0 * std::sqrt(2.0 * std::log(2.0))));
-  if (!std::isfinite(noise) || noise < 0.0 || !std::isfinite(c0) || !std::isfinite(sp)) return;
+  if (!std::isfinite(noise) || noise < 0.0 || !std::isfinite(c0) || !std::isfinite(sp))
+    return false;
   const int hw = static_cast<int>(std::ceil(4.0 * sp));
-  if (c0 - hw - 1.0 < 0.0 || c0 + hw + 1.0 > v.n_prof - 1.0) return;
+  if (c0 - hw - 1.0 < 0.0 || c0 + hw + 1.0 > v.n_prof - 1.0) return false;
   // the profile's peak: the largest sample within one profile sigma of the centre
   double peak = 0.0;
   for (int p = static_cast<int>(std::ceil(c0 - sp)); p <= static_cast<int>(std::floor(c0 + sp));
@@ -117,31 +134,71 @@ void RefineLine(const V& v, int s, double noise, const StripeRefineOptions& o, S
     peak = std::max(peak, v.at(s, p));
   }
   const double add = std::max(noise, o.noise_floor * peak);
-  const double a2 = add * add;
-  auto set_failed = [&] {
-    res->status[s] = static_cast<std::uint8_t>(StripeStatus::kFitFailed);
-    res->centre[s] = kNaN;
-    res->sigma[s] = kNaN;
-  };
-  if (!(peak > 0.0) || !(a2 > 0.0 || k2 > 0.0)) {
-    set_failed();
+  st->a2 = add * add;
+  if (!(peak > 0.0) || !(st->a2 > 0.0 || st->k2 > 0.0)) {
+    SetRefineFailed(s, res);
+    return false;
+  }
+  st->c0 = st->c = c0;
+  st->sp = sp;
+  st->hw = hw;
+  st->peak = peak;
+  st->inv_s2 = 1.0 / (sp * sp);
+  // P(x) = peak exp(-x^2 / (2 sp^2)) at x = p - c, by the recurrence exp(-(x + 1)^2 / 2 s2)
+  // = exp(-x^2 / 2 s2) exp(-(2 x + 1) / 2 s2), whose factor shrinks by exp(-1 / s2) a step
+  st->shrink = std::exp(-st->inv_s2);
+  return true;
+}
+
+// An iteration's window about m = round(c) and the recurrence's start at its first pixel
+// (P there, and its first factor); false when the window leaves the image.
+inline bool RefineWindow(const RefineState& st, int n_prof, int* m, double* g, double* ratio) {
+  *m = static_cast<int>(std::lround(st.c));
+  if (*m - st.hw < 0 || *m + st.hw > n_prof - 1) return false;
+  const double x0 = (*m - st.hw) - st.c;
+  *g = st.peak * std::exp(-0.5 * x0 * x0 * st.inv_s2);
+  *ratio = std::exp(-0.5 * (2.0 * x0 + 1.0) * st.inv_s2);
+  return true;
+}
+
+// An iteration's step from its sums: false when the iteration ends (converged, or no step).
+inline bool RefineStep(RefineState* st, const StripeRefineOptions& o) {
+  if (!(st->df_sum < 0.0 || st->df_sum > 0.0) || !std::isfinite(st->f_sum)) return false;
+  const double step = std::clamp(-st->f_sum / st->df_sum, -0.5, 0.5);
+  st->c += step;
+  if (std::abs(step) < o.tolerance) {
+    st->converged = true;
+    return false;
+  }
+  return true;
+}
+
+// The refined centre and its sigma, or kFitFailed (no convergence, or more than half a
+// profile sigma from the start).
+inline void RefineFinish(const RefineState& st, int s, StripeResult* res) {
+  if (!st.converged || !(std::abs(st.c - st.c0) <= 0.5 * st.sp)) {
+    SetRefineFailed(s, res);
     return;
   }
-  const double inv_s2 = 1.0 / (sp * sp);
-  double c = c0, f_sum = 0.0, df_sum = 0.0, var_sum = 0.0;
-  bool converged = false;
+  res->centre[s] = st.c;
+  res->sigma[s] = std::sqrt(st.var_sum) / std::abs(st.df_sum);
+}
+
+// RefineStripeCentres on scan line s (kFound, additive noise `noise`): updates the centre,
+// sigma and status of `res` at s. `v` holds the image as floats.
+template <class V>
+void RefineLine(const V& v, int s, double noise, const StripeRefineOptions& o, StripeResult* res) {
+  RefineState st;
+  if (!RefineStart(v, s, noise, o, res, &st)) return;
+  const double inv_s2 = st.inv_s2, a2 = st.a2, k2 = st.k2, shrink = st.shrink;
   for (int it = 0; it < o.max_iterations; ++it) {
-    const int m = static_cast<int>(std::lround(c));
-    if (m - hw < 0 || m + hw > v.n_prof - 1) break;
-    f_sum = df_sum = var_sum = 0.0;
-    // P(x) = peak exp(-x^2 / (2 sp^2)) at x = p - c, by the recurrence exp(-(x + 1)^2 / 2 s2)
-    // = exp(-x^2 / 2 s2) exp(-(2 x + 1) / 2 s2), whose factor shrinks by exp(-1 / s2) a step
-    const double x0 = (m - hw) - c;
-    double g = peak * std::exp(-0.5 * x0 * x0 * inv_s2);
-    double ratio = std::exp(-0.5 * (2.0 * x0 + 1.0) * inv_s2);
-    const double shrink = std::exp(-inv_s2);
-    for (int p = m - hw; p <= m + hw; ++p, g *= ratio, ratio *= shrink) {
-      const double x = p - c;
+    int m = 0;
+    double g = 0.0, ratio = 0.0;
+    if (!RefineWindow(st, v.n_prof, &m, &g, &ratio)) break;
+    double f_sum = 0.0, df_sum = 0.0, var_sum = 0.0;
+    const double cc = st.c;
+    for (int p = m - st.hw; p <= m + st.hw; ++p, g *= ratio, ratio *= shrink) {
+      const double x = p - cc;
       const double pp = g;                                      // P(x)
       const double dp = -x * inv_s2 * pp;                       // P'(x)
       const double ddp = (x * x * inv_s2 - 1.0) * inv_s2 * pp;  // P''(x)
@@ -154,20 +211,12 @@ void RefineLine(const V& v, int s, double noise, const StripeRefineOptions& o, S
       df_sum -= dw * y;  // d/dc of w(p - c) y
       var_sum += w * w * den;
     }
-    if (!(df_sum < 0.0 || df_sum > 0.0) || !std::isfinite(f_sum)) break;
-    const double step = std::clamp(-f_sum / df_sum, -0.5, 0.5);
-    c += step;
-    if (std::abs(step) < o.tolerance) {
-      converged = true;
-      break;
-    }
+    st.f_sum = f_sum;
+    st.df_sum = df_sum;
+    st.var_sum = var_sum;
+    if (!RefineStep(&st, o)) break;
   }
-  if (!converged || !(std::abs(c - c0) <= 0.5 * sp)) {
-    set_failed();
-    return;
-  }
-  res->centre[s] = c;
-  res->sigma[s] = std::sqrt(var_sum) / std::abs(df_sum);
+  RefineFinish(st, s, res);
 }
 
 }  // namespace hmlvs::scan
