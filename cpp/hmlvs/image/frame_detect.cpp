@@ -155,12 +155,12 @@ void DetectRuns(const Stats<T>& st, const DifferenceRule<T>& rule, const DView<T
 // ExtractStripe's scan lines from their runs: v the difference, dv the detection view.
 template <class V, class DV>
 void ScanLines(const V& v, const DV& dv, const Runs& runs, const StripeOptions& o,
-               StripeResult* res) {
+               StripeResult* res, bool residual) {
   ResetResult(v.n_scan, res);
   const StegerKernels kernels = StegerKernelsOf(o);
   for (int s = 0; s < v.n_scan; ++s) {
     const size_t at = static_cast<size_t>(s) * kMaxRuns;
-    ScanLine(v, dv, s, &runs.begin[at], &runs.end[at], runs.count[s], o, kernels, res);
+    ScanLine(v, dv, s, &runs.begin[at], &runs.end[at], runs.count[s], o, kernels, res, residual);
   }
 }
 
@@ -173,12 +173,12 @@ template void DetectRuns<std::uint16_t>(const Stats<std::uint16_t>&,
                                         const DView<std::uint16_t>&, const SView<std::uint16_t>*,
                                         Detector*, Detector*);
 template void ScanLines(const DView<std::uint8_t>&, const DView<std::uint8_t>&, const Runs&,
-                        const StripeOptions&, StripeResult*);
+                        const StripeOptions&, StripeResult*, bool);
 template void ScanLines(const DView<std::uint8_t>&, const SView<std::uint8_t>&, const Runs&,
-                        const StripeOptions&, StripeResult*);
+                        const StripeOptions&, StripeResult*, bool);
 template void ScanLines(const DView<std::uint16_t>&, const DView<std::uint16_t>&, const Runs&,
-                        const StripeOptions&, StripeResult*);
+                        const StripeOptions&, StripeResult*, bool);
 template void ScanLines(const DView<std::uint16_t>&, const SView<std::uint16_t>&, const Runs&,
-                        const StripeOptions&, StripeResult*);
+                        const StripeOptions&, StripeResult*, bool);
 
 }  // namespace hmlvs::scan

@@ -17,9 +17,10 @@ template <typename T>
 void DetectRuns(const Stats<T>& st, const DifferenceRule<T>& rule, const DView<T>& d,
                 const SView<T>* s, Detector* plain, Detector* smooth);
 
-// ExtractStripe's scan lines from their runs: v the difference, dv the detection view.
+// ExtractStripe's scan lines from their runs: v the difference, dv the detection view; the
+// residuals unless `residual` is false (a pass that only sizes the stripe).
 template <class V, class DV>
 void ScanLines(const V& v, const DV& dv, const Runs& runs, const StripeOptions& o,
-               StripeResult* res);
+               StripeResult* res, bool residual = true);
 
 }  // namespace hmlvs::scan

@@ -217,13 +217,13 @@ class PairStripe {
     DetectRuns(st_, rule_, *d_, smooth_.get(), det_plain.threshold >= 0.0 ? &det_plain : nullptr,
                det_smooth.threshold >= 0.0 ? &det_smooth : nullptr);
   }
-  void Extract(const StripeOptions& p, StripeResult* res) const {
+  void Extract(const StripeOptions& p, StripeResult* res, bool residual = true) const {
     res->threshold = p.threshold;
     res->noise = p.noise >= 0.0 ? p.noise : d_noise_;
     if (p.detect_sigma_along > 0.0) {
-      ScanLines(*d_, *smooth_, ws_.detectors[1].runs, p, res);
+      ScanLines(*d_, *smooth_, ws_.detectors[1].runs, p, res, residual);
     } else {
-      ScanLines(*d_, *d_, ws_.detectors[0].runs, p, res);
+      ScanLines(*d_, *d_, ws_.detectors[0].runs, p, res, residual);
     }
   }
   // the second pass by Steger's method, at half the median FWHM of the first pass's found
@@ -232,7 +232,7 @@ class PairStripe {
     second_.method = StripeMethod::kSteger;
     if (need_first_) {
       StripeResult r1;
-      Extract(first_, &r1);
+      Extract(first_, &r1, false);  // only its found widths are read
       const double median = MedianFoundWidth(r1);
       second_.steger_sigma = std::isnan(median) ? 3.0 : std::clamp(0.5 * median, 3.0, 20.0);
     }

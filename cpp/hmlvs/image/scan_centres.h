@@ -216,10 +216,12 @@ void ResetResult(int n, StripeResult* res);
 
 // Scan line s of ExtractStripe: its `count` runs above the threshold [begin[k], end[k]) of
 // the detection view dv -> peaks (sized on dv), the choice of one, its status and its centre
-// (measured on v). `res` holds threshold and noise and receives scan line s.
+// (measured on v). `res` holds threshold and noise and receives scan line s; its residual
+// (the profile's asymmetry) unless `residual` is false.
 template <class V, class DV>
 void ScanLine(const V& v, const DV& dv, int s, const int* begin, const int* end, int count,
-              const StripeOptions& o, const StegerKernels& kernels, StripeResult* res) {
+              const StripeOptions& o, const StegerKernels& kernels, StripeResult* res,
+              bool residual = true) {
   if (count == 0) return;
   if (count > kMaxRuns) {
     res->status[s] = static_cast<std::uint8_t>(StripeStatus::kMultiple);
@@ -293,7 +295,7 @@ void ScanLine(const V& v, const DV& dv, int s, const int* begin, const int* end,
   res->status[s] = static_cast<std::uint8_t>(StripeStatus::kFound);
   res->centre[s] = c.centre;
   res->sigma[s] = c.sigma;
-  res->residual[s] = Asymmetry(v, s, c.centre, best_valid.width, best_valid.value);
+  if (residual) res->residual[s] = Asymmetry(v, s, c.centre, best_valid.width, best_valid.value);
 }
 
 }  // namespace hmlvs::scan
