@@ -93,6 +93,52 @@ inline std::uint64_t Row8(const std::uint8_t* a, const std::uint8_t* b, int bloc
   return parts[0] + parts[1];
 }
 
+#if defined(HMLVS_AVX2)
+// Row8 eight blocks at a time, on CPUs with AVX2 (the same integers): Reduce4 in each 128-bit
+// lane reduces blocks k, k + 2, k + 4, k + 6 in the low lane and k + 1, ..., k + 7 in the high
+// one, interleaved at the end
+__attribute__((target("avx2"))) std::uint64_t Row8Avx2(const std::uint8_t* a, const std::uint8_t* b,
+                                                       int blocks, std::uint8_t* d,
+                                                       std::uint8_t* mxd, std::uint8_t* mno) {
+  const __m256i zero = _mm256_setzero_si256();
+  __m256i sum = zero;
+  int k = 0;
+  for (; k + 8 <= blocks; k += 8) {
+    __m256i vd[4], vb[4];
+    for (int q = 0; q < 4; ++q) {
+      const int at = (k + 2 * q) * kSb;
+      const __m256i va = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a + at));
+      vb[q] = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(b + at));
+      vd[q] = _mm256_subs_epu8(va, vb[q]);  // max(a - b, 0)
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(d + at), vd[q]);
+      sum = _mm256_add_epi64(sum, _mm256_sad_epu8(vb[q], zero));
+    }
+    __m256i x =
+        _mm256_max_epu8(_mm256_unpacklo_epi8(vd[0], vd[1]), _mm256_unpackhi_epi8(vd[0], vd[1]));
+    __m256i y =
+        _mm256_max_epu8(_mm256_unpacklo_epi8(vd[2], vd[3]), _mm256_unpackhi_epi8(vd[2], vd[3]));
+    __m256i mx = _mm256_max_epu8(_mm256_unpacklo_epi16(x, y), _mm256_unpackhi_epi16(x, y));
+    mx = _mm256_max_epu8(mx, _mm256_srli_si256(mx, 8));
+    mx = _mm256_max_epu8(mx, _mm256_srli_si256(mx, 4));
+    x = _mm256_min_epu8(_mm256_unpacklo_epi8(vb[0], vb[1]), _mm256_unpackhi_epi8(vb[0], vb[1]));
+    y = _mm256_min_epu8(_mm256_unpacklo_epi8(vb[2], vb[3]), _mm256_unpackhi_epi8(vb[2], vb[3]));
+    __m256i mn = _mm256_min_epu8(_mm256_unpacklo_epi16(x, y), _mm256_unpackhi_epi16(x, y));
+    mn = _mm256_min_epu8(mn, _mm256_srli_si256(mn, 8));
+    mn = _mm256_min_epu8(mn, _mm256_srli_si256(mn, 4));
+    _mm_storel_epi64(
+        reinterpret_cast<__m128i*>(mxd + k),
+        _mm_unpacklo_epi8(_mm256_castsi256_si128(mx), _mm256_extracti128_si256(mx, 1)));
+    _mm_storel_epi64(
+        reinterpret_cast<__m128i*>(mno + k),
+        _mm_unpacklo_epi8(_mm256_castsi256_si128(mn), _mm256_extracti128_si256(mn, 1)));
+  }
+  alignas(32) std::uint64_t parts[4];
+  _mm256_store_si256(reinterpret_cast<__m256i*>(parts), sum);
+  const std::uint64_t rest =
+      k < blocks ? Row8(a + k * kSb, b + k * kSb, blocks - k, d + k * kSb, mxd + k, mno + k) : 0;
+  return parts[0] + parts[1] + parts[2] + parts[3] + rest;
+}
+#endif
 // FindColumnPeaks (half width 2) of the plain difference of 8-bit frames over the whole blocks
 // of columns, given every row's block maxima `mxd` (rows x blocks): per block first the row
 // where the block and its neighbours reach their largest difference, then, in row order, only
@@ -284,7 +330,11 @@ class StatsPass {
     }
     if constexpr (sizeof(T) == 1) {
       if (simd_) {
+#if defined(HMLVS_AVX2)
+        total_ += UseAvx2() ? Row8Avx2(a, b, full_, d_, mxd, mno) : Row8(a, b, full_, d_, mxd, mno);
+#else
         total_ += Row8(a, b, full_, d_, mxd, mno);
+#endif
         done = full_ * kSb;
       }
     }
