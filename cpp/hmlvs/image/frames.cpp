@@ -9,6 +9,12 @@
 // the stripe) per 16 columns of a row decides where a value could clear a threshold; only
 // there, and where a scan line's peak, centre, refinement or check reads, are values computed,
 // each once per call (Plane).
+//
+// Here the pipeline (PairStripe, the laser-on frame alone, DropJumps); its parts in
+// frame_buffers.h (planes, marks, runs, the thread's workspace), frame_stats (the pass over
+// every pixel), frame_albedo (the albedo offset's fit), frame_views.h (the difference and its
+// smoothing where read), frame_detect (runs and scan lines), frame_refine with refine_batch.h
+// (the refinement, four scan lines at a time) and frame_background.cpp (the opening).
 #include "hmlvs/image/frames.h"
 
 #include <algorithm>
