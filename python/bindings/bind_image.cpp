@@ -105,9 +105,42 @@ py::tuple FromFrames(const py::array& on, const py::object& off, const FrameStri
                         r.refined, background);
 }
 
-}  // namespace
+// AssessStripe of a stripe's image and its frames (either may be None): the new statuses.
+Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1> AssessFrames(
+    const py::array& image, const py::object& on, const py::object& off, StripeDirection direction,
+    const StripeQualityOptions& options, const Eigen::VectorXd& centre,
+    const Eigen::VectorXd& width, const Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1>& status,
+    double threshold) {
+  StripeResult out;
+  out.centre = centre;
+  out.width = width;
+  out.status = status;
+  out.threshold = threshold;
+  const Depth d = DepthOf(image, "the image");
+  for (const py::object* o : {&on, &off}) {
+    if (!o->is_none() && DepthOf(o->cast<py::array>(), "a frame") != d) {
+      throw std::invalid_argument("the frames and the stripe's image differ in bit depth");
+    }
+  }
+  auto run = [&](auto tag) {
+    using T = decltype(tag);
+    const ImageView<T> v = ViewOf<T>(image, "the image");
+    const ImageView<T> a =
+        on.is_none() ? ImageView<T>() : ViewOf<T>(on.cast<py::array>(), "the laser-on image");
+    const ImageView<T> b =
+        off.is_none() ? ImageView<T>() : ViewOf<T>(off.cast<py::array>(), "the laser-off image");
+    py::gil_scoped_release release;
+    AssessStripe(v, a, b, direction, options, &out);
+  };
+  if (d == Depth::kU8) {
+    run(std::uint8_t{});
+  } else {
+    run(std::uint16_t{});
+  }
+  return out.status;
+}
 
-void BindImage(py::module_& m) {
+void BindStripeTypes(py::module_& m) {
   py::enum_<StripeDirection>(m, "_StripeDirection")
       .value("columns", StripeDirection::kColumns)
       .value("rows", StripeDirection::kRows);
@@ -137,7 +170,9 @@ void BindImage(py::module_& m) {
       .def_readonly("residual", &StripeResult::residual)
       .def_readonly("threshold", &StripeResult::threshold)
       .def_readonly("noise", &StripeResult::noise);
+}
 
+void BindWholeImages(py::module_& m) {
   m.def(
       "_difference_image",
       [](const py::array& on, const py::array& off, bool normalize, double scale, double floor,
@@ -181,49 +216,31 @@ void BindImage(py::module_& m) {
                                                          : Extract<std::uint16_t>(image, options);
       },
       py::arg("image"), py::arg("options"));
+  m.def(
+      "_estimate_difference_noise",
+      [](const py::array& image) {
+        if (DepthOf(image, "the image") == Depth::kU8) {
+          const auto v = ViewOf<std::uint8_t>(image, "the image");
+          py::gil_scoped_release release;
+          return EstimateDifferenceNoise(v);
+        }
+        const auto v = ViewOf<std::uint16_t>(image, "the image");
+        py::gil_scoped_release release;
+        return EstimateDifferenceNoise(v);
+      },
+      py::arg("image"));
+}
+
+void BindQuality(py::module_& m) {
   py::class_<StripeQualityOptions>(m, "_StripeQualityOptions")
       .def(py::init<>())
       .def_readwrite("albedo_step", &StripeQualityOptions::albedo_step)
       .def_readwrite("albedo_offset", &StripeQualityOptions::albedo_offset)
       .def_readwrite("hump", &StripeQualityOptions::hump)
       .def_readwrite("dip", &StripeQualityOptions::dip);
-  m.def(
-      "_assess_stripe",
-      [](const py::array& image, const py::object& on, const py::object& off,
-         StripeDirection direction, const StripeQualityOptions& options,
-         const Eigen::VectorXd& centre, const Eigen::VectorXd& width,
-         const Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1>& status, double threshold) {
-        StripeResult out;
-        out.centre = centre;
-        out.width = width;
-        out.status = status;
-        out.threshold = threshold;
-        const Depth d = DepthOf(image, "the image");
-        for (const py::object* o : {&on, &off}) {
-          if (!o->is_none() && DepthOf(o->cast<py::array>(), "a frame") != d) {
-            throw std::invalid_argument("the frames and the stripe's image differ in bit depth");
-          }
-        }
-        auto run = [&](auto tag) {
-          using T = decltype(tag);
-          const ImageView<T> v = ViewOf<T>(image, "the image");
-          const ImageView<T> a =
-              on.is_none() ? ImageView<T>() : ViewOf<T>(on.cast<py::array>(), "the laser-on image");
-          const ImageView<T> b = off.is_none()
-                                     ? ImageView<T>()
-                                     : ViewOf<T>(off.cast<py::array>(), "the laser-off image");
-          py::gil_scoped_release release;
-          AssessStripe(v, a, b, direction, options, &out);
-        };
-        if (d == Depth::kU8) {
-          run(std::uint8_t{});
-        } else {
-          run(std::uint16_t{});
-        }
-        return out.status;
-      },
-      py::arg("image"), py::arg("on"), py::arg("off"), py::arg("direction"), py::arg("options"),
-      py::arg("centre"), py::arg("width"), py::arg("status"), py::arg("threshold"));
+  m.def("_assess_stripe", &AssessFrames, py::arg("image"), py::arg("on"), py::arg("off"),
+        py::arg("direction"), py::arg("options"), py::arg("centre"), py::arg("width"),
+        py::arg("status"), py::arg("threshold"));
   py::class_<StripeRefineOptions>(m, "_StripeRefineOptions")
       .def(py::init<>())
       .def_readwrite("speckle", &StripeRefineOptions::speckle)
@@ -253,19 +270,9 @@ void BindImage(py::module_& m) {
       },
       py::arg("image"), py::arg("direction"), py::arg("noise"), py::arg("options"),
       py::arg("centre"), py::arg("width"), py::arg("sigma"), py::arg("status"));
-  m.def(
-      "_estimate_difference_noise",
-      [](const py::array& image) {
-        if (DepthOf(image, "the image") == Depth::kU8) {
-          const auto v = ViewOf<std::uint8_t>(image, "the image");
-          py::gil_scoped_release release;
-          return EstimateDifferenceNoise(v);
-        }
-        const auto v = ViewOf<std::uint16_t>(image, "the image");
-        py::gil_scoped_release release;
-        return EstimateDifferenceNoise(v);
-      },
-      py::arg("image"));
+}
+
+void BindFrames(py::module_& m) {
   py::class_<FrameStripeOptions>(m, "_FrameStripeOptions")
       .def(py::init<>())
       .def_readwrite("stripe", &FrameStripeOptions::stripe)
@@ -342,6 +349,15 @@ void BindImage(py::module_& m) {
       },
       py::arg("centre"), py::arg("status"));
   m.def("_smoothing_noise_gain", &SmoothingNoiseGain, py::arg("sigma"));
+}
+
+}  // namespace
+
+void BindImage(py::module_& m) {
+  BindStripeTypes(m);
+  BindWholeImages(m);
+  BindQuality(m);
+  BindFrames(m);
 }
 
 }  // namespace hmlvs::python

@@ -92,14 +92,8 @@ void DetectPerLine(const ScanView<T>& v, T thr, Runs* runs) {
   }
 }
 
-}  // namespace
-
-template <typename T>
-void DifferenceImage(const ImageView<T>& on, const ImageView<T>& off, T* out,
-                     const DifferenceOptions& o) {
-  RequireImage(on, "the laser-on image");
-  RequireImage(off, "the laser-off image");
-  scan::RequireSameSize(on, off);
+// Throws std::invalid_argument for a scale, floor or offset of DifferenceOptions out of range.
+void CheckDifferenceOptions(const DifferenceOptions& o) {
   if (!std::isfinite(o.scale) || !std::isfinite(o.floor) || o.scale == 0.0 || o.floor == 0.0) {
     std::ostringstream msg;
     msg << "normalisation scale and floor must be finite and positive (or negative for "
@@ -112,27 +106,49 @@ void DifferenceImage(const ImageView<T>& on, const ImageView<T>& off, T* out,
     msg << "the normalisation offset must be a finite number, got " << o.offset;
     throw std::invalid_argument(msg.str());
   }
+}
+
+// DifferenceImage without normalisation: max(on - off, 0).
+template <typename T>
+void PlainDifference(const ImageView<T>& on, const ImageView<T>& off, T* out) {
   // Loop bounds and strides in locals: writes through a uint8_t pointer may alias anything,
   // so struct members read in the loop would be reloaded every pixel and block vectorising.
   const int rows = on.rows, cols = on.cols;
   const std::ptrdiff_t on_rs = on.row_stride, on_cs = on.col_stride;
   const std::ptrdiff_t off_rs = off.row_stride, off_cs = off.col_stride;
   const bool contiguous = on_cs == 1 && off_cs == 1;
-  if (!o.normalize) {
-    for (int r = 0; r < rows; ++r) {
-      const T* a = on.data + r * on_rs;
-      const T* b = off.data + r * off_rs;
-      T* dst = out + static_cast<std::ptrdiff_t>(r) * cols;
-      if (contiguous) {
-        // branch-free max(a, b) - b, which compilers vectorise
-        for (int c = 0; c < cols; ++c) dst[c] = static_cast<T>(std::max(a[c], b[c]) - b[c]);
-      } else {
-        for (int c = 0; c < cols; ++c) {
-          const T x = a[c * on_cs], y = b[c * off_cs];
-          dst[c] = static_cast<T>(std::max(x, y) - y);
-        }
+  for (int r = 0; r < rows; ++r) {
+    const T* a = on.data + r * on_rs;
+    const T* b = off.data + r * off_rs;
+    T* dst = out + static_cast<std::ptrdiff_t>(r) * cols;
+    if (contiguous) {
+      // branch-free max(a, b) - b, which compilers vectorise
+      for (int c = 0; c < cols; ++c) dst[c] = static_cast<T>(std::max(a[c], b[c]) - b[c]);
+    } else {
+      for (int c = 0; c < cols; ++c) {
+        const T x = a[c * on_cs], y = b[c * off_cs];
+        dst[c] = static_cast<T>(std::max(x, y) - y);
       }
     }
+  }
+}
+
+}  // namespace
+
+template <typename T>
+void DifferenceImage(const ImageView<T>& on, const ImageView<T>& off, T* out,
+                     const DifferenceOptions& o) {
+  RequireImage(on, "the laser-on image");
+  RequireImage(off, "the laser-off image");
+  scan::RequireSameSize(on, off);
+  CheckDifferenceOptions(o);
+  // Loop bounds and strides in locals: writes through a uint8_t pointer may alias anything,
+  // so struct members read in the loop would be reloaded every pixel and block vectorising.
+  const int rows = on.rows, cols = on.cols;
+  const std::ptrdiff_t on_rs = on.row_stride, on_cs = on.col_stride;
+  const std::ptrdiff_t off_rs = off.row_stride, off_cs = off.col_stride;
+  if (!o.normalize) {
+    PlainDifference(on, off, out);
     return;
   }
   std::uint64_t sum = 0;
@@ -482,106 +498,5 @@ double SmoothingNoiseGain(double sigma) {
 
 template double EstimateDifferenceNoise<std::uint8_t>(const ImageView<std::uint8_t>&, int);
 template double EstimateDifferenceNoise<std::uint16_t>(const ImageView<std::uint16_t>&, int);
-
-namespace scan {
-
-void ValidateOptions(const StripeOptions& o) {
-  std::ostringstream msg;
-  if (o.direction != StripeDirection::kColumns && o.direction != StripeDirection::kRows) {
-    msg << "direction must be columns or rows";
-  } else if (o.method != StripeMethod::kCentroid && o.method != StripeMethod::kGaussian &&
-             o.method != StripeMethod::kSteger) {
-    msg << "method must be centroid, gaussian or steger";
-  } else if (!std::isfinite(o.threshold)) {
-    msg << "threshold must be a finite number (negative for automatic), got " << o.threshold;
-  } else if (!(o.min_width >= 0.0) || !(o.max_width > o.min_width) || !std::isfinite(o.max_width)) {
-    msg << "stripe widths must satisfy 0 <= min_width < max_width < inf, got min_width "
-        << o.min_width << " and max_width " << o.max_width;
-  } else if (!std::isfinite(o.noise)) {
-    msg << "noise must be a finite number (negative to estimate it), got " << o.noise;
-  } else if (!(o.steger_sigma >= 0.5 && o.steger_sigma <= 20.0)) {
-    msg << "steger_sigma must lie in [0.5, 20] px, got " << o.steger_sigma;
-  } else if (!(o.steger_sigma_along <= 0.0 ||
-               (o.steger_sigma_along >= 0.5 && o.steger_sigma_along <= 40.0))) {
-    msg << "steger_sigma_along must be 0 (= steger_sigma) or lie in [0.5, 40] px, got "
-        << o.steger_sigma_along;
-  } else if (!(o.dominance == 0.0 || (o.dominance >= 1.0 && std::isfinite(o.dominance)))) {
-    msg << "dominance must be 0 (off) or a finite ratio >= 1, got " << o.dominance;
-  } else if (!(o.detect_sigma_along == 0.0 ||
-               (o.detect_sigma_along >= 0.5 && o.detect_sigma_along <= 40.0))) {
-    msg << "detect_sigma_along must be 0 (off) or lie in [0.5, 40] px, got "
-        << o.detect_sigma_along;
-  } else {
-    return;
-  }
-  throw std::invalid_argument(msg.str());
-}
-
-void ResetResult(int n, StripeResult* res) {
-  res->centre.setConstant(n, kNaN);
-  res->intensity.setConstant(n, kNaN);
-  res->width.setConstant(n, kNaN);
-  res->sigma.setConstant(n, kNaN);
-  res->residual.setConstant(n, kNaN);
-  res->status.setConstant(n, static_cast<std::uint8_t>(StripeStatus::kNone));
-  res->num_peaks.setZero(n);
-}
-
-void ValidateQualityOptions(const StripeQualityOptions& o) {
-  if (!std::isfinite(o.albedo_step) || !(o.hump >= 0.0 && o.hump <= 1.0) ||
-      !(o.dip > 0.0 && o.dip <= 1.0) ||
-      !(o.albedo_offset >= 0.0 && std::isfinite(o.albedo_offset))) {
-    std::ostringstream msg;
-    msg << "quality options must satisfy albedo_step finite, 0 <= hump <= 1, 0 < dip <= 1, "
-           "albedo_offset finite and >= 0; got "
-        << o.albedo_step << ", " << o.hump << ", " << o.dip << ", " << o.albedo_offset;
-    throw std::invalid_argument(msg.str());
-  }
-}
-
-void ValidateRefineOptions(const StripeRefineOptions& o) {
-  if (!(o.speckle >= 0.0 && std::isfinite(o.speckle)) ||
-      !(o.noise_floor >= 0.0 && std::isfinite(o.noise_floor)) || o.max_iterations < 1 ||
-      !(o.tolerance > 0.0)) {
-    std::ostringstream msg;
-    msg << "refine options must satisfy speckle >= 0, noise_floor >= 0, max_iterations >= 1, "
-           "tolerance > 0; got "
-        << o.speckle << ", " << o.noise_floor << ", " << o.max_iterations << ", " << o.tolerance;
-    throw std::invalid_argument(msg.str());
-  }
-}
-
-double NoiseFromHistogram(const std::vector<std::uint64_t>& hist, std::uint64_t n) {
-  // first guess: for X ~ N(0, s^2), P(max(0, X) <= s) = 0.8413
-  const double target = 0.8413 * static_cast<double>(n);
-  std::uint64_t cum = 0;
-  size_t s0 = 0;
-  for (; s0 < hist.size(); ++s0) {
-    cum += hist[s0];
-    if (static_cast<double>(cum) >= target) break;
-  }
-  const size_t cut = std::min(hist.size() - 1, std::max<size_t>(2, 4 * s0));
-  double sum2 = 0.0;
-  std::uint64_t count = 0;
-  for (size_t x = 0; x <= cut; ++x) {
-    sum2 += static_cast<double>(hist[x]) * static_cast<double>(x) * static_cast<double>(x);
-    count += hist[x];
-  }
-  const double var = count > 0 ? 2.0 * sum2 / static_cast<double>(count) : 0.0;
-  return std::sqrt(var + 1.0 / 6.0);
-}
-
-// One output line: acc = sum_k w[k] line[s + k], the inner loop over contiguous floats.
-void SumShifted(const float* __restrict line, const float* __restrict w, int taps, int n,
-                float* __restrict acc) {
-  for (int s = 0; s < n; ++s) acc[s] = w[0] * line[s];
-  for (int k = 1; k < taps; ++k) {
-    const float wk = w[k];
-    const float* __restrict b = line + k;
-    for (int s = 0; s < n; ++s) acc[s] += wk * b[s];
-  }
-}
-
-}  // namespace scan
 
 }  // namespace hmlvs

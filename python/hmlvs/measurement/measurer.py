@@ -134,16 +134,20 @@ class Measurer:
         if stripe.direction != "columns":
             raise ValueError("Measurer measures a roughly horizontal stripe (scan lines are "
                              "image columns)")
-        cols = np.asarray(stripe.position, int)
+        cols = np.asarray(stripe.position, np.intp)
         stripe_status[cols] = stripe.status
-        found = cols[stripe.found]
-        px = stripe.pixels
-        if len(px):
+        is_found = stripe.status == StripeStatus.FOUND
+        found = cols[is_found]
+        if found.size:
+            px = np.empty((found.size, 2))  # stripe.pixels: (u, v) of the found centres
+            px[:, 0] = found
+            px[:, 1] = stripe.centre[is_found]
             cam, ok = self._model.points_in_camera(px, on_invalid="mask")
             base_from_camera = pose @ self._hand_from_camera
             pixels[found] = px
-            camera[found[ok]] = cam[ok]
-            points[found[ok]] = cam[ok] @ base_from_camera[:3, :3].T + base_from_camera[:3, 3]
+            good, cam_ok = found[ok], cam[ok]
+            camera[good] = cam_ok
+            points[good] = cam_ok @ base_from_camera[:3, :3].T + base_from_camera[:3, 3]
             status[found] = np.where(ok, PointStatus.MEASURED, PointStatus.NO_POINT)
         return Profile(pixels, points, camera, status, stripe_status)
 
