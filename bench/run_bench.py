@@ -444,7 +444,8 @@ def _kept_sections(path: Path, written: list[str]) -> list[str]:
     sensor's, written by examples/blaser/run.py where that data is at hand), as they were."""
     if not path.exists():
         return []
-    ours = {ln for ln in written if ln.startswith("## ")}
+    # the sections written: a benchmark script's section is one multi-line entry
+    ours = {ln for block in written for ln in block.splitlines() if ln.startswith("## ")}
     kept: list[str] = []
     keep = False
     for ln in path.read_text().splitlines():

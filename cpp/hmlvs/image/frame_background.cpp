@@ -77,24 +77,26 @@ inline void LinePass(Src src, int rows, int cols, int h, Op op, T* buffer, T* ds
 // starts at base + r * rs.
 template <typename T>
 struct Opening {
-  static void Run(const T* base, std::ptrdiff_t rs, int rows, int cols, int h, T* buffer, T* eroded,
-                  T* out) {
+  // The body, inlined into each of the entry points below (compiled for their targets).
+  __attribute__((always_inline)) static inline void Body(const T* base, std::ptrdiff_t rs, int rows,
+                                                         int cols, int h, T* buffer, T* eroded,
+                                                         T* out) {
     auto lower = [](T a, T b) { return std::min(a, b); };
     auto upper = [](T a, T b) { return std::max(a, b); };
     LinePass<T>([&](int r) { return base + r * rs; }, rows, cols, h, lower, buffer, eroded);
     LinePass<T>([&](int r) { return eroded + static_cast<size_t>(r) * cols; }, rows, cols, h, upper,
                 buffer, out);
   }
+  static void Run(const T* base, std::ptrdiff_t rs, int rows, int cols, int h, T* buffer, T* eroded,
+                  T* out) {
+    Body(base, rs, rows, cols, h, buffer, eroded, out);
+  }
 #if defined(HMLVS_AVX2)
   // the same integer operations 32 bytes at a time, on CPUs with AVX2
   __attribute__((target("avx2"))) static void RunAvx2(const T* base, std::ptrdiff_t rs, int rows,
                                                       int cols, int h, T* buffer, T* eroded,
                                                       T* out) {
-    auto lower = [](T a, T b) { return std::min(a, b); };
-    auto upper = [](T a, T b) { return std::max(a, b); };
-    LinePass<T>([&](int r) { return base + r * rs; }, rows, cols, h, lower, buffer, eroded);
-    LinePass<T>([&](int r) { return eroded + static_cast<size_t>(r) * cols; }, rows, cols, h, upper,
-                buffer, out);
+    Body(base, rs, rows, cols, h, buffer, eroded, out);
   }
 #endif
 };

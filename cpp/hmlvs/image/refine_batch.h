@@ -122,13 +122,8 @@ __attribute__((always_inline)) inline void RefineSums(Lane* lanes, int n) {
       y[k] = j < len[k] ? lanes[k].view.at(lanes[k].s, first[k] + j) : 0.0;
     }
     const RefineVector x = (base + static_cast<double>(j)) - c;
-    const RefineVector pp = g;                                      // P(x)
-    const RefineVector dp = -x * inv_s2 * pp;                       // P'(x)
-    const RefineVector ddp = (x * x * inv_s2 - 1.0) * inv_s2 * pp;  // P''(x)
-    const RefineVector den = a2 + k2 * pp * pp;
-    const RefineVector inv = 1.0 / den;
-    const RefineVector w = dp * inv;
-    const RefineVector dw = (ddp - dp * 2.0 * k2 * pp * dp * inv) * inv;
+    RefineVector w, dw, den;
+    ProfileWeight(x, g, inv_s2, a2, k2, &w, &dw, &den);
     f = in ? f + w * y : f;
     df = in ? df - dw * y : df;  // d/dc of w(p - c) y
     var = in ? var + w * w * den : var;

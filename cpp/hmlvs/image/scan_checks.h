@@ -184,6 +184,21 @@ inline void RefineFinish(const RefineState& st, int s, StripeResult* res) {
   res->sigma[s] = std::sqrt(st.var_sum) / std::abs(st.df_sum);
 }
 
+// The weight w of a profile sample at offset x from the centre (P(x) = pp) in the centre's
+// fit, dw, its derivative in the centre, and den, the sample's variance factor: for one scan line
+// (double) or several at once (RefineVector, one lane per line), the same operations in the same
+// order, so the same values.
+template <typename V, typename C>
+inline void ProfileWeight(const V& x, const V& pp, const C& inv_s2, const C& a2, const C& k2, V* w,
+                          V* dw, V* den) {
+  const V dp = -x * inv_s2 * pp;                       // P'(x)
+  const V ddp = (x * x * inv_s2 - 1.0) * inv_s2 * pp;  // P''(x)
+  *den = a2 + k2 * pp * pp;
+  const V inv = 1.0 / *den;
+  *w = dp * inv;
+  *dw = (ddp - dp * 2.0 * k2 * pp * dp * inv) * inv;
+}
+
 // RefineStripeCentres on scan line s (kFound, additive noise `noise`): updates the centre,
 // sigma and status of `res` at s. `v` holds the image as floats.
 template <class V>
@@ -199,13 +214,8 @@ void RefineLine(const V& v, int s, double noise, const StripeRefineOptions& o, S
     const double cc = st.c;
     for (int p = m - st.hw; p <= m + st.hw; ++p, g *= ratio, ratio *= shrink) {
       const double x = p - cc;
-      const double pp = g;                                      // P(x)
-      const double dp = -x * inv_s2 * pp;                       // P'(x)
-      const double ddp = (x * x * inv_s2 - 1.0) * inv_s2 * pp;  // P''(x)
-      const double den = a2 + k2 * pp * pp;
-      const double inv = 1.0 / den;
-      const double w = dp * inv;
-      const double dw = (ddp - dp * 2.0 * k2 * pp * dp * inv) * inv;
+      double w, dw, den;
+      ProfileWeight(x, g, inv_s2, a2, k2, &w, &dw, &den);
       const double y = v.at(s, p);
       f_sum += w * y;
       df_sum -= dw * y;  // d/dc of w(p - c) y
