@@ -105,6 +105,31 @@ void Check(const double* rays, int sample_rows, int sample_cols, const BoardShad
   if (!(o.stripe_sigma > 0)) fail("stripe_sigma must be > 0");
 }
 
+// A block of pixel rows from r0 (pixel_rows of them, w wide) from its samples (s x s a
+// pixel): the mean ambient and laser light, and the laser-plane distance at the centre sample.
+void AverageSamples(const std::vector<double>& ambient, const std::vector<double>& laser,
+                    const std::vector<double>& d, int r0, int pixel_rows, int w, int s,
+                    int sample_cols, BoardExposure* out) {
+  const double samples = static_cast<double>(s) * s;
+  for (int pr = 0; pr < pixel_rows; ++pr) {
+    for (int pc = 0; pc < w; ++pc) {
+      double sa = 0.0;
+      double sl = 0.0;
+      for (int i = 0; i < s; ++i) {
+        const std::size_t row = static_cast<std::size_t>(pr * s + i) * sample_cols;
+        for (int j = 0; j < s; ++j) {
+          sa += ambient[row + pc * s + j];
+          sl += laser[row + pc * s + j];
+        }
+      }
+      out->ambient(r0 + pr, pc) = sa / samples;
+      out->laser(r0 + pr, pc) = sl / samples;
+      out->distance(r0 + pr, pc) =
+          d[static_cast<std::size_t>(pr * s + s / 2) * sample_cols + pc * s + s / 2];
+    }
+  }
+}
+
 }  // namespace
 
 BoardExposure ShadeBoard(const double* rays, int sample_rows, int sample_cols,
@@ -174,24 +199,7 @@ BoardExposure ShadeBoard(const double* rays, int sample_rows, int sample_cols,
         ambient[i] = o.ambient * albedo;
       }
     }
-    const double samples = static_cast<double>(s) * s;
-    for (int pr = 0; pr < r1 - r0; ++pr) {
-      for (int pc = 0; pc < w; ++pc) {
-        double sa = 0.0;
-        double sl = 0.0;
-        for (int i = 0; i < s; ++i) {
-          const std::size_t row = static_cast<std::size_t>(pr * s + i) * sample_cols;
-          for (int j = 0; j < s; ++j) {
-            sa += ambient[row + pc * s + j];
-            sl += laser[row + pc * s + j];
-          }
-        }
-        out.ambient(r0 + pr, pc) = sa / samples;
-        out.laser(r0 + pr, pc) = sl / samples;
-        out.distance(r0 + pr, pc) =
-            d[static_cast<std::size_t>(pr * s + s / 2) * sample_cols + pc * s + s / 2];
-      }
-    }
+    AverageSamples(ambient, laser, d, r0, r1 - r0, w, s, sample_cols, &out);
   }
   return out;
 }
