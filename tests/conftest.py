@@ -20,7 +20,7 @@ def random_params(rng: np.random.Generator) -> np.ndarray:
     return q
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def cli_files(tmp_path_factory):
     """A folder with a simulated data set, its calibration and a rendered 3-view image
     session, for the command-line fault tests: (folder, data set, calibration, session)."""
