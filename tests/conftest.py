@@ -48,7 +48,7 @@ def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
     return e.value.code, out.out, out.err
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def clean():
     """8 poses of the paper's set-up rendered without sensor noise (the image tests' clean
     session)."""

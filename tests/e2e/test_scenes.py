@@ -17,7 +17,9 @@ from hmlvs.sim.sessions import ik_look_at
 import numpy as np
 import pytest
 
-pytestmark = [pytest.mark.scene, pytest.mark.slow]  # simulated sessions or rendered images
+# simulated sessions or rendered images; on one BLAS kernel: the scenarios' tolerances are
+# millimetres of measurement, far above the kernels' last bits (suite time, issue 37)
+pytestmark = [pytest.mark.scene, pytest.mark.slow, pytest.mark.one_kernel]
 
 
 def rms(x):
