@@ -209,15 +209,13 @@ class CalibrationResult:
     def to_dict(self) -> dict[str, Any]:
         """The result as plain JSON-ready values (the command line's --json): the
         parameters, what was held and what the data determine, the fit, the termination."""
-        from ..geometry.transforms import rotation_to_vector
-        from ..models.paper import hand_from_camera
+        from ..models.paper import hand_eye_rotation_vector
 
         det, undet = self.determined_split()
         return {"model": "paper", "method": self.method,
                 "parameters": self.params.to_dict(), "fixed": list(self.fixed),
                 "determined": det, "not_determined": undet,
-                "rotation_vector_rad": [float(x) for x in rotation_to_vector(
-                    hand_from_camera(self.params)[:3, :3])],
+                "rotation_vector_rad": hand_eye_rotation_vector(self.params),
                 "fit_rms_mm": self.fit_rms, "test_rms_mm": self.test_rms,
                 "termination": str(self.termination), "seconds": self.seconds}
 

@@ -389,7 +389,6 @@ def resolve_fixed(fixed: list[str], free: list[str]) -> tuple[tuple[str, ...], l
 
 def rotation_vector(params) -> "list[float]":
     """hand_from_camera's rotation as a rotation vector (axis times angle, rad)."""
-    from ..geometry.transforms import rotation_to_vector
-    from ..models.paper import hand_from_camera
+    from ..models.paper import hand_eye_rotation_vector
 
-    return [float(x) for x in rotation_to_vector(hand_from_camera(params)[:3, :3])]
+    return hand_eye_rotation_vector(params)

@@ -127,6 +127,13 @@ def hand_from_camera(params: Any) -> np.ndarray:
     return np.asarray(_core._hand_from_camera(as_params(params)))
 
 
+def hand_eye_rotation_vector(params: Any) -> list[float]:
+    """hand_from_camera's rotation as a rotation vector (axis times angle, rad)."""
+    from ..geometry.transforms import rotation_to_vector
+
+    return [float(x) for x in rotation_to_vector(hand_from_camera(params)[:3, :3])]
+
+
 def validate_poses(poses: Any) -> None:
     """Raise ``ValueError`` naming the first pose that is not a rigid transform."""
     _core._validate_poses(as_poses(poses))
