@@ -103,11 +103,18 @@ deps-check: test-install
 # declared lower bounds of the dependencies (make test-lowest).
 # pytest runs one worker per core (pytest-xdist), each test file on one worker so that a file's
 # fixtures are built once.
+# The second pass reads the sessions of the tests' independent renderer (an oracle, not
+# hmlvs) that the first one drew (tests/oracles/independent_render.py); the cache lives for
+# one make test.
 PYTEST := $(PY) -m pytest -q -n auto --dist loadfile
+RENDER_CACHE := build/test-render-cache
 test: test-install style deps-check
 	$(VENV)/bin/ctest --test-dir $(BUILD_DIR) --output-on-failure
-	$(PYTEST)
-	OPENBLAS_CORETYPE=Prescott $(PYTEST) -m "scene and not one_kernel"
+	rm -rf $(RENDER_CACHE) && mkdir -p $(RENDER_CACHE)
+	HMLVS_TEST_RENDER_CACHE=$(abspath $(RENDER_CACHE)) $(PYTEST)
+	HMLVS_TEST_RENDER_CACHE=$(abspath $(RENDER_CACHE)) OPENBLAS_CORETYPE=Prescott \
+	  $(PYTEST) -m "scene and not one_kernel"
+	rm -rf $(RENDER_CACHE)
 	$(MAKE) --no-print-directory test-lowest
 
 # A quick loop while developing: the Python suite without the tests marked slow (make test
