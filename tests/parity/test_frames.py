@@ -211,11 +211,19 @@ def test_threads_give_the_serial_values(frames):
 def _avx2_case() -> np.ndarray:
     on, off = _pair(np.random.default_rng(2), 200, 640)
     out = [stripe_from_pair(on, o, blur_var=0.3) for o in (off, None)]
-    return np.stack([np.r_[s.centre, s.sigma, s.status] for s in out])
+    parts = [np.r_[s.centre, s.sigma, s.status] for s in out]
+    # the opening (EstimateBackground) of a noisy frame whose rows are no whole number of
+    # vectors, 8 and 16 bits, with a short and a long line
+    noisy = np.random.default_rng(4).integers(0, 256, (150, 637), dtype=np.uint8)
+    for image in (noisy, noisy.astype(np.uint16) * 257):
+        for width in (2.0, 16.0):
+            parts.append(estimate_background(image, width).ravel().astype(float))
+    return np.concatenate(parts)
 
 
 def test_the_same_values_without_avx2(tmp_path):
-    """The AVX2 loops (taken on CPUs that have them) give the SSE2 loops' values to the bit."""
+    """The AVX2 loops (taken on CPUs that have them) give the SSE2 loops' values to the bit:
+    the stripe of a pair and of a laser-on frame alone, and the opening alone."""
     path = tmp_path / "sse2.npy"
     code = ("import sys, numpy as np; sys.path[:0] = sys.argv[1].split(','); "
             "from test_frames import _avx2_case; np.save(sys.argv[2], _avx2_case())")

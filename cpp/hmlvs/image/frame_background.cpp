@@ -21,16 +21,19 @@ namespace {
 // extreme from the block's start (g) and to its end (e); the extreme over image rows
 // r - h .. r + h (indices r .. r + 2h) is that of e at r and g at r + 2h. The blocks are
 // computed in turn and used at once: g of two blocks and e of one (`buffer`, 3 k rows) stay
-// in the cache.
+// in the cache. Inlined with its steps into the callers (Opening::Run and RunAvx2): each
+// compiled for its caller's target.
 template <typename T, class Op, class Src>
-inline void LinePass(Src src, int rows, int cols, int h, Op op, T* buffer, T* dst) {
+__attribute__((always_inline)) inline void LinePass(Src src, int rows, int cols, int h, Op op,
+                                                    T* buffer, T* dst) {
   const int k = 2 * h + 1, n = rows + 2 * h;
   const size_t block = static_cast<size_t>(k) * cols;
   T* gs[2] = {buffer, buffer + block};
   T* e = buffer + 2 * block;
   auto at = [cols](T* v, int i) { return v + static_cast<size_t>(i) * cols; };
   auto ext = [&](int i) { return src(std::clamp(i - h, 0, rows - 1)); };
-  auto forward = [&](int b0, int b1, T* g) {  // g of indices b0 .. b1 - 1
+  // g of indices b0 .. b1 - 1
+  auto forward = [&](int b0, int b1, T* g) __attribute__((always_inline)) {
     std::copy(ext(b0), ext(b0) + cols, g);
     for (int i = b0 + 1; i < b1; ++i) {
       const T* x = ext(i);
@@ -43,7 +46,8 @@ inline void LinePass(Src src, int rows, int cols, int h, Op op, T* buffer, T* ds
       for (int c = 0; c < cols; ++c) cg[c] = op(pg[c], x[c]);
     }
   };
-  auto backward = [&](int b0, int b1) {  // e of indices b0 .. b1 - 1
+  // e of indices b0 .. b1 - 1
+  auto backward = [&](int b0, int b1) __attribute__((always_inline)) {
     std::copy(ext(b1 - 1), ext(b1 - 1) + cols, at(e, b1 - 1 - b0));
     for (int i = b1 - 2; i >= b0; --i) {
       const T* x = ext(i);
@@ -53,7 +57,7 @@ inline void LinePass(Src src, int rows, int cols, int h, Op op, T* buffer, T* ds
     }
   };
   // the output rows r of block j (r < rows): e of block j at r, g of block j or j + 1 at r + 2h
-  auto emit = [&](int j) {
+  auto emit = [&](int j) __attribute__((always_inline)) {
     const int b0 = j * k;
     for (int r = b0; r < std::min(rows, b0 + k); ++r) {
       const int i = r + 2 * h;
