@@ -111,39 +111,46 @@ void SumShiftedTail(const float* line, const float* w, int taps, int s0, int n, 
   }
 }
 
+// SumShifted four vectors of kLanes floats at a time, then one, up to the last whole vector;
+// returns the first output left for SumShiftedTail. V is a GCC vector type read and written
+// unaligned (may_alias, aligned(4): declared here, since a template argument would lose its
+// attributes); the body is inlined into each entry point below and compiled for its target:
+// 4 lanes in SSE2 registers, 8 in AVX2 ones. Every output is the same products summed in the
+// same order as in SumShiftedTail.
+template <int kLanes>
+__attribute__((always_inline)) inline int SumShiftedVectors(const float* line, const float* w,
+                                                            int taps, int n, float* acc) {
+  typedef float V __attribute__((vector_size(4 * kLanes), aligned(4), may_alias));
+  using In = const V*;  // unaligned loads of kLanes floats
+  int s = 0;
+  for (; s + 4 * kLanes <= n; s += 4 * kLanes) {
+    const float* l = line + s;
+    V a0 = w[0] * *In(l), a1 = w[0] * *In(l + kLanes);
+    V a2 = w[0] * *In(l + 2 * kLanes), a3 = w[0] * *In(l + 3 * kLanes);
+    for (int k = 1; k < taps; ++k) {
+      const float* b = l + k;
+      a0 += w[k] * *In(b);
+      a1 += w[k] * *In(b + kLanes);
+      a2 += w[k] * *In(b + 2 * kLanes);
+      a3 += w[k] * *In(b + 3 * kLanes);
+    }
+    *reinterpret_cast<V*>(acc + s) = a0;
+    *reinterpret_cast<V*>(acc + s + kLanes) = a1;
+    *reinterpret_cast<V*>(acc + s + 2 * kLanes) = a2;
+    *reinterpret_cast<V*>(acc + s + 3 * kLanes) = a3;
+  }
+  for (; s + kLanes <= n; s += kLanes) {
+    V a = w[0] * *In(line + s);
+    for (int k = 1; k < taps; ++k) a += w[k] * *In(line + s + k);
+    *reinterpret_cast<V*>(acc + s) = a;
+  }
+  return s;
+}
+
 #if defined(HMLVS_AVX2)
-// SumShifted 32 outputs at a time in AVX2 registers
 __attribute__((target("avx2"))) void SumShiftedAvx2(const float* line, const float* w, int taps,
                                                     int n, float* acc) {
-  int s = 0;
-  for (; s + 32 <= n; s += 32) {
-    const float* l = line + s;
-    __m256 w0 = _mm256_set1_ps(w[0]);
-    __m256 a0 = _mm256_mul_ps(w0, _mm256_loadu_ps(l)),
-           a1 = _mm256_mul_ps(w0, _mm256_loadu_ps(l + 8));
-    __m256 a2 = _mm256_mul_ps(w0, _mm256_loadu_ps(l + 16));
-    __m256 a3 = _mm256_mul_ps(w0, _mm256_loadu_ps(l + 24));
-    for (int k = 1; k < taps; ++k) {
-      const __m256 wk = _mm256_set1_ps(w[k]);
-      const float* b = l + k;
-      a0 = _mm256_add_ps(a0, _mm256_mul_ps(wk, _mm256_loadu_ps(b)));
-      a1 = _mm256_add_ps(a1, _mm256_mul_ps(wk, _mm256_loadu_ps(b + 8)));
-      a2 = _mm256_add_ps(a2, _mm256_mul_ps(wk, _mm256_loadu_ps(b + 16)));
-      a3 = _mm256_add_ps(a3, _mm256_mul_ps(wk, _mm256_loadu_ps(b + 24)));
-    }
-    _mm256_storeu_ps(acc + s, a0);
-    _mm256_storeu_ps(acc + s + 8, a1);
-    _mm256_storeu_ps(acc + s + 16, a2);
-    _mm256_storeu_ps(acc + s + 24, a3);
-  }
-  for (; s + 8 <= n; s += 8) {
-    __m256 a = _mm256_mul_ps(_mm256_set1_ps(w[0]), _mm256_loadu_ps(line + s));
-    for (int k = 1; k < taps; ++k) {
-      a = _mm256_add_ps(a, _mm256_mul_ps(_mm256_set1_ps(w[k]), _mm256_loadu_ps(line + s + k)));
-    }
-    _mm256_storeu_ps(acc + s, a);
-  }
-  SumShiftedTail(line, w, taps, s, n, acc);
+  SumShiftedTail(line, w, taps, SumShiftedVectors<8>(line, w, taps, n, acc), n, acc);
 }
 #endif
 
@@ -159,28 +166,7 @@ void SumShifted(const float* __restrict line, const float* __restrict w, int tap
     return;
   }
 #endif
-  int s = 0;
-#if defined(__SSE2__)
-  for (; s + 16 <= n; s += 16) {
-    const float* l = line + s;
-    const __m128 w0 = _mm_set1_ps(w[0]);
-    __m128 a0 = _mm_mul_ps(w0, _mm_loadu_ps(l)), a1 = _mm_mul_ps(w0, _mm_loadu_ps(l + 4));
-    __m128 a2 = _mm_mul_ps(w0, _mm_loadu_ps(l + 8)), a3 = _mm_mul_ps(w0, _mm_loadu_ps(l + 12));
-    for (int k = 1; k < taps; ++k) {
-      const __m128 wk = _mm_set1_ps(w[k]);
-      const float* b = l + k;
-      a0 = _mm_add_ps(a0, _mm_mul_ps(wk, _mm_loadu_ps(b)));
-      a1 = _mm_add_ps(a1, _mm_mul_ps(wk, _mm_loadu_ps(b + 4)));
-      a2 = _mm_add_ps(a2, _mm_mul_ps(wk, _mm_loadu_ps(b + 8)));
-      a3 = _mm_add_ps(a3, _mm_mul_ps(wk, _mm_loadu_ps(b + 12)));
-    }
-    _mm_storeu_ps(acc + s, a0);
-    _mm_storeu_ps(acc + s + 4, a1);
-    _mm_storeu_ps(acc + s + 8, a2);
-    _mm_storeu_ps(acc + s + 12, a3);
-  }
-#endif
-  SumShiftedTail(line, w, taps, s, n, acc);
+  SumShiftedTail(line, w, taps, SumShiftedVectors<4>(line, w, taps, n, acc), n, acc);
 }
 
 }  // namespace scan

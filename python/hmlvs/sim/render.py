@@ -141,16 +141,22 @@ class RenderedSession:
 _RAY_CACHE: dict[tuple, np.ndarray] = {}
 
 
+def _sample_pixels(image_size: tuple[int, int], s: int) -> np.ndarray:
+    """The supersample positions (h*s * w*s, 2), s x s in each pixel, row by row."""
+    w, h = image_size
+    off = (np.arange(s) + 0.5) / s - 0.5
+    us = (np.arange(w)[:, None] + off[None, :]).ravel()
+    vs = (np.arange(h)[:, None] + off[None, :]).ravel()
+    uu, vv = np.meshgrid(us, vs)
+    return np.stack([uu.ravel(), vv.ravel()], axis=1)
+
+
 def _sample_rays(q: np.ndarray, image_size: tuple[int, int], s: int) -> np.ndarray:
     """Camera rays (h*s, w*s, 3) of the supersample positions, cached for the last call."""
     key = (tuple(q.tolist()), tuple(image_size), s)
     if key not in _RAY_CACHE:
         w, h = image_size
-        off = (np.arange(s) + 0.5) / s - 0.5
-        us = (np.arange(w)[:, None] + off[None, :]).ravel()
-        vs = (np.arange(h)[:, None] + off[None, :]).ravel()
-        uu, vv = np.meshgrid(us, vs)
-        rays = rays_in_camera(q, np.stack([uu.ravel(), vv.ravel()], axis=1))
+        rays = rays_in_camera(q, _sample_pixels(image_size, s))
         _RAY_CACHE.clear()
         _RAY_CACHE[key] = rays.reshape(h * s, w * s, 3)
     return _RAY_CACHE[key]
@@ -167,11 +173,7 @@ def _sample_ray_jacobian(q: np.ndarray, image_size: tuple[int, int], s: int
     key = (tuple(q.tolist()), tuple(image_size), s)
     if key not in _RAY_JACOBIAN_CACHE:
         w, h = image_size
-        off = (np.arange(s) + 0.5) / s - 0.5
-        us = (np.arange(w)[:, None] + off[None, :]).ravel()
-        vs = (np.arange(h)[:, None] + off[None, :]).ravel()
-        uu, vv = np.meshgrid(us, vs)
-        px = np.stack([uu.ravel(), vv.ravel()], axis=1)
+        px = _sample_pixels(image_size, s)
         eps = 1e-3
         out = []
         for step in ([eps, 0.0], [0.0, eps]):
