@@ -132,8 +132,10 @@ def test_one_report_for_either_calibration(both, cli_files, tmp_path):
     for cal in both:
         cal.save(tmp_path / f"{cal.model}.yaml")
     w = write_calibration_report(tmp_path / "paper.yaml", tmp_path / "p2.html", ds)
-    # the same parameters on the same points: the same residuals
+    # the same parameters on the same points: the same residuals; the file's verdict first
     assert w.result is not paper.solve and w.result.fit_rms == paper.fit_rms
+    page = w.path.read_text()
+    assert page.index("Verdict: this calibration") < page.index("Parameters (layout")
     with pytest.raises(ValueError, match="give data="):
         write_calibration_report(tmp_path / "opencv.yaml", tmp_path / "o2.html")
     with pytest.raises(ValueError, match="give data="):
