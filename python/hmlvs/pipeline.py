@@ -1,17 +1,21 @@
 """Images to calibrations, for either sensor model: the top of the library, over the image
-pipeline (:mod:`hmlvs.image`) and the identification (:mod:`hmlvs.calibration`)."""
+pipeline (:mod:`hmlvs.image`), the identification (:mod:`hmlvs.calibration`) and the verdict
+(:mod:`hmlvs.diagnostics.verdict`). Either model's calibration is a :class:`Calibration`:
+the calibration file's content, its verdict included, with the solver's outcome
+(``calibration.solve``)."""
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
 import os
-from typing import Any, Callable, Sequence, Union
+from typing import Any, Callable, Iterator, Sequence, Union
 
 from .calibration.joint import JointCalibration, calibrate_joint
 from .calibration.solvers import CalibrationResult
 from .calibration.solvers import calibrate as calibrate_paper
 from .data.calibration_file import Calibration
-from .data.dataset import Dataset
+from .data.dataset import Dataset, fit_and_test
 from .data.views import ViewData
 from .diagnostics.verdict import Verdict
 from .geometry.board import BoardSpec, Checkerboard
@@ -25,41 +29,117 @@ from .models.opencv import DISTORTION_NAMES, OpenCvSensor
 CalibrationData = Union[Dataset, str, os.PathLike, Sequence[ViewData]]
 
 
-def calibrate(data: CalibrationData, *, model: str = "paper", **options: Any
-              ) -> CalibrationResult | JointCalibration:
-    """Calibrate a sensor: ``model="paper"`` identifies the paper's 14 parameters from
-    calibration points (a :class:`hmlvs.Dataset` or a simulation; options and result:
-    :func:`hmlvs.calibration.solvers.calibrate`); ``model="opencv"`` calibrates the general
-    model from an image session or extracted views (:func:`calibrate_views`; returns a
-    :class:`~hmlvs.calibration.joint.JointCalibration`). Defaults are the command line's."""
+def calibrate(data: CalibrationData, *, model: str = "paper", robot: Robot | None = None,
+              judge: bool = True, require: float | None = None, **options: Any
+              ) -> Calibration:
+    """Calibrate a sensor; either model's calibration is a :class:`Calibration` (the
+    calibration file's content: ``save``, ``to_dict``; the solver's whole outcome as
+    ``calibration.solve``).
+
+    ``model="paper"`` identifies the paper's 14 parameters from calibration points (a
+    :class:`hmlvs.Dataset` or a simulation; ``options``:
+    :func:`hmlvs.calibration.solvers.calibrate`, whose
+    :class:`~hmlvs.calibration.result.CalibrationResult` is ``solve``); ``model="opencv"``
+    calibrates the general model from an image session or extracted views
+    (:func:`calibrate_views`; ``solve``: a
+    :class:`~hmlvs.calibration.joint.JointCalibration`). ``robot``: the arm, kept in the
+    calibration (and, for images, the one that took them). ``judge``: give the calibration
+    its verdict (:mod:`hmlvs.diagnostics.verdict`, as ``hmlvs calibrate`` does; it
+    calibrates two halves of the data again), with ``require`` mm as the most predicted
+    95th-percentile 3D uncertainty, if given. Defaults are the command line's: for the same
+    data and options, the same file content."""
     if model == "opencv":
-        return calibrate_views(data, **options)
+        return calibrate_views(data, robot=robot, judge=judge, require=require, **options)
     if model != "paper":
         raise ValueError(f"unknown model {model!r}; the models are opencv and paper")
-    return calibrate_paper(data, **options)
+    result = calibrate_paper(data, **options)
+    fit, _ = fit_and_test(data, options.get("test"))
+    return judged_paper(result, fit, robot=robot, judge=judge, require=require)
+
+
+def judged_paper(result: CalibrationResult, dataset: Dataset, *, robot: Robot | None = None,
+                 views: Sequence[ViewData] | None = None, judge: bool = True,
+                 require: float | None = None) -> Calibration:
+    """A paper-model solve (on ``dataset``) as a :class:`Calibration`, with its verdict
+    (:func:`~hmlvs.diagnostics.verdict.judge_paper`; ``views``: those of a session from
+    images) unless ``judge`` is False."""
+    from .diagnostics.verdict import judge_paper, require_check
+
+    cal = Calibration.from_result(result, dataset, robot=robot)
+    if judge:
+        with _quiet_refits():
+            verdict = judge_paper(result, dataset, views=views)
+        _set_verdict(cal, require_check(verdict, require))
+    return cal
+
+
+def _set_verdict(cal: Calibration, verdict: Verdict) -> None:
+    cal.verdict = verdict.to_dict()
+    cal.judged = verdict
+
+
+@contextmanager
+def _quiet_refits() -> Iterator[None]:
+    """The verdict's cross-validation calibrates two halves of the data again: what those
+    solves warn about is said of the halves, not of the calibration judged (whose own
+    warnings were given), so it is not repeated."""
+    import warnings
+
+    from .errors import HmlvsDataWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HmlvsDataWarning)
+        yield
 
 
 def calibrate_views(source: str | os.PathLike | Sequence[ViewData], *,
                     board: BoardSpec | Checkerboard | None = None,
                     image_size: tuple[int, int] | None = None,
                     robot: Robot | None = None, test: Sequence[ViewData] | None = None,
-                    **options: Any) -> JointCalibration:
+                    judge: bool = True, require: float | None = None,
+                    **options: Any) -> Calibration:
     """The general model's calibration from an image session (a folder or manifest, see
     docs/file-formats.md) or from views already extracted (a list of :class:`ViewData`, with
-    ``board`` and ``image_size``). ``options`` go to
-    :func:`hmlvs.calibration.joint.calibrate_joint`; the manifest's measured board pose
-    (``board.origin``), if any, is used unless ``base_from_board`` is given."""
+    ``board`` and ``image_size``), judged unless ``judge`` is False (see :func:`calibrate`).
+    ``options`` go to :func:`hmlvs.calibration.joint.calibrate_joint`; the manifest's
+    measured board pose (``board.origin``), if any, is used unless ``base_from_board`` is
+    given."""
+    reports: list[ImageReport] = []
     if isinstance(source, (list, tuple)):
         if board is None or image_size is None:
             raise ValueError("views given as a list need board= and image_size=")
-        return calibrate_joint(source, board, image_size, test=test, **options)
-    from .image.views import views_from_images
+        views, spec, size = list(source), BoardSpec.of(board), image_size
+    else:
+        from .image.views import views_from_images
 
-    views, spec, size, board_pose, _ = views_from_images(source, robot=robot, board=board)
-    if not views:
-        raise ValueError(f"{source}: no view has both the whole board and a stripe")
-    options.setdefault("base_from_board", board_pose)
-    return calibrate_joint(views, spec, size, test=test, **options)
+        views, spec, size, board_pose, reports = views_from_images(source, robot=robot,
+                                                                   board=board)
+        if not views:
+            raise ValueError(f"{source}: no view has both the whole board and a stripe")
+        options.setdefault("base_from_board", board_pose)
+    return _joint(views, spec, size, reports, robot=robot, test=test, judge=judge,
+                  require=require, options=options)
+
+
+def _joint(views: list[ViewData], board: BoardSpec, size: tuple[int, int],
+           reports: list[ImageReport], *, robot: Robot | None,
+           test: Sequence[ViewData] | None, judge: bool, require: float | None,
+           options: dict[str, Any]) -> Calibration:
+    """The joint calibration of ``views`` (a failure led by the likely mistake), judged
+    (its two halves calibrated again with the same ``options``) unless ``judge`` is False,
+    as a :class:`Calibration` (the camera blur of the session's ``reports``, if any)."""
+    from .diagnostics.mistakes import explaining
+    from .diagnostics.verdict import judge_joint, require_check
+
+    with explaining(views, board, size):  # a failure led by the likely mistake
+        result = calibrate_joint(views, board, size, test=test, **options)
+    cal = Calibration.from_joint(result, robot=robot,
+                                 blur_var=next((r.blur_var for r in reports if r.ok), None))
+    if judge:
+        with _quiet_refits():
+            verdict = judge_joint(result, views, board, options=options)
+        _set_verdict(cal, require_check(verdict, require))
+    return cal
 
 
 @dataclass
@@ -69,7 +149,8 @@ class SessionCalibration:
 
     result: JointCalibration
     verdict: Verdict
-    #: the calibration file's content, its verdict included (``calibration.save(path)``)
+    #: the calibration (the file's content, its verdict included: ``calibration.save(path)``;
+    #: ``calibration.solve`` is ``result``)
     calibration: Calibration
     #: one account per image pair, in the session's order
     reports: list[ImageReport]
@@ -91,13 +172,11 @@ def calibrate_session(source: str | os.PathLike, *, robot: Robot | None = None,
     mm as the most predicted 95th-percentile 3D uncertainty, if given) -> the calibration
     file's content. ``camera``: an opencv calibration whose camera and laser plane are held
     (e.g. a bench session's); only the hand-eye transform and the board pose are then
-    calibrated."""
+    calibrated. :func:`calibrate` with ``model="opencv"`` gives the same calibration
+    (without the hold-out)."""
     from .data.views import split_views
-    from .diagnostics.mistakes import explaining
-    from .diagnostics.verdict import judge_joint, require_check
     from .image.views import views_from_images
 
-    terms = tuple(distortion)
     views, board, size, board_pose, reports = views_from_images(source, robot=robot)
     if on_views is not None:
         on_views(reports)
@@ -105,14 +184,9 @@ def calibrate_session(source: str | os.PathLike, *, robot: Robot | None = None,
         raise ValueError("no view has both the whole board and a stripe:\n" + "\n".join(
             f"  {r.id}: {r.reason}" for r in reports))
     views, test_views = split_views(views, holdout, seed)
-    with explaining(views, board, size):  # a failure led by the likely mistake
-        result = calibrate_joint(views, board, size, distortion=terms,
-                                 base_from_board=board_pose, test=test_views or None,
-                                 camera=camera)
-    verdict = require_check(judge_joint(
-        result, views, board, options={"distortion": terms, "base_from_board": board_pose,
-                                       "camera": camera}), require)
-    cal = Calibration.from_joint(result, robot=robot,
-                                 blur_var=next((r.blur_var for r in reports if r.ok), None))
-    cal.verdict = verdict.to_dict()
-    return SessionCalibration(result, verdict, cal, reports, views, board, size)
+    cal = _joint(views, board, size, reports, robot=robot, test=test_views or None,
+                 judge=True, require=require,
+                 options={"distortion": tuple(distortion), "base_from_board": board_pose,
+                          "camera": camera})
+    assert cal.solve is not None and cal.judged is not None
+    return SessionCalibration(cal.solve, cal.judged, cal, reports, views, board, size)

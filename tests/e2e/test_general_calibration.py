@@ -45,7 +45,8 @@ def test_calibrate_from_images_alone_recovers_the_general_sensor(rendered, tmp_p
               str(tmp_path / "r.html"), "--json"])
     assert e.value.code == 0
     doc = json.loads(capsys.readouterr().out)
-    assert doc["model"] == "opencv" and doc["mode"] == "chain" and doc["determined"]
+    assert doc["model"] == "opencv" and doc["solve"]["mode"] == "chain"
+    assert doc["solve"]["rank"] == doc["solve"]["unknowns"] and doc["solve"]["not_determined"] == []
     cal = Calibration.load(out)
     s, t, sd = cal.sensor, session.sensor, cal.std
     # Every parameter within 4 of its reported standard deviations (3 sigma plus a margin

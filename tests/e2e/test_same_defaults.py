@@ -47,6 +47,9 @@ def test_paper_model_same_parameters_from_the_cli_and_the_library(cli_files, tmp
     assert sorted(from_cli.fixed) == sorted(DEFAULT_FIXED) == sorted(from_lib.fixed)
     # the file keeps every float exactly (repr), so the two agree to the last bit
     np.testing.assert_array_equal(from_cli.params.to_array(), from_lib.params.to_array())
+    # the library's calibration is the file's content: the same parameters, the same verdict
+    assert isinstance(from_lib, hmlvs.Calibration)
+    _same_file_content(from_cli, from_lib)
 
 
 @pytest.mark.filterwarnings("ignore")
@@ -56,7 +59,10 @@ def test_opencv_model_same_parameters_from_the_cli_and_the_library(cli_files, tm
                             "-q"], capsys)
     assert code in (0, 3), err  # 3 views: the verdict may call it untrustworthy
     from_cli = hmlvs.Calibration.load(tmp_path / "cal.yaml").sensor
-    from_lib = hmlvs.calibrate(session, model="opencv").sensor
+    lib = hmlvs.calibrate(session, model="opencv")
+    from_lib = lib.sensor
+    assert isinstance(lib, hmlvs.Calibration)
+    _same_file_content(hmlvs.Calibration.load(tmp_path / "cal.yaml"), lib)
     # the command's library call: the same calibration, judged as the file says
     run = hmlvs.pipeline.calibrate_session(session)
     assert run.verdict.to_dict() == hmlvs.Calibration.load(tmp_path / "cal.yaml").verdict
@@ -66,6 +72,16 @@ def test_opencv_model_same_parameters_from_the_cli_and_the_library(cli_files, tm
                                       err_msg=name)
         np.testing.assert_array_equal(getattr(from_cli, name),
                                       getattr(run.calibration.sensor, name), err_msg=name)
+
+
+def _same_file_content(from_cli: hmlvs.Calibration, from_lib: hmlvs.Calibration) -> None:
+    """The file the command line wrote and the library's calibration hold the same content
+    (parameters or sensor, standard deviations, verdict, ...), but the time each was made."""
+    cli, lib = from_cli.to_dict(), from_lib.to_dict()
+    assert cli.keys() == lib.keys()
+    for key in cli.keys() - {"created"}:
+        assert cli[key] == lib[key], key
+    assert from_lib.solve is not None and from_cli.solve is None  # the solve is not saved
 
 
 @pytest.mark.filterwarnings("ignore")

@@ -63,7 +63,7 @@ def test_every_view_is_used_and_the_sensor_recovered(rendered, tmp_path, capsys)
         main(["calibrate", str(r.manifest.parent), "--out", str(out), "--json"])
     assert e.value.code == 0
     doc = json.loads(capsys.readouterr().out)
-    assert doc["model"] == "opencv" and doc["mode"] == "chain"
+    assert doc["model"] == "opencv" and doc["solve"]["mode"] == "chain"
     cal = Calibration.load(out)
     # the views whose stripe misses the pattern give laser points on the board's plane
     result = calibrate_joint(views, BOARD, SIZE)

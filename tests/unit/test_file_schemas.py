@@ -49,8 +49,13 @@ def test_the_camera_blur_reads_back(tmp_path):
     path = Calibration(params=Parameters.nominal(), blur_var=0.37).save(tmp_path / "c.yaml")
     assert Calibration.load(path).blur_var == 0.37
     plain = Calibration(params=Parameters.nominal()).save(tmp_path / "p.yaml")
-    assert "stripe_blur_var_px2" not in plain.read_text()
+    # every key is written (docs/file-formats.md), null where it does not apply
+    assert "stripe_blur_var_px2: null" in plain.read_text()
     assert Calibration.load(plain).blur_var is None
+    older = Calibration(params=Parameters.nominal()).to_dict()
+    del older["stripe_blur_var_px2"]
+    (tmp_path / "older.json").write_text(json.dumps(older))
+    assert Calibration.load(tmp_path / "older.json").blur_var is None
 
 
 def test_a_valid_file_with_unknown_keys_still_loads(tmp_path, cal_doc):

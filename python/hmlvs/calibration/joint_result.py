@@ -90,6 +90,26 @@ class JointCalibration:
                 "flipped": self.flipped, "termination": self.termination,
                 "iterations": self.iterations, "seconds": self.seconds}
 
+    def solve_figures(self) -> dict[str, Any]:
+        """The solve's figures in the form both models share (``hmlvs calibrate --json``'s
+        ``solve``, docs/file-formats.md); ``determined``/``not_determined`` name the unknowns
+        only when the data determine them all (a rank-deficient solve does not name its flat
+        directions: both null then). Then this model's own: the mode, the corner residuals,
+        the views used, the outliers dropped, the views whose numbering was turned."""
+        from .result import Termination
+
+        all_named = self.determined
+        return {"termination": str(Termination.from_ceres(self.termination)),
+                "iterations": int(self.iterations), "seconds": float(self.seconds),
+                "unknowns": int(self.num_unknowns), "rank": int(self.rank),
+                "determined": list(self.names) if all_named else None,
+                "not_determined": [] if all_named else None,
+                "rotation_vector_rad": [float(x) for x in rotation_to_vector(
+                    self.sensor.hand_from_camera[:3, :3])],
+                "mode": self.mode, "corner_rms_px": float(self.corner_rms_px),
+                "views": len(self.per_view), "dropped": dict(self.dropped),
+                "flipped": list(self.flipped)}
+
     @property
     def determined(self) -> bool:
         return self.rank == self.num_unknowns

@@ -219,6 +219,18 @@ class CalibrationResult:
                 "fit_rms_mm": self.fit_rms, "test_rms_mm": self.test_rms,
                 "termination": str(self.termination), "seconds": self.seconds}
 
+    def solve_figures(self) -> dict[str, Any]:
+        """The solve's figures in the form both models share (``hmlvs calibrate --json``'s
+        ``solve``, docs/file-formats.md): why and when it stopped, what the data determine,
+        the hand-eye rotation."""
+        from ..models.paper import hand_eye_rotation_vector
+
+        det, undet = self.determined_split()
+        return {"termination": str(self.termination), "iterations": int(self.iterations),
+                "seconds": float(self.seconds), "unknowns": len(self.free), "rank": len(det),
+                "determined": det, "not_determined": undet,
+                "rotation_vector_rad": hand_eye_rotation_vector(self.params)}
+
     def summary(self, truth: Parameters | None = None) -> str:
         lines = [f"method {self.method}: {self.termination_message}",
                  f"{self.iterations} iterations in {self.seconds:.3f} s ({self.threads} "

@@ -110,16 +110,8 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
             distortion=[t.strip() for t in distortion.split(",") if t.strip()],
             on_views=None if (as_json or quiet) else _echo_views)
         result, verdict, reports = run.result, run.verdict, run.reports
-        report_path = None
-        with outputs(out) as made:
-            path = run.calibration.save(out)
-            made.append(path)
-            if report is not None:
-                from ..report.joint import write_joint_report
-
-                report_path = write_joint_report(result, report, image_reports=reports,
-                                                 verdict=verdict)
-    warns = finish(caught, as_json, _summary(path, report_path, verdict, result, reports),
+        path, report_path = _save(run.calibration, out, report, image_reports=reports)
+    warns = finish(caught, as_json, _summary(path, report_path, run.calibration, reports),
                    result.warnings, quiet=True)
     if warns is None:
         exit_untrusted(verdict)
@@ -138,13 +130,30 @@ def _echo_views(reports: list) -> None:
                    f"{r.id}: laser only (no board seen), {found}")
 
 
-def _summary(path: Path, report_path: Optional[Path], verdict: Any, result: Any,
+def _save(cal: Any, out: Path, report: Optional[Path], **report_options: Any
+          ) -> tuple[Path, Optional[Path]]:
+    """Write the calibration file and, if asked, its report (either model,
+    :func:`hmlvs.report.calibration.write_calibration_report`); neither is left without
+    the other."""
+    report_path = None
+    with outputs(out) as made:
+        path = cal.save(out)
+        made.append(path)
+        if report is not None:
+            from ..report.calibration import write_calibration_report
+
+            report_path = write_calibration_report(cal, report, **report_options).path
+    return path, report_path
+
+
+def _summary(path: Path, report_path: Optional[Path], cal: Any,
              reports: list) -> dict[str, Any]:
-    """hmlvs calibrate --json, either model: the files written, the verdict, the result and
-    the account of every image pair."""
+    """hmlvs calibrate --json, either model: the files written, the calibration file's
+    content (:meth:`hmlvs.Calibration.to_dict`, its verdict included), the solve's figures
+    (``solve``) and the account of every image pair (docs/file-formats.md)."""
     return {"calibration": str(path),
             "report": None if report_path is None else str(report_path),
-            "verdict": verdict.to_dict(), **result.to_dict(),
+            **cal.to_dict(), "solve": cal.solve_figures(),
             "images": [r.to_dict() for r in reports or ()]}
 
 
@@ -316,8 +325,7 @@ def _calibrate_paper(o: _PaperRun) -> None:
     """hmlvs calibrate --model paper: data set (or images) -> calibration -> verdict ->
     file (and report); exit 3 when the verdict is not trustworthy."""
     from ..calibration.solvers import calibrate as run_calibration
-    from ..data.calibration_file import Calibration
-    from ..diagnostics.verdict import judge_paper, require_check
+    from ..pipeline import judged_paper
 
     with command(o.as_json) as caught:
         fixed_names, why = resolve_fixed(o.fixed, o.free)
@@ -335,29 +343,21 @@ def _calibrate_paper(o: _PaperRun) -> None:
                                  iterations=o.iterations, loss=o.loss, loss_scale=o.loss_scale,
                                  seed=o.seed, threads=o.threads,
                                  progress=solve_progress(o.as_json or o.quiet))
-        verdict = require_check(judge_paper(result, ds, views=[
-            r.view for r in image_reports if r.view is not None]), o.require)
-        report_path = None
-        with outputs(o.out) as made:
-            cal = Calibration.from_result(result, ds, robot=arm)
-            cal.verdict = verdict.to_dict()
-            path = cal.save(o.out)
-            made.append(path)
-            if o.report is not None:
-                from ..report.html import write_report
-
-                report_path = write_report(result, ds, o.report, test=test_ds,
-                                           image_reports=image_reports, verdict=verdict)
-    _paper_output(o, result, caught, path, report_path, verdict, widened, why, image_reports)
+        cal = judged_paper(result, ds, robot=arm, require=o.require,
+                           views=[r.view for r in image_reports if r.view is not None])
+        path, report_path = _save(cal, o.out, o.report, data=ds, test=test_ds,
+                                  image_reports=image_reports)
+    _paper_output(o, cal, caught, path, report_path, widened, why, image_reports)
 
 
-def _paper_output(o: _PaperRun, result: Any, caught: list, path: Path,
-                  report_path: Optional[Path], verdict: Any, widened: list[str],
+def _paper_output(o: _PaperRun, cal: Any, caught: list, path: Path,
+                  report_path: Optional[Path], widened: list[str],
                   why: list[str], image_reports: list) -> None:
     """What hmlvs calibrate --model paper prints (text or --json)."""
+    result, verdict = cal.solve, cal.judged
     summary = result.summary()
-    warns = finish(caught, o.as_json, {**_summary(path, report_path, verdict, result,
-                                                  image_reports), "notes": widened},
+    warns = finish(caught, o.as_json, {**_summary(path, report_path, cal, image_reports),
+                                       "notes": widened},
                    result.warnings, summary, quiet=True)
     if warns is None:
         exit_untrusted(verdict)

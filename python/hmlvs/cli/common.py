@@ -213,28 +213,11 @@ def _main(
 
 
 def is_manifest(path: Path) -> bool:
-    """An image manifest: a folder, ``manifest.json``/``.yaml``, or a JSON/YAML file of any
-    name whose format is ``hmlvs-images`` (wherever the file puts its ``format`` key)."""
-    if path.is_dir() or path.name in ("manifest.json", "manifest.yaml", "manifest.yml"):
-        return True
-    if path.suffix.lower() not in (".json", ".yaml", ".yml") or not path.is_file():
-        return False
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(4096)
-            if b"hmlvs-images" in head:
-                return True
-            if b"hmlvs-dataset" in head or b"hmlvs-images" not in fh.read():
-                return False
-    except OSError:
-        return False
-    from .._io import read_document
+    """An image manifest (:func:`hmlvs.data.manifest.is_manifest`), its module loaded only
+    when asked."""
+    from ..data.manifest import is_manifest as is_images
 
-    try:
-        doc = read_document(path, "manifest")
-    except ValueError:
-        return False
-    return isinstance(doc, dict) and doc.get("format") == "hmlvs-images"
+    return is_images(path)
 
 
 def solve_progress(quiet: bool):

@@ -31,7 +31,10 @@ Format ``hmlvs-calibration`` version 1, as YAML (``.yaml``/``.yml``) or JSON (``
       cross_validation_mm: {rms: .., p95: ..}  # two halves' maps apart, or null
       likely_mistake: null                   # the usual mistake that explains the data
 
-A file without ``model`` is a paper-model file.
+A file without ``model`` is a paper-model file. Both models write every key (null where it
+does not apply: ``sensor`` of a paper-model file, ``image_size`` of an opencv one, ...) but
+``parameters``, which an opencv-model file leaves out; files without the optional keys (older
+ones) still load.
 
 See docs/file-formats.md for the full description.
 """
@@ -44,7 +47,7 @@ import hashlib
 import math
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -113,12 +116,28 @@ def dataset_hash(ds: Dataset) -> str:
     return h.hexdigest()
 
 
+class SolveOutcome(Protocol):
+    """What a solver returns, as a :class:`Calibration` holds it (``solve``): the paper
+    model's :class:`~hmlvs.calibration.result.CalibrationResult` or the general model's
+    :class:`~hmlvs.calibration.joint_result.JointCalibration`."""
+
+    warnings: list[str]
+
+    def solve_figures(self) -> dict[str, Any]: ...
+
+    def summary(self) -> str: ...
+
+
 @dataclass
 class Calibration:
-    """A calibrated sensor as stored on disk.
+    """A calibrated sensor: what :func:`hmlvs.calibrate` returns for either model, and what
+    a calibration file holds (:meth:`save`, :meth:`load`; :meth:`to_dict` is the file's
+    content).
 
     ``model`` is "paper" (the 14 ``params``) or "opencv" (``sensor``, an
-    :class:`~hmlvs.models.opencv.OpenCvSensor`; ``params`` then may be None).
+    :class:`~hmlvs.models.opencv.OpenCvSensor`; ``params`` then may be None). A calibration
+    just computed also holds the solver's whole outcome (``solve``) and the verdict's
+    details (``judged``); neither is saved.
     """
 
     params: Parameters | None = None
@@ -143,6 +162,14 @@ class Calibration:
     #: the verdict (:meth:`hmlvs.diagnostics.verdict.Verdict.to_dict`); None in files
     #: written before verdicts
     verdict: dict[str, Any] | None = None
+    #: the solver's outcome (:class:`~hmlvs.calibration.result.CalibrationResult` or
+    #: :class:`~hmlvs.calibration.joint_result.JointCalibration`: every figure of the solve,
+    #: the uncertainty, the warnings) when this calibration was just computed; None when
+    #: loaded from a file (it is not saved)
+    solve: SolveOutcome | None = field(default=None, repr=False, compare=False)
+    #: the :class:`~hmlvs.diagnostics.verdict.Verdict` behind ``verdict`` when it was just
+    #: judged (with its uncertainty map over the image, which the report draws); not saved
+    judged: Any = field(default=None, repr=False, compare=False)
 
     @property
     def trustworthy(self) -> bool | None:
@@ -176,7 +203,8 @@ class Calibration:
                        timespec="seconds"),
                    hmlvs_version=__version__, robot=robot,
                    blur_var=None if dataset is None else _blur_var_of(dataset.meta),
-                   image_size=None if dataset is None else _image_size_of(dataset.meta))
+                   image_size=None if dataset is None else _image_size_of(dataset.meta),
+                   solve=result)
 
     @classmethod
     def from_joint(cls, result: Any, robot: Robot | None = None,
@@ -193,9 +221,12 @@ class Calibration:
                    method=f"joint-lm ({result.mode})",
                    created=datetime.datetime.now(datetime.timezone.utc).isoformat(
                        timespec="seconds"),
-                   hmlvs_version=__version__, robot=robot, blur_var=blur_var)
+                   hmlvs_version=__version__, robot=robot, blur_var=blur_var, solve=result)
 
     def to_dict(self) -> dict[str, Any]:
+        """The calibration file's content, either model: every key of the format (null where
+        it does not apply), but ``parameters`` only for a calibration that has them (older
+        readers refuse a null there)."""
         d: dict[str, Any] = {
             "format": FORMAT,
             "version": FORMAT_VERSION,
@@ -205,6 +236,9 @@ class Calibration:
         if self.params is not None:
             d["parameters"] = {n: float(getattr(self.params, n)) for n in NAMES}
             d["std"] = {n: self.std.get(n) for n in NAMES}
+        else:
+            # the joint solve's standard deviations: px, mm, rad (rotation vectors)
+            d["std"] = {k: (None if v is None else float(v)) for k, v in self.std.items()}
         d.update({
             "fixed": list(self.fixed),
             "fit_rms_mm": self.fit_rms,
@@ -217,19 +251,36 @@ class Calibration:
             "hand_from_camera": (hand_from_camera(self.params) if self.sensor is None
                                  else self.sensor.hand_from_camera).tolist(),
             "robot": None if self.robot is None else self.robot.to_dict(),
+            "stripe_blur_var_px2": None if self.blur_var is None else float(self.blur_var),
+            "image_size": (None if self.image_size is None or self.sensor is not None
+                           else [int(self.image_size[0]), int(self.image_size[1])]),
+            "verdict": self.verdict,
+            "sensor": None if self.sensor is None else self.sensor.to_dict(),
         })
-        if self.blur_var is not None:
-            d["stripe_blur_var_px2"] = float(self.blur_var)
-        if self.image_size is not None and self.sensor is None:
-            d["image_size"] = [int(self.image_size[0]), int(self.image_size[1])]
-        if self.verdict is not None:
-            d["verdict"] = self.verdict
-        if self.sensor is not None:
-            d["sensor"] = self.sensor.to_dict()
-            if self.params is None:
-                # the joint solve's standard deviations: px, mm, rad (rotation vectors)
-                d["std"] = {k: (None if v is None else float(v)) for k, v in self.std.items()}
         return d
+
+    def solve_figures(self) -> dict[str, Any] | None:
+        """The solve's figures in the form both models share (termination, iterations,
+        seconds, what the data determine, the hand-eye rotation; ``hmlvs calibrate
+        --json``'s ``solve``, docs/file-formats.md); None for a calibration loaded from a
+        file."""
+        return None if self.solve is None else self.solve.solve_figures()
+
+    @property
+    def warnings(self) -> list[str]:
+        """The solve's warnings about the data or the solution (none for a loaded file)."""
+        return [] if self.solve is None else list(self.solve.warnings)
+
+    def summary(self) -> str:
+        """A few lines a user reads: the verdict's first line, then the solve's summary
+        (a loaded file: its parameter table)."""
+        lines = []
+        if self.verdict is not None:
+            lines.append("verdict: " + ("trustworthy" if self.trustworthy else
+                                        "NOT trustworthy: " + "; ".join(
+                                            self.verdict.get("reasons") or [])))
+        lines.append(self.table() if self.solve is None else self.solve.summary())
+        return "\n".join(lines)
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write atomically as YAML (.yaml/.yml) or JSON (.json)."""

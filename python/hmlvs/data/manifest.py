@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .._io import atomic_folder, atomic_write, parse_text
+from .._io import atomic_folder, atomic_write, parse_text, read_document
 from .dataset import check_format
 from .poses import PoseFormat, pose_from_entry, read_poses
 
@@ -159,6 +159,30 @@ def _entry(e: Any, i: int, path: Path, seen: dict[str, int], in_pose_file: bool,
     if has_images and "on" not in e:
         raise ValueError(f"{where} names a laser-off image but no laser-on image ('on')")
     return e
+
+
+def is_manifest(path: str | os.PathLike) -> bool:
+    """An image manifest: a folder, ``manifest.json``/``.yaml``, or a JSON/YAML file of any
+    name whose format is ``hmlvs-images`` (wherever the file puts its ``format`` key)."""
+    path = Path(path)
+    if path.is_dir() or path.name in ("manifest.json", "manifest.yaml", "manifest.yml"):
+        return True
+    if path.suffix.lower() not in (".json", ".yaml", ".yml") or not path.is_file():
+        return False
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+            if b"hmlvs-images" in head:
+                return True
+            if b"hmlvs-dataset" in head or b"hmlvs-images" not in fh.read():
+                return False
+    except OSError:
+        return False
+    try:
+        doc = read_document(path, "manifest")
+    except ValueError:
+        return False
+    return isinstance(doc, dict) and doc.get("format") == "hmlvs-images"
 
 
 def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Path]:

@@ -205,7 +205,10 @@ def of_paper(result: Any, dataset: Any) -> PointModel | None:
     def points(delta: np.ndarray, px: np.ndarray) -> np.ndarray:
         qq = q.copy()
         qq[idx] += delta[:len(plain)]
-        pts, ok = points_in_camera(qq, px, on_invalid="mask")
+        try:
+            pts, ok = points_in_camera(qq, px, on_invalid="mask")
+        except ValueError:  # a step out of the model's domain (f, Su or Sv <= 0): no points
+            return np.full((len(px), 3), np.nan)
         h = hand_from_camera(qq)
         rot = h[:3, :3] if not euler else rotation_from_vector(delta[len(plain):]) @ hfc[:3, :3]
         return np.where(ok[:, None], pts @ rot.T + h[:3, 3], np.nan)

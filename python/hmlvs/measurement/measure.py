@@ -199,8 +199,8 @@ def measure(calibration: Calibration | Parameters | SensorModel,
 
     Parameters
     ----------
-    calibration : a :class:`Calibration`, a ``CalibrationResult``, :class:`Parameters` or the
-        path of a calibration file
+    calibration : a :class:`Calibration` of either model (:func:`hmlvs.calibrate`'s, or a
+        file's), its path, or a solver's result, :class:`Parameters` or a sensor model
     stripes : one entry per pose: an (k, 2) array of stripe pixels (u, v), an object with
         ``pixels`` (and optionally ``intensity``) such as :class:`hmlvs.image.StripeResult`,
         or a tuple ``(laser_on, laser_off)`` of images whose stripe is extracted as the

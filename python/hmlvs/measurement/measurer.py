@@ -66,8 +66,9 @@ class Measurer:
 
     Parameters
     ----------
-    calibration : a :class:`hmlvs.Calibration` (either model) or the path of a calibration
-        file; a bench session's calibration (no hand-eye transform) is refused
+    calibration : a :class:`hmlvs.Calibration` of either model (:func:`hmlvs.calibrate`'s,
+        or a file's) or the path of a calibration file; a bench session's calibration (no
+        hand-eye transform) is refused
     stripe_options : options of :func:`hmlvs.image.session.stripe_from_pair`; without
         ``blur_var`` the camera blur the calibration's session fitted is used
     """
