@@ -7,7 +7,7 @@ import sys
 
 
 def run() -> None:
-    from ._io import Terminated, on_sigterm
+    from ._io import Terminated, check_terminated, on_sigterm
 
     # a file name that is not UTF-8 is printed as the bytes it is, not an encoding error
     for stream in (sys.stdout, sys.stderr):
@@ -21,6 +21,8 @@ def run() -> None:
         pass
     try:
         from .cli import main
+
+        check_terminated()  # a SIGTERM whose exception an import swallowed
     except KeyboardInterrupt as e:
         terminated = isinstance(e, Terminated)
         print("terminated" if terminated else "interrupted", file=sys.stderr)

@@ -28,6 +28,14 @@ def on_sigterm(signum: int, frame: object) -> None:
     raise Terminated("terminated")
 
 
+def check_terminated() -> None:
+    """Raise :class:`Terminated` if SIGTERM came: its exception may have been raised where
+    Python cannot pass it on (a finaliser, a callback from C code: "Exception ignored in"),
+    and so lost; every output is committed only after this check."""
+    if SIGTERM_RECEIVED[0]:
+        raise Terminated("terminated")
+
+
 # Every temporary name is ".hmlvs-tmp-<pid>-<random>.tmp": the marker and the writing
 # process's id make a name no user file has; only such names whose process is gone (and that
 # are older than an hour) are ever removed, so a user's file is never touched.
@@ -126,6 +134,7 @@ def atomic_write(path: str | os.PathLike, mode: str = "w", encoding: str | None 
             yield fh
             fh.flush()
             os.fsync(fh.fileno())
+        check_terminated()
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -290,6 +299,7 @@ def atomic_folder(path: str | os.PathLike, last: tuple[str, ...] = ("manifest.js
     tmp = Path(tempfile.mkdtemp(prefix=_tmp_prefix(), suffix=".tmp", dir=path.parent))
     try:
         yield tmp
+        check_terminated()
         if not path.exists():
             os.replace(tmp, path)
             return

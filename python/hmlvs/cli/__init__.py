@@ -68,8 +68,10 @@ def main(argv: Optional[list[str]] = None) -> None:
     try:
         _command().main(args=argv, prog_name="hmlvs")
     except SystemExit as e:
-        # SIGTERM while a command loads (before its guard): typer exits 130 without a word
-        if e.code == 130 and _io.SIGTERM_RECEIVED[0]:
+        # SIGTERM while a command loads (before its guard): typer exits 130 without a word;
+        # or its exception was lost where Python could not pass it on (the outputs were not
+        # committed: hmlvs._io.check_terminated)
+        if e.code in (0, 130) and _io.SIGTERM_RECEIVED[0]:
             print("terminated", file=sys.stderr)
             sys.exit(143)
         raise
