@@ -104,10 +104,10 @@ def test_unknown_option_lists_the_valid_ones(sim):
 def test_option_objects_and_keywords(sim):
     """calibrate(pso=PsoOptions(...)) runs those options; a keyword overrides a field."""
     kw = dict(method="pso", threads=1, analyze=False)
-    a = hmlvs.calibrate(sim, pso=PsoOptions(swarm_size=10, iterations=30), **kw).solve
-    b = hmlvs.calibrate(sim, swarm_size=10, iterations=30, **kw).solve
+    a = hmlvs.calibrate(sim, pso=PsoOptions(swarm_size=10, iterations=30), **kw, judge=False).solve
+    b = hmlvs.calibrate(sim, swarm_size=10, iterations=30, **kw, judge=False).solve
     c = hmlvs.calibrate(sim, pso=PsoOptions(swarm_size=10, iterations=999), iterations=30,
-                        **kw).solve
+                        **kw, judge=False).solve
     assert a.iterations == a.pso.iterations == 30 and a.history.size == 30
     np.testing.assert_array_equal(a.params.to_array(), b.params.to_array())
     np.testing.assert_array_equal(a.params.to_array(), c.params.to_array())
@@ -122,12 +122,13 @@ def _away(sim):
 
 def test_lm_iteration_limit_vs_convergence(sim):
     start = _away(sim)
-    tiny = hmlvs.calibrate(sim, method="lm", initial=start, max_iterations=1, analyze=False).solve
+    tiny = hmlvs.calibrate(sim, method="lm", initial=start, max_iterations=1, analyze=False,
+                           judge=False).solve
     assert tiny.termination is Termination.MAX_ITERATIONS
     assert tiny.lm.ceres_termination == "NO_CONVERGENCE" and tiny.iterations == 1
     assert tiny.termination_message.startswith("max_iterations (iteration limit reached): ")
     assert "after 1 LM iterations" in tiny.termination_message
-    full = hmlvs.calibrate(sim, method="lm", initial=start, analyze=False).solve
+    full = hmlvs.calibrate(sim, method="lm", initial=start, analyze=False, judge=False).solve
     assert full.termination is Termination.CONVERGED
     assert full.lm.ceres_termination == "CONVERGENCE"
     assert 1 < full.iterations < 100
@@ -141,7 +142,7 @@ def test_lm_iteration_limit_vs_convergence(sim):
 
 def test_pso_lm_stages_agree_with_the_result(sim):
     r = hmlvs.calibrate(sim, swarm_size=20, iterations=150, runs=2, threads=2, seed=3,
-                        analyze=False).solve
+                        analyze=False, judge=False).solve
     assert r.pso is not None and r.lm is not None and r.random is None
     assert r.pso.termination is Termination.MAX_ITERATIONS and r.pso.iterations == 150
     assert r.pso.best_fitness == pytest.approx(r.pso.run_fitness.min())
@@ -161,12 +162,13 @@ def test_pso_lm_stages_agree_with_the_result(sim):
 
 def test_pso_target_fitness_and_random_search_stages(sim):
     r = hmlvs.calibrate(sim, method="pso", swarm_size=20, iterations=4000,
-                        target_fitness=1e3, threads=1, analyze=False).solve
+                        target_fitness=1e3, threads=1, analyze=False, judge=False).solve
     assert r.termination is r.pso.termination is Termination.TARGET_FITNESS
     assert r.pso.iterations < 4000 and r.cost <= 1e3 and r.lm is None
     assert r.termination_message.startswith("target_fitness (target fitness reached): PSO: "
                                             f"{r.pso.iterations} generations")
-    rs = hmlvs.calibrate(sim, method="random", evaluations=500, threads=1, analyze=False).solve
+    rs = hmlvs.calibrate(sim, method="random", evaluations=500, threads=1, analyze=False,
+                         judge=False).solve
     assert rs.termination is Termination.MAX_EVALUATIONS and rs.pso is None and rs.lm is None
     assert rs.random.evaluations == rs.iterations == 500
     assert rs.random.best_fitness == pytest.approx(rs.cost, rel=1e-9)
@@ -176,7 +178,7 @@ def test_pso_target_fitness_and_random_search_stages(sim):
 def test_cancelled_termination(sim):
     r = hmlvs.calibrate(sim, method="pso", swarm_size=10, iterations=1000, progress_every=10,
                         threads=1, progress=lambda done, total, best: done < 50,
-                        analyze=False).solve
+                        analyze=False, judge=False).solve
     assert r.termination is Termination.CANCELLED and r.pso.iterations < 1000
     assert r.termination_message.startswith("cancelled (stopped by the progress callback)")
 
@@ -223,9 +225,9 @@ def test_threads_beyond_the_cores_are_capped_with_a_note():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         many = hmlvs.calibrate(sim.dataset, method="pso", iterations=20, threads=20000,
-                               analyze=False).solve
+                               analyze=False, judge=False).solve
         one = hmlvs.calibrate(sim.dataset, method="pso", iterations=20, threads=1,
-                              analyze=False).solve
+                              analyze=False, judge=False).solve
     cores = os.cpu_count() or 1
     assert many.threads == cores
     assert any(f"threads capped at {cores}" in n for n in many.notes)

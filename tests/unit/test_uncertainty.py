@@ -36,7 +36,7 @@ def _monte_carlo(truth, runs=200):
             warnings.simplefilter("ignore", hmlvs.HmlvsDataWarning)  # the gimbal lock
             # use_bounds=False: k = 0 is at its Table 2 bound, which would fold its errors
             r = hmlvs.calibrate(sim, method="lm", initial=truth, fixed=WELL_POSED, threads=1,
-                                use_bounds=False).solve
+                                use_bounds=False, judge=False).solve
         u_est = r.uncertainty
         u_giv = hmlvs.uncertainty(sim.fit, r.params, fixed=WELL_POSED, pixel_noise=0.1)
         est.append(r.params.to_array())
@@ -89,7 +89,8 @@ def test_combinations_far_better_than_raw_parameters_with_the_gauge_free():
     start = truth.replace(f=8.3, Su=0.0071, Sv=0.0077, theta=0.44, tx=61.0, omega=0.02,
                           varphi=0.01)
     with pytest.warns(hmlvs.HmlvsDataWarning, match="scale gauge"):
-        r = hmlvs.calibrate(sim, method="lm", initial=start, fixed=fixed, threads=1).solve
+        r = hmlvs.calibrate(sim, method="lm", initial=start, fixed=fixed, threads=1,
+                            judge=False).solve
     assert r.test_rms < 1e-6  # a perfect fit ...
     raw = {n: abs(getattr(r.params, n) / getattr(truth, n) - 1) for n in ("f", "Su", "Sv")}
     assert min(raw.values()) > 1e-3, raw  # ... with f, Su, Sv off by 0.1 % or more
@@ -118,7 +119,7 @@ def test_combinations_with_noise_agree_with_truth_within_their_std():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", hmlvs.HmlvsDataWarning)
             r = hmlvs.calibrate(sim, method="lm", initial=start, fixed=fixed, threads=1,
-                                use_bounds=False).solve
+                                use_bounds=False, judge=False).solve
         c = r.uncertainty.combination("f/Su")
         z_comb = (c.value - truth.f / truth.Su) / c.std
         # f's own std is the pseudo-inverse's (not meaningful): its error is far beyond it
@@ -180,7 +181,7 @@ def test_noise_levels_estimated_from_residuals(pixel, point):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", hmlvs.HmlvsDataWarning)
             r = hmlvs.calibrate(sim, method="lm", initial=sim.truth, fixed=WELL_POSED,
-                                threads=1, use_bounds=False).solve
+                                threads=1, use_bounds=False, judge=False).solve
         est.append((r.uncertainty.pixel_noise, r.uncertainty.point_noise))
     mean = np.mean(est, axis=0)
     # measured means: (0.093, 0.050), (0.021, 0.048), (0.285, 0.020). A zero pixel noise comes
@@ -195,7 +196,7 @@ def test_calibrate_passes_pixel_noise_and_rejects_bad_noise():
     truth = hmlvs.Parameters.nominal().replace(**GENERIC)
     sim = hmlvs.simulate(truth, seed=2, pixel_noise=0.1)
     r = hmlvs.calibrate(sim, method="lm", initial=truth, fixed=WELL_POSED, threads=1,
-                        pixel_noise=0.1).solve
+                        pixel_noise=0.1, judge=False).solve
     assert r.uncertainty.noise_model == "given" and r.uncertainty.pixel_noise == 0.1
     assert "f/Su" in str(r)
     with pytest.raises(ValueError, match="pixel_noise must be a finite number >= 0"):
