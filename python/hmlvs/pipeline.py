@@ -190,3 +190,89 @@ def calibrate_session(source: str | os.PathLike, *, robot: Robot | None = None,
                           "camera": camera})
     assert cal.solve is not None and cal.judged is not None
     return SessionCalibration(cal.solve, cal.judged, cal, reports, views, board, size)
+
+
+def session_model(data: str | os.PathLike, model: str = "auto") -> str:
+    """The sensor model to calibrate ``data`` with: ``model`` as asked (opencv needs images),
+    or (``"auto"``) opencv for an image manifest without a measured board pose, paper
+    otherwise (a data set of calibration points, or images of a placed board)."""
+    from .data.manifest import is_manifest, read_manifest
+
+    if model not in ("auto", "opencv", "paper"):
+        raise ValueError(f"--model must be opencv, paper or auto, got {model!r}")
+    if model != "auto":
+        if model == "opencv" and not is_manifest(data):
+            raise ValueError(f"{data}: the opencv model is calibrated from images (a manifest); "
+                             "a data set of calibration points is for --model paper")
+        return model
+    if not is_manifest(data):
+        return "paper"
+    _, doc, _ = read_manifest(data)
+    board = doc.get("board")
+    return "paper" if isinstance(board, dict) and "origin" in board else "opencv"
+
+
+@dataclass
+class PaperCalibration:
+    """A paper-model calibration of an image session or a data set, judged and ready to save
+    (:func:`calibrate_paper_data`)."""
+
+    #: the file's content, its verdict included (``calibration.solve``: the solver's outcome)
+    calibration: Calibration
+    #: the calibration points fitted, and those held out (None without)
+    dataset: Dataset
+    test: Dataset | None
+    #: one account per image pair (empty for a data set)
+    reports: list[ImageReport]
+    #: the search bounds widened to hold the initial guess, one sentence each
+    notes: list[str]
+    #: the calibration points extracted from the images, all of them (None for a data set)
+    extracted: Dataset | None = None
+
+
+def calibrate_paper_data(data: str | os.PathLike, *, mode: str = "corners",
+                         robot: Robot | None = None,
+                         initial: str | os.PathLike | None = None,
+                         bounds: str | os.PathLike | None = None,
+                         test: str | os.PathLike | None = None, holdout: float = 0.0,
+                         seed: int = 0, require: float | None = None,
+                         on_images: Callable[[list[ImageReport]], None] | None = None,
+                         **options: Any) -> PaperCalibration:
+    """What ``hmlvs calibrate --model paper`` does, as a library call: an image session's
+    calibration points (``mode`` corners or homography; the corners numbered with the
+    ``initial`` guess, a file of either model, else the nominal values; ``on_images`` sees the
+    images' accounts before the solve) or a data set file -> a held-out part (the ``test``
+    file, else a fraction ``holdout`` of the poses drawn with ``seed``) -> the solve
+    (``options``: :func:`hmlvs.calibration.solvers.calibrate`, within the ``bounds`` file or
+    Table 2 widened to hold the guess) -> its verdict (``require``: see :func:`calibrate`)."""
+    from .data.guess import bounds_with, initial_board_pose, read_bounds, read_initial
+    from .data.manifest import is_manifest
+    from .models.params import Parameters
+
+    guess = read_initial(initial) if initial is not None else None
+    reports: list[ImageReport] = []
+    extracted = None
+    if is_manifest(data):
+        from .image.paper_session import dataset_from_images
+
+        # a board the manifest does not place sits where an opencv initial guess put it
+        ds, reports = dataset_from_images(
+            data, mode=mode, robot=robot, params=guess,
+            base_from_board=initial_board_pose(initial) if initial is not None else None)
+        extracted = ds
+        if on_images is not None:
+            on_images(reports)
+    else:
+        ds = Dataset.load(data)
+    test_ds = Dataset.load(test) if test is not None else None
+    if test_ds is None and holdout > 0:
+        ds, test_ds = ds.split(1.0 - holdout, seed=seed, by_pose=True)
+    notes: list[str] = []
+    if bounds is not None:
+        options["bounds"] = read_bounds(bounds, guess or Parameters.nominal())
+    elif guess is not None:
+        options["bounds"], notes = bounds_with(guess)
+    result = calibrate_paper(ds, test=test_ds, initial=guess, seed=seed, **options)
+    cal = judged_paper(result, ds, robot=robot, require=require,
+                       views=[r.view for r in reports if r.view is not None])
+    return PaperCalibration(cal, ds, test_ds, reports, notes, extracted)

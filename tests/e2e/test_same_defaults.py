@@ -52,6 +52,24 @@ def test_paper_model_same_parameters_from_the_cli_and_the_library(cli_files, tmp
     _same_file_content(from_cli, from_lib)
 
 
+@pytest.mark.slow
+def test_the_paper_commands_library_call_gives_its_file(cli_files, tmp_path, capsys):
+    # hmlvs calibrate --model paper is hmlvs.pipeline.calibrate_paper_data: the same options
+    # (a hold-out drawn with a seed, LM) give the same file content, to the last bit
+    _, ds, _, _ = cli_files
+    out = tmp_path / "cal.yaml"
+    code, _, err = run_cli(["calibrate", str(ds), "--holdout", "0.25", "--seed", "3",
+                            "--method", "lm", "--out", str(out), "-q"], capsys)
+    assert code in (0, 3), err
+    run = hmlvs.pipeline.calibrate_paper_data(ds, holdout=0.25, seed=3, method="lm")
+    assert run.test is not None and len(run.test) + len(run.dataset) == len(
+        hmlvs.Dataset.load(ds)) and run.extracted is None and run.reports == []
+    _same_file_content(hmlvs.Calibration.load(out), run.calibration)
+    assert hmlvs.pipeline.session_model(ds) == "paper"
+    with pytest.raises(ValueError, match="the opencv model is calibrated from images"):
+        hmlvs.pipeline.session_model(ds, "opencv")
+
+
 @pytest.mark.filterwarnings("ignore")
 def test_opencv_model_same_parameters_from_the_cli_and_the_library(cli_files, tmp_path, capsys):
     _, _, _, session = cli_files

@@ -19,7 +19,6 @@ from .common import (
     finish,
     guard,
     inputs_of,
-    is_manifest,
     load_robot,
     outputs,
     resolve_fixed,
@@ -46,25 +45,6 @@ _MODEL_OPTION = typer.Option(
 _BOUNDS_OPTION = typer.Option(
     None, help="paper model: search bounds, a YAML/JSON mapping of parameter names to "
     "[lower, upper] or {plus_minus: h} around the initial guess; others keep Table 2.")
-
-
-def _resolve_model(model: str, data: Path) -> str:
-    """The sensor model to calibrate: as asked, or (auto) opencv for an image manifest without
-    a measured board pose, paper otherwise."""
-    if model not in ("auto", "opencv", "paper"):
-        raise ValueError(f"--model must be opencv, paper or auto, got {model!r}")
-    if model != "auto":
-        if model == "opencv" and not is_manifest(data):
-            raise ValueError(f"{data}: the opencv model is calibrated from images (a manifest); "
-                             "a data set of calibration points is for --model paper")
-        return model
-    if not is_manifest(data):
-        return "paper"
-    from ..data.manifest import read_manifest
-
-    _, doc, _ = read_manifest(data)
-    board = doc.get("board")
-    return "paper" if isinstance(board, dict) and "origin" in board else "opencv"
 
 
 def _paper_only_options(**given: bool) -> None:
@@ -249,7 +229,9 @@ def _checked(data: Path, out: Path, holdout: float, mode: str, test: Optional[Pa
     check_suffix("--out", out, (".yaml", ".yml", ".json"), "a calibration file")
     check_suffix("--report", report, (".html", ".htm"), "an HTML report")
     check_suffix("--save-data", save_data, (".npz", ".json"), "a data set")
-    return _resolve_model(model, data)
+    from ..pipeline import session_model
+
+    return session_model(data, model)
 
 
 @dataclass
@@ -280,74 +262,31 @@ class _PaperRun:
     require: Optional[float]
 
 
-def _paper_data(o: _PaperRun, arm: Any, guess: Any, board_pose: Any) -> tuple[Any, Any, list]:
-    """The paper model's data set (from images, numbered with the initial guess, or a file)
-    and its held-out part; the image accounts."""
-    from ..data.dataset import Dataset
-
-    image_reports: list = []
-    if is_manifest(o.data):
-        from ..image.paper_session import dataset_from_images
-
-        # the corners are numbered with the given initial guess, else the nominal values;
-        # a board the manifest does not place sits where an opencv initial guess put it
-        ds, image_reports = dataset_from_images(o.data, mode=o.mode, robot=arm, params=guess,
-                                                base_from_board=board_pose)
-        if not (o.as_json or o.quiet):
-            for r in image_reports:
-                typer.echo(str(r))
-        if o.save_data is not None:
-            ds.save(o.save_data)
-    else:
-        ds = Dataset.load(o.data)
-    test_ds = Dataset.load(o.test) if o.test is not None else None
-    if test_ds is None and o.holdout > 0:
-        ds, test_ds = ds.split(1.0 - o.holdout, seed=o.seed, by_pose=True)
-    return ds, test_ds, image_reports
-
-
-def _paper_bounds(o: _PaperRun, guess: Any) -> tuple[Any, list[str]]:
-    """The search bounds (a file's, or Table 2 widened to hold the initial guess, with a note
-    per widening)."""
-    if o.bounds is not None:
-        from ..data.guess import read_bounds
-        from ..models.params import Parameters
-
-        return read_bounds(o.bounds, guess or Parameters.nominal()), []
-    if guess is not None:
-        from ..data.guess import bounds_with
-
-        return bounds_with(guess)
-    return None, []
-
-
 def _calibrate_paper(o: _PaperRun) -> None:
     """hmlvs calibrate --model paper: data set (or images) -> calibration -> verdict ->
     file (and report); exit 3 when the verdict is not trustworthy."""
-    from ..calibration.solvers import calibrate as run_calibration
-    from ..pipeline import judged_paper
+    from ..pipeline import calibrate_paper_data
 
     with command(o.as_json) as caught:
         fixed_names, why = resolve_fixed(o.fixed, o.free)
-        arm = load_robot(o.robot)
-        guess = board_pose = None
-        if o.initial is not None:
-            from ..data.guess import initial_board_pose, read_initial
+        run = calibrate_paper_data(
+            o.data, mode=o.mode, robot=load_robot(o.robot), initial=o.initial, bounds=o.bounds,
+            test=o.test, holdout=o.holdout, seed=o.seed, require=o.require,
+            on_images=None if (o.as_json or o.quiet) else _echo_images, method=o.method,
+            fixed=fixed_names, runs=o.runs, iterations=o.iterations, loss=o.loss,
+            loss_scale=o.loss_scale, threads=o.threads,
+            progress=solve_progress(o.as_json or o.quiet))
+        if o.save_data is not None and run.extracted is not None:
+            run.extracted.save(o.save_data)
+        path, report_path = _save(run.calibration, o.out, o.report, data=run.dataset,
+                                  test=run.test, image_reports=run.reports)
+    _paper_output(o, run.calibration, caught, path, report_path, run.notes, why, run.reports)
 
-            guess = read_initial(o.initial)
-            board_pose = initial_board_pose(o.initial)
-        ds, test_ds, image_reports = _paper_data(o, arm, guess, board_pose)
-        bounds_obj, widened = _paper_bounds(o, guess)
-        result = run_calibration(ds, method=o.method, test=test_ds, fixed=fixed_names,
-                                 runs=o.runs, initial=guess, bounds=bounds_obj,
-                                 iterations=o.iterations, loss=o.loss, loss_scale=o.loss_scale,
-                                 seed=o.seed, threads=o.threads,
-                                 progress=solve_progress(o.as_json or o.quiet))
-        cal = judged_paper(result, ds, robot=arm, require=o.require,
-                           views=[r.view for r in image_reports if r.view is not None])
-        path, report_path = _save(cal, o.out, o.report, data=ds, test=test_ds,
-                                  image_reports=image_reports)
-    _paper_output(o, cal, caught, path, report_path, widened, why, image_reports)
+
+def _echo_images(reports: list) -> None:
+    """One line per image pair of a paper-model session, before the solve."""
+    for r in reports:
+        typer.echo(str(r))
 
 
 def _paper_output(o: _PaperRun, cal: Any, caught: list, path: Path,
