@@ -4,7 +4,6 @@
 import json
 import math
 import os
-from pathlib import Path
 import subprocess
 import sys
 import warnings
@@ -219,4 +218,10 @@ def test_demo_is_determined_accurate_and_warning_free(tmp_path):
     held = float(next(x for x in r.stdout.splitlines()
                       if x.startswith("held-out RMS")).split()[2])
     assert held < 0.2
-    assert Path(tmp_path / "demo-out" / "calibration.yaml").exists()
+    # judged as every calibration is: the verdict first on the terminal, and in the file
+    lines = r.stdout.splitlines()
+    first = next(i for i, x in enumerate(lines) if x.startswith("VERDICT:"))
+    assert lines[first].startswith("VERDICT: this calibration can be trusted")
+    assert first < next(i for i, x in enumerate(lines) if x.startswith("method pso+lm"))
+    cal = hmlvs.Calibration.load(tmp_path / "demo-out" / "calibration.yaml")
+    assert cal.trustworthy is True and cal.verdict["map_sigma_mm"]["p95"] < 0.2

@@ -73,7 +73,8 @@ def demo(
     """
     from .. import sim
     from ..calibration.solvers import calibrate as run_calibration
-    from ..data.calibration_file import Calibration
+    from ..pipeline import judged_paper
+
     truth = mounted_truth(MOUNTING_DEG)
     fixed, why = resolve_fixed([], [])
     with command(as_json) as caught:
@@ -85,17 +86,20 @@ def demo(
                        f"{len(test)} points from {test.num_poses} poses\n")
         result = run_calibration(fit, test=test, seed=seed, fixed=fixed,
                                  progress=solve_progress(as_json or quiet))
-        path = Calibration.from_result(result, fit, robot=session.robot).save(
-            out / "calibration.yaml")
+        # judged as hmlvs calibrate judges a calibration, its verdict in the file
+        cal = judged_paper(result, fit, robot=session.robot)
+        path = cal.save(out / "calibration.yaml")
     summary = result.summary(session.truth)
     verdict, verdict_json = _demo_verdict(result, session.truth, why)
     warns = finish(caught, as_json, {
         "points": len(session.dataset), "poses": session.dataset.num_poses,
-        "calibration": str(path), **result.to_dict(), **verdict_json,
+        "calibration": str(path), **cal.to_dict(), "solve": cal.solve_figures(),
+        "against_truth": verdict_json,
         "true_rotation_vector_rad": rotation_vector(session.truth)},
         result.warnings, summary, quiet=quiet)
     if warns is None:
         return
+    typer.echo(cal.judged.text())
     typer.echo(without_warning_lines(summary))
     typer.echo(rotation_text(result.params, session.truth))
     typer.echo(verdict)
