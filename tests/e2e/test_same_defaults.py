@@ -126,3 +126,33 @@ def test_report_of_an_opencv_calibration_on_its_session(cli_files, tmp_path, cap
     code, _, err = run_cli(["report", str(cal), str(ds), "--out", str(tmp_path / "r2.html")],
                            capsys)
     assert code == 2 and "image session" in err and not (tmp_path / "r2.html").exists()
+
+
+@pytest.mark.filterwarnings("ignore")
+def test_one_calibrate_reads_the_manifest_once(cli_files, tmp_path, capsys, monkeypatch):
+    # the session is read and checked once (hmlvs.data.manifest.load_manifest); every later
+    # step takes the Manifest for its path and reads copies of it
+    from pathlib import Path
+
+    from hmlvs.data.manifest import Manifest, load_manifest, read_manifest
+
+    _, _, _, session = cli_files
+    read_text, reads = Path.read_text, []
+
+    def counted(self, *args, **kwargs):
+        if self.name == "manifest.json":
+            reads.append(self)
+        return read_text(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "read_text", counted)
+    code, _, err = run_cli(["calibrate", str(session), "--out", str(tmp_path / "cal.yaml"),
+                            "-q"], capsys)
+    assert code in (0, 3), err
+    assert len(reads) == 1, reads
+    m = load_manifest(session)
+    assert load_manifest(m) is m and str(m) == str(session) and Path(m) == Path(session)
+    entries, doc, folder = read_manifest(m)
+    entries[0]["id"], doc["board"] = "changed", None
+    again, doc_again, _ = read_manifest(m)
+    assert again[0]["id"] != "changed" and doc_again["board"] is not None
+    assert isinstance(m, Manifest) and len(reads) == 2  # load_manifest read it; the rest not

@@ -33,6 +33,8 @@ entry, and the rest of the session goes through.
 
 from __future__ import annotations
 
+import copy
+from dataclasses import dataclass
 import json
 import os
 from pathlib import Path
@@ -185,11 +187,42 @@ def is_manifest(path: str | os.PathLike) -> bool:
     return isinstance(doc, dict) and doc.get("format") == "hmlvs-images"
 
 
+@dataclass(frozen=True)
+class Manifest:
+    """An image manifest read and checked once (:func:`load_manifest`). It stands for the
+    path it was read from wherever a session's path is taken (``os.fspath``, ``str``);
+    :func:`read_manifest` of it reads nothing again and gives copies of its entries and
+    document, so no reader changes what the next one sees."""
+
+    source: Path
+    entries: list[dict[str, Any]]
+    doc: dict[str, Any]
+    folder: Path
+
+    def __fspath__(self) -> str:
+        return os.fspath(self.source)
+
+    def __str__(self) -> str:
+        return str(self.source)
+
+
+def load_manifest(source: Any) -> Manifest:
+    """The manifest at ``source`` (a folder or the file) read and checked once, to be passed
+    wherever its path would be (:class:`Manifest`); a :class:`Manifest` is returned as is."""
+    if isinstance(source, Manifest):
+        return source
+    entries, doc, folder = read_manifest(source)
+    return Manifest(Path(source), entries, doc, folder)
+
+
 def read_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, Any], Path]:
-    """Read and validate a manifest (a folder holding manifest.json, or the file itself).
+    """Read and validate a manifest (a folder holding manifest.json, or the file itself, or
+    a :class:`Manifest` already read).
 
     Returns (entries, document, folder).
     """
+    if isinstance(source, Manifest):
+        return copy.deepcopy(source.entries), copy.deepcopy(source.doc), source.folder
     path = Path(source)
     if path.is_dir():
         candidates = [path / n for n in ("manifest.json", "manifest.yaml", "manifest.yml")]
