@@ -72,8 +72,7 @@ def demo(
     Example: hmlvs demo --seed 1 --poses 60
     """
     from .. import sim
-    from ..calibration.solvers import calibrate as run_calibration
-    from ..pipeline import judged_paper
+    from ..pipeline import calibrate
 
     truth = mounted_truth(MOUNTING_DEG)
     fixed, why = resolve_fixed([], [])
@@ -84,10 +83,10 @@ def demo(
             typer.echo(session.summary())
             typer.echo(f"fit: {len(fit)} points from {fit.num_poses} poses; held out: "
                        f"{len(test)} points from {test.num_poses} poses\n")
-        result = run_calibration(fit, test=test, seed=seed, fixed=fixed,
-                                 progress=solve_progress(as_json or quiet))
         # judged as hmlvs calibrate judges a calibration, its verdict in the file
-        cal = judged_paper(result, fit, robot=session.robot)
+        cal = calibrate(fit, robot=session.robot, test=test, seed=seed, fixed=fixed,
+                        progress=solve_progress(as_json or quiet))
+        result = cal.solve
         path = cal.save(out / "calibration.yaml")
     summary = result.summary(session.truth)
     verdict, verdict_json = _demo_verdict(result, session.truth, why)
