@@ -270,6 +270,11 @@ def test_a_sigterm_whose_exception_was_lost_still_commits_nothing(files, tmp_pat
     assert err.strip().splitlines()[-1] == "terminated"
     assert _temporaries(tmp_path) == []
     assert _tree(work) == before
+    # the flag ends with the run: a later write in this process is not stopped by it
+    assert not _io.SIGTERM_RECEIVED[0]
+    with _io.atomic_write(tmp_path / "later.txt") as fh:
+        fh.write("written")
+    assert (tmp_path / "later.txt").read_text() == "written"
 
 
 def test_a_sigterm_lost_while_loading_ends_the_program_before_its_command(tmp_path):

@@ -88,3 +88,6 @@ def main(argv: Optional[list[str]] = None) -> None:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+        # the flag speaks of this run only: a later library write in the same process (an
+        # embedding application, a test) must not be stopped by it
+        _io.SIGTERM_RECEIVED[0] = False
