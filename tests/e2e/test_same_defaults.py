@@ -129,14 +129,10 @@ def test_report_of_an_opencv_calibration_on_its_session(cli_files, tmp_path, cap
 
 
 @pytest.mark.filterwarnings("ignore")
-def test_one_calibrate_reads_the_manifest_once(cli_files, tmp_path, capsys, monkeypatch):
-    # the session is read and checked once (hmlvs.data.manifest.load_manifest); every later
-    # step takes the Manifest for its path and reads copies of it
+def _counted_manifest_reads(monkeypatch) -> list:
+    """Every read of a manifest.json from here on (Path.read_text counted)."""
     from pathlib import Path
 
-    from hmlvs.data.manifest import Manifest, load_manifest, read_manifest
-
-    _, _, _, session = cli_files
     read_text, reads = Path.read_text, []
 
     def counted(self, *args, **kwargs):
@@ -145,6 +141,38 @@ def test_one_calibrate_reads_the_manifest_once(cli_files, tmp_path, capsys, monk
         return read_text(self, *args, **kwargs)
 
     monkeypatch.setattr(Path, "read_text", counted)
+    return reads
+
+
+@pytest.mark.parametrize("command", ["measure", "inspect", "report"])
+def test_every_session_command_reads_the_manifest_once(command, cli_files, tmp_path, capsys,
+                                                       monkeypatch):
+    # as calibrate: the command line loads the manifest once (cli.common.session_of) and
+    # passes the Manifest on; measure read it 3 times before, inspect 3, report 2
+    _, _, _, session = cli_files
+    cal = tmp_path / "cal.yaml"
+    code, _, err = run_cli(["calibrate", str(session), "--out", str(cal), "-q"], capsys)
+    assert code in (0, 3), err
+    reads = _counted_manifest_reads(monkeypatch)
+    argv = {"measure": ["measure", str(cal), str(session), "--out", str(tmp_path / "c.ply")],
+            "inspect": ["inspect", str(session), "--out", str(tmp_path / "pictures")],
+            "report": ["report", str(cal), str(session), "--out", str(tmp_path / "r.html")]}
+    code, out, err = run_cli(argv[command], capsys)
+    assert code == 0, err
+    assert len(reads) == 1, reads
+    written = {"measure": "c.ply", "inspect": "pictures", "report": "r.html"}[command]
+    assert (tmp_path / written).exists(), out
+
+
+def test_one_calibrate_reads_the_manifest_once(cli_files, tmp_path, capsys, monkeypatch):
+    # the session is read and checked once (hmlvs.data.manifest.load_manifest); every later
+    # step takes the Manifest for its path and reads copies of it
+    from pathlib import Path
+
+    from hmlvs.data.manifest import Manifest, load_manifest, read_manifest
+
+    _, _, _, session = cli_files
+    reads = _counted_manifest_reads(monkeypatch)
     code, _, err = run_cli(["calibrate", str(session), "--out", str(tmp_path / "cal.yaml"),
                             "-q"], capsys)
     assert code in (0, 3), err

@@ -19,11 +19,11 @@ from .common import (
     finish,
     guard,
     inputs_of,
-    is_manifest,
     load_robot,
     outputs,
     resolve_fixed,
     rotation_text,
+    session_of,
     show_warnings,
     solve_progress,
     without_warning_lines,
@@ -193,10 +193,7 @@ def calibrate(
     Example: hmlvs calibrate session.npz --holdout 0.3 --out calibration.yaml --report report.html
     """
     with guard(as_json):
-        if is_manifest(data):  # read and checked once, for every step below
-            from ..data.manifest import load_manifest
-
-            data = load_manifest(data)  # type: ignore[assignment]
+        data = session_of(data)  # a manifest read and checked once, for every step below
         chosen = _checked(data, out, holdout, mode, test, initial, bounds, robot, report,
                           save_data, model)
         if chosen == "opencv":

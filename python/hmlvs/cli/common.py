@@ -220,6 +220,17 @@ def is_manifest(path: Path) -> bool:
     return is_images(path)
 
 
+def session_of(path: Path) -> Any:
+    """An image session's manifest read and checked once (a
+    :class:`hmlvs.data.manifest.Manifest`, taken wherever its path is), or any other data
+    argument as it is: every later step of the command reads no manifest again."""
+    if not is_manifest(path):
+        return path
+    from ..data.manifest import load_manifest
+
+    return load_manifest(path)
+
+
 def solve_progress(quiet: bool):
     """Progress for solves: a bar, or with --json a silent callback. Either way the solver
     calls back into Python periodically, which is where Ctrl-C is noticed."""

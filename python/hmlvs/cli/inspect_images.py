@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from .common import app, command, finish, inputs_of, load_robot
+from .common import app, command, finish, inputs_of, load_robot, session_of
 from .options import JSON_OPTION, ROBOT_OPTION, out_option
 
 
@@ -34,8 +34,9 @@ def inspect_images(
     with command(as_json) as caught:
         from ..guard import refuse_overwrite
 
-        refuse_overwrite([*inputs_of(data), robot], [], [("--out", out)])
-        views = inspect_session(data, out, robot=load_robot(robot))
+        session = session_of(data)  # a manifest read and checked once
+        refuse_overwrite([*inputs_of(session), robot], [], [("--out", out)])
+        views = inspect_session(session, out, robot=load_robot(robot))
     if finish(caught, as_json, [v.to_dict() for v in views]) is None:
         return
     for v in views:

@@ -7,7 +7,7 @@ from typing import Optional
 
 import typer
 
-from .common import app, bar, command, finish, inputs_of, is_manifest, load_robot
+from .common import app, bar, command, finish, inputs_of, is_manifest, load_robot, session_of
 from .options import JSON_OPTION, ROBOT_OPTION, out_option
 
 
@@ -39,6 +39,7 @@ def measure(
     with command(as_json) as caught:
         from ..guard import refuse_overwrite
 
+        source = session_of(source)  # a manifest read and checked once
         refuse_overwrite([calibration, *inputs_of(source), robot], [("--out", out)])
         cal = Calibration.load(calibration)
         if cal.trustworthy is False and not accept_untrusted:

@@ -7,7 +7,7 @@ from typing import Any, Optional
 
 import typer
 
-from .common import app, command, finish, inputs_of, load_robot
+from .common import app, command, finish, inputs_of, load_robot, session_of
 from .options import JSON_OPTION, ROBOT_OPTION, out_option
 
 
@@ -38,7 +38,8 @@ def report(
     with command(as_json) as caught:
         from ..guard import refuse_overwrite
 
-        refuse_overwrite([calibration, *inputs_of(data), test, robot], [("--out", out)])
+        session = session_of(data)  # a manifest read and checked once
+        refuse_overwrite([calibration, *inputs_of(session), test, robot], [("--out", out)])
         cal = Calibration.load(calibration)
         if cal.model == "opencv" and test is not None:
             raise ValueError("--test takes a data set of calibration points, which only "
@@ -47,7 +48,7 @@ def report(
             raise ValueError(f"{calibration}: a calibration of the {cal.model} model has no "
                              "paper parameters to report on")
         written = write_calibration_report(
-            cal, out, data, test=None if test is None else _dataset(test),
+            cal, out, session, test=None if test is None else _dataset(test),
             robot=load_robot(robot), mode=mode)
     result, path = written.result, written.path
     if finish(caught, as_json, {"report": str(path), **result.to_dict()}) is None:
