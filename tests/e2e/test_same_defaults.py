@@ -4,6 +4,7 @@ parameters, for both sensor models."""
 
 from __future__ import annotations
 
+import html
 import json
 
 from conftest import run_cli
@@ -122,6 +123,12 @@ def test_report_of_an_opencv_calibration_on_its_session(cli_files, tmp_path, cap
     # hundredths of a pixel and of a millimetre)
     assert summary["views"] == 3 and 0 < summary["corner_rms_px"] < 1.0
     assert 0 < summary["laser_rms_mm"] < 0.1
+    # the solve shown is the board pose's alone, and the page says so (not the calibration's
+    # "hand-eye and board pose estimated", nor its unknowns)
+    assert summary["evaluated"] is True and summary["unknowns"] == 6
+    shown = html.unescape(page)
+    assert "hand-eye held, the board's pose in the base estimated" in shown
+    assert "solve of the board's pose" in shown and "hand-eye and board pose estimated" not in shown
     # a data set of calibration points is not what an opencv calibration is reported on
     code, _, err = run_cli(["report", str(cal), str(ds), "--out", str(tmp_path / "r2.html")],
                            capsys)

@@ -344,7 +344,7 @@ def _assemble(su: _Setup, board: BoardSpec, image_size: tuple[int, int], state: 
     if rank < len(names):
         su.warnings.append(f"the data determine {rank} of the {len(names)} unknowns; add views "
                            "with the board at other angles")
-    _warn_pose_disagreement(su, corners_r, pose_sigma)
+    _warn_pose_disagreement(su, corners_r, pose_sigma, held=bool(opts.hand_eye_known))
     sensor = _sensor_of(state, image_size, su.chain)
     c_all = np.concatenate([c.ravel() for c in corners_r])
     test_rms = None
@@ -376,16 +376,18 @@ def _assemble(su: _Setup, board: BoardSpec, image_size: tuple[int, int], state: 
 
 
 def _warn_pose_disagreement(su: _Setup, corners_r: Sequence[np.ndarray],
-                            pose_sigma: tuple[float, float] | None) -> None:
-    """A warning when the exact chain fits the corners far worse than free board poses."""
+                            pose_sigma: tuple[float, float] | None, held: bool) -> None:
+    """A warning when the exact chain fits the corners far worse than free board poses
+    (``held``: a calibration evaluated, its camera and hand-eye held)."""
+    where = ("the calibration's camera and hand-eye are held, so the difference stays in the "
+             "residuals" if held else "the camera and hand-eye absorb the difference")
     chain_rms = finite_rms(np.concatenate([c.ravel() for c in corners_r])) * math.sqrt(2)
     if su.chain and not pose_sigma and chain_rms > POSE_DISAGREEMENT * max(su.cv_rms, 0.05):
         su.warnings.append(
             f"the robot poses disagree with the images: through the robot chain the corners "
             f"lie {chain_rms:.2f} px RMS from their detections, against {su.cv_rms:.2f} px with "
-            "each view's board pose free; the camera and hand-eye absorb the difference (check "
-            "the poses' timing and convention, that the board did not move, and the robot's "
-            "accuracy)")
+            f"each view's board pose free; {where} (check the poses' timing and convention, "
+            "that the board did not move, and the robot's accuracy)")
 
 
 def _per_view(su: _Setup, keep_c: list[np.ndarray], keep_l: list[np.ndarray],
@@ -501,4 +503,4 @@ def evaluate_sensor(sensor: OpenCvSensor, views: Sequence[ViewData], board: Any,
     from dataclasses import replace
 
     result = calibrate_joint(views, board, image_size, camera=sensor, hold_hand_eye=True)
-    return replace(result, std={**(std or {}), **result.std})
+    return replace(result, std={**(std or {}), **result.std}, evaluated=True)

@@ -71,12 +71,15 @@ class JointCalibration:
     #: that count as one independent one, :func:`stripe_correlation`); the covariance takes
     #: the stripe pixels as that many times fewer
     stripe_correlation: float = 1.0
+    #: a calibration evaluated on a session (:func:`evaluate_sensor`): its camera, laser plane
+    #: and hand-eye held, so the solve is of the board's pose alone
+    evaluated: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         """The result as plain JSON-ready values (the command line's --json): the sensor,
         the fit, what the data determine, the termination."""
         s = self.sensor
-        return {"model": "opencv", "mode": self.mode,
+        return {"model": "opencv", "mode": self.mode, "evaluated": self.evaluated,
                 "camera_matrix": s.camera_matrix.tolist(),
                 "dist_coeffs": s.dist_coeffs.tolist(), "image_size": list(s.image_size),
                 "laser_plane": s.laser_plane.tolist(),

@@ -69,6 +69,19 @@ def _fmt(v: float | None, digits: str = ".3g") -> str:
     return "-" if v is None or not math.isfinite(v) else format(v, digits)
 
 
+def _how(result: Any) -> str:
+    """What the shown solve estimated: the calibration, or the board's pose alone when the
+    calibration is evaluated on a session."""
+    if result.evaluated:
+        held = "camera, laser plane and hand-eye" if result.mode == "chain" else \
+            "camera and laser plane"
+        board = "the board's pose in the base" if result.mode == "chain" else \
+            "each view's board pose"
+        return f"this calibration on this session: its {held} held, {board} estimated"
+    return ("robot poses (hand-eye and board pose estimated)" if result.mode == "chain"
+            else "no robot poses (camera and laser plane only)")
+
+
 def render_joint_report(result: Any, image_reports: Any = None, verdict: Any = None,
                         title: str = "hmlvs calibration report (opencv model)") -> str:
     """The report of a :class:`~hmlvs.calibration.joint.JointCalibration` as an HTML string."""
@@ -112,13 +125,13 @@ def render_joint_report(result: Any, image_reports: Any = None, verdict: Any = N
     captions = {"quiver": "Corner residuals over the image", "per_view": "Reprojection error "
                 "per view", "laser": "Laser residuals"}
     now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
-    how = "robot poses (hand-eye and board pose estimated)" if chain else \
-        "no robot poses (camera and laser plane only)"
+    how = _how(result)
     return page(title, f"""<h1>{html.escape(title)}</h1>
 {verdict_html(verdict)}
 <table class="summary">
 <tr><td>model, mode</td><td>opencv, {html.escape(how)}</td></tr>
-<tr><td>solve</td><td>{html.escape(result.termination.lower())} after {result.iterations}
+<tr><td>{"solve of the board's pose" if result.evaluated else "solve"}</td><td>{
+ html.escape(result.termination.lower())} after {result.iterations}
  Levenberg-Marquardt iterations, {result.seconds:.2f} s</td></tr>
 <tr><td>corner residuals</td><td>{result.corner_rms_px:.4f} px RMS (noise weight
  {result.corner_sigma_px:.4f} px per axis)</td></tr>
