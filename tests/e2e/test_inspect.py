@@ -8,7 +8,14 @@ import json
 import cv2
 from hmlvs.cli import main as cli_main
 from hmlvs.image.stripe import StripeResult, StripeStatus
-from hmlvs.report.inspect import CORNER_COLOUR, STATUS_COLOURS, TICK, draw_view, inspect_session
+from hmlvs.report.inspect import (
+    CORNER_COLOUR,
+    OFF_LINE_COLOUR,
+    STATUS_COLOURS,
+    TICK,
+    draw_view,
+    inspect_session,
+)
 from hmlvs.sim.general import general_session, render_general_session
 import numpy as np
 import pytest
@@ -101,14 +108,39 @@ def test_rejected_scan_lines_are_marked_at_the_border_in_their_status_colour():
     status[20:60] = StripeStatus.FOUND
     status[70:75] = StripeStatus.MULTIPLE
     status[90:92] = StripeStatus.TOO_WIDE
-    centre = np.where(status == StripeStatus.FOUND, 50.0, np.nan)
+    # the stripe at row 150 of 200: the header (title and the marks' legend, wrapped at the
+    # image's width) covers the top rows of so narrow an image
+    centre = np.where(status == StripeStatus.FOUND, 150.0, np.nan)
     nan = np.full(n, np.nan)
     stripe = StripeResult(np.arange(n), centre, nan, nan, nan, status, np.zeros(n, int),
                           "columns", "centroid", 10.0, 1.0)
-    img = draw_view(np.full((100, n), 80, np.uint8), None, stripe, "")
+    img = draw_view(np.full((200, n), 80, np.uint8), None, stripe, "")
     for s, cols in ((StripeStatus.MULTIPLE, range(70, 75)), (StripeStatus.TOO_WIDE, (90, 91))):
-        mark = np.all(img[100 - TICK:, :] == STATUS_COLOURS[s], axis=2)
+        mark = np.all(img[200 - TICK:, :] == STATUS_COLOURS[s], axis=2)
         assert sorted(set(np.nonzero(mark)[1].tolist())) == list(cols)
     green = np.all(img == STATUS_COLOURS[StripeStatus.FOUND], axis=2)
-    assert set(np.nonzero(green)[0].tolist()) <= {49, 50, 51}
+    assert set(np.nonzero(green)[0].tolist()) <= {149, 150, 151}
     assert set(np.nonzero(green)[1].tolist()) == set(range(19, 61))
+
+
+def test_centres_the_pipeline_dropped_off_the_line_are_drawn_apart():
+    # the pipeline kept the found centres of columns 25-59 (``kept``); those of columns 20-24
+    # it dropped as off the stripe's line (the terminal's OFF_LINE): drawn in their own
+    # colour, marked at the border and named in the header, not in the found centres' green
+    n = 200
+    status = np.full(n, StripeStatus.NONE, np.uint8)
+    status[20:60] = StripeStatus.FOUND
+    centre = np.where(status == StripeStatus.FOUND, 150.0, np.nan)
+    nan = np.full(n, np.nan)
+    stripe = StripeResult(np.arange(n), centre, nan, nan, nan, status, np.zeros(n, int),
+                          "columns", "centroid", 10.0, 1.0)
+    kept = np.column_stack([np.arange(25, 60), np.full(35, 150.0)])
+    img = draw_view(np.full((200, n), 80, np.uint8), None, stripe, "", kept=kept)
+    green = np.all(img == STATUS_COLOURS[StripeStatus.FOUND], axis=2)
+    assert set(np.nonzero(green)[1].tolist()) == set(range(25, 61))  # (the dots: radius 1)
+    cyan = np.all(img == OFF_LINE_COLOUR, axis=2)
+    assert set(np.nonzero(cyan[200 - TICK:])[1].tolist()) == set(range(20, 25))
+    assert set(np.nonzero(cyan[140:160])[1].tolist()) == set(range(19, 26))
+    assert cyan[:40].any()  # the header names OFF_LINE in its colour
+    without = draw_view(np.full((200, n), 80, np.uint8), None, stripe, "")
+    assert not np.all(without == OFF_LINE_COLOUR, axis=2).any()

@@ -29,7 +29,14 @@ STATUS_COLOURS: dict[StripeStatus, tuple[int, int, int]] = {
     StripeStatus.TOO_NARROW: (255, 160, 0),  # blue: noise, hot pixels
     StripeStatus.TOO_WIDE: (0, 165, 255),    # orange: glare
     StripeStatus.FIT_FAILED: (255, 0, 255),  # magenta: e.g. a saturated flat top
+    StripeStatus.SATURATED: (128, 0, 255),   # pink: the laser-on image saturated under the peak
+    StripeStatus.CLIPPED: (0, 100, 180),     # brown: the profile runs off the image
+    StripeStatus.DOUBLE_PEAK: (180, 80, 255),  # violet-pink: a reflection beside the peak
+    StripeStatus.ALBEDO_EDGE: (255, 80, 80),   # light blue: the albedo steps under the profile
 }
+#: BGR colour of centres the pipeline found but dropped as off the view's one stripe line
+#: (the terminal's OFF_LINE): a dot and a border mark, like a rejected scan line
+OFF_LINE_COLOUR = (255, 255, 0)  # cyan
 CORNER_COLOUR = (0, 255, 255)  # yellow
 FIRST_CORNER_COLOUR = (255, 0, 255)  # magenta: corner 0, so the numbering's origin shows
 TICK = 10  # px: length of a rejected scan line's mark at the image border
@@ -68,12 +75,14 @@ class ViewInspection:
 
 
 def draw_view(image: np.ndarray, corners: Any = None, stripe: StripeResult | None = None,
-              title: str = "") -> np.ndarray:
+              title: str = "", kept: np.ndarray | None = None) -> np.ndarray:
     """A BGR picture of one view: ``image`` (gray or colour, 8 or 16 bit) with ``corners``
     (a :class:`~hmlvs.image.corners.Corners`: a circle and the board index at each, corner
     0 in magenta), the stripe's found centres (green dots) and its rejected scan lines (a
     mark of the status colour at the image border: the bottom for columns, the right side
-    for rows), and ``title`` at the top left."""
+    for rows), and ``title`` at the top left followed by the names of the marks drawn.
+    ``kept``: the stripe pixels the pipeline kept (k, 2); found centres on other scan lines
+    were dropped as off the stripe's line and are drawn as such (:data:`OFF_LINE_COLOUR`)."""
     import cv2
 
     gray = as_gray(image, "the image", None)
@@ -81,18 +90,34 @@ def draw_view(image: np.ndarray, corners: Any = None, stripe: StripeResult | Non
         gray = (gray >> 8).astype(np.uint8)
     out = cv2.cvtColor(np.ascontiguousarray(gray), cv2.COLOR_GRAY2BGR)
     h, w = gray.shape
+    legend: list[tuple[str, tuple[int, int, int]]] = []
     if stripe is not None:
         columns = stripe.direction == "columns"
-        status = np.asarray(stripe.status)
-        for s, colour in STATUS_COLOURS.items():
-            lines = np.asarray(stripe.position)[status == s]
-            if s == StripeStatus.FOUND:
-                for px in stripe.pixels:
-                    cv2.circle(out, (int(round(px[0])), int(round(px[1]))), 1, colour, -1)
-                continue
+
+        def mark(lines: np.ndarray, colour: tuple[int, int, int]) -> None:
             for p in lines.astype(int):
                 a, b = ((p, h - TICK), (p, h - 1)) if columns else ((w - TICK, p), (w - 1, p))
                 cv2.line(out, a, b, colour, 1)
+
+        status = np.asarray(stripe.status)
+        found = status == StripeStatus.FOUND
+        off = np.zeros_like(found)
+        if kept is not None:
+            used = {int(round(q)) for q in np.asarray(kept, float).reshape(-1, 2)[:, 0 if columns
+                                                                                   else 1]}
+            off = found & ~np.isin(np.asarray(stripe.position).astype(int), list(used))
+        for s, colour in STATUS_COLOURS.items():
+            if s == StripeStatus.FOUND:
+                for px in np.asarray(stripe.pixels)[~off[found]]:
+                    cv2.circle(out, (int(round(px[0])), int(round(px[1]))), 1, colour, -1)
+            elif (status == s).any():
+                mark(np.asarray(stripe.position)[status == s], colour)
+                legend.append((s.name, colour))
+        if off.any():
+            for px in np.asarray(stripe.pixels)[off[found]]:
+                cv2.circle(out, (int(round(px[0])), int(round(px[1]))), 1, OFF_LINE_COLOUR, -1)
+            mark(np.asarray(stripe.position)[off], OFF_LINE_COLOUR)
+            legend.append(("OFF_LINE", OFF_LINE_COLOUR))
     if corners is not None and len(corners):
         radius = 4 if len(corners) < 200 else 2
         for px, k in zip(np.asarray(corners.pixels), np.asarray(corners.index)):
@@ -101,12 +126,39 @@ def draw_view(image: np.ndarray, corners: Any = None, stripe: StripeResult | Non
             cv2.circle(out, c, radius, colour, 1)
             cv2.putText(out, str(int(k)), (c[0] + 4, c[1] - 4), cv2.FONT_HERSHEY_SIMPLEX,
                         0.35, colour, 1, cv2.LINE_AA)
-    if title:
-        (tw, th), _ = cv2.getTextSize(title, cv2.FONT_HERSHEY_SIMPLEX, 0.55, 1)
-        cv2.rectangle(out, (0, 0), (tw + 16, th + 16), (0, 0, 0), -1)
-        cv2.putText(out, title, (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 1,
-                    cv2.LINE_AA)
+    _draw_header(out, title, legend, "bottom" if stripe is None or
+                 stripe.direction == "columns" else "right")
     return out
+
+
+def _draw_header(out: np.ndarray, title: str, legend: list[tuple[str, tuple[int, int, int]]],
+                 border: str) -> None:
+    """``title`` in white, then the names of the border marks drawn, each in its colour, on
+    black bands at the top left (a line wraps at the image's width)."""
+    import cv2
+
+    words = [(title + "   ", (255, 255, 255))] if title else []
+    if legend:
+        words += [(f"marks at the {border}: ", (255, 255, 255)),
+                  *((name + " ", colour) for name, colour in legend)]
+    font, scale = cv2.FONT_HERSHEY_SIMPLEX, 0.5
+    th = cv2.getTextSize("Ag", font, scale, 1)[0][1]
+    lines: list[list[tuple[str, tuple[int, int, int], int]]] = [[]]
+    x = 8
+    for word, colour in words:
+        width = cv2.getTextSize(word, font, scale, 1)[0][0]
+        if lines[-1] and x + width > out.shape[1] - 8:
+            lines.append([])
+            x = 8
+        lines[-1].append((word, colour, width))
+        x += width
+    for k, line in enumerate(ln for ln in lines if ln):
+        top, x = k * (th + 10), 8
+        cv2.rectangle(out, (0, top), (sum(w for _, _, w in line) + 16, top + th + 12),
+                      (0, 0, 0), -1)
+        for word, colour, width in line:
+            cv2.putText(out, word, (x, top + th + 6), font, scale, colour, 1, cv2.LINE_AA)
+            x += width
 
 
 def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = None,
@@ -128,8 +180,8 @@ def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = Non
                                                   **stripe_options)
     # the corners the pipeline numbered: a partly visible board's come from its robot pose
     # and a first calibration, which detecting this image alone cannot repeat
-    numbered = {v.id: _Numbered(np.asarray(v.corner_pixels), np.asarray(v.corner_index))
-                for v in used}
+    numbered = {v.id: _Numbered(np.asarray(v.corner_pixels), np.asarray(v.corner_index),
+                                np.asarray(v.laser_pixels)) for v in used}
     entries, _, folder = read_manifest(source)
     from ..geometry.board import Checkerboard
 
@@ -181,8 +233,13 @@ def _picture(entry: dict, rep: Any, view: ViewInspection, folder: Path, numbered
     if not rep.ok:  # the pipeline stopped early: report what the images show
         view.corners = 0 if corners is None else len(corners)
         view.stripe = {} if stripe is None else stripe.counts()
-    state = "used" if rep.ok else "rejected"
-    return draw_view(on, corners, stripe, f"{rep.id}: {state}, {view.corners} corners")
+    if not rep.ok:
+        state = f"rejected, {view.corners} corners"
+    else:
+        state = f"used, {view.corners} corners" if view.corners else "used, laser only (no " \
+            "board seen)"
+    kept = numbered[rep.id].stripe if rep.id in numbered else None
+    return draw_view(on, corners, stripe, f"{rep.id}: {state}", kept=kept)
 
 
 def _unique(stem: str, taken: set[str]) -> str:
@@ -211,10 +268,12 @@ def _read_image(name: Any, folder: Path) -> np.ndarray | None:
 
 @dataclass(frozen=True)
 class _Numbered:
-    """Corners as :func:`draw_view` draws them: pixels (k, 2) and board indices (k,)."""
+    """Corners as :func:`draw_view` draws them: pixels (k, 2) and board indices (k,); with
+    the stripe pixels the pipeline kept in that view (m, 2)."""
 
     pixels: np.ndarray
     index: np.ndarray
+    stripe: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.index)
