@@ -171,7 +171,10 @@ def session_offset(reads: list[PairRead], reader: PairReader) -> tuple[float | N
     rejected): (the offset or None, the indices of the pairs that took it). One board print
     and one laser: a stripe on one level of the board only (along a row of light squares)
     cannot fit the offset; with 0 instead, it would be lost on the light squares and pulled
-    towards the dark ones where it touches them."""
+    towards the dark ones where it touches them. Nothing waits for it unless the reader
+    defers (``defer``): (None, empty set)."""
+    if not reader.defer:
+        return None, set()
     offsets = [r.pair.offset for r in reads if r.kept and r.pair.offset is not None
                and np.isfinite(r.pair.offset)]
     offset = float(np.median(offsets)) if offsets else None
