@@ -1,10 +1,11 @@
-"""The views of a joint calibration (model "opencv"): per image, the board corners found,
-the stripe pixels and the robot pose."""
+"""The views of an image session, the observations both sensor models calibrate from: per
+image, the board corners found and numbered, the stripe (its pixels, and every scan line with
+its status) and the robot pose."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -16,6 +17,12 @@ class ViewData:
     corner_pixels : (k, 2) detected corners; corner_index : (k,) their board indices
     laser_pixels : (m, 2) stripe pixels (any that miss the board are dropped by the solve's
         set-up); base_from_hand : the robot's 4x4 pose, None without a robot
+    stripe : the stripe of a view read from images, every scan line with its centre, noise
+        and status (a :class:`hmlvs.image.stripe.StripeResult`, corrected as its
+        ``laser_pixels`` were), from which the paper model's calibration points are derived
+        (:func:`hmlvs.image.points.view_points`); None for views made otherwise
+    joints : the joint readings (rad) the pose was computed from, when the view's record
+        gave them
     """
 
     id: str
@@ -23,6 +30,8 @@ class ViewData:
     corner_index: np.ndarray
     laser_pixels: np.ndarray
     base_from_hand: np.ndarray | None = None
+    stripe: Any = None
+    joints: np.ndarray | None = None
 
 
 def split_views(views: Sequence[ViewData], holdout: float, seed: int = 0

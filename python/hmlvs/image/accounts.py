@@ -26,9 +26,11 @@ class ImageReport:
     blur_var : the camera blur variance (px^2) the stripe was corrected with at albedo steps
         (:func:`~hmlvs.image.session.stripe_from_pair` ``blur_var``, fitted to the session
         unless given); None for a rejected pair
-    view : the pair's numbered corners, stripe pixels and robot pose
-        (:class:`hmlvs.data.views.ViewData`) when it was used (for the verdict's corner and
-        chain checks); None otherwise
+    view : the pair's view when it was used (:class:`hmlvs.data.views.ViewData`: numbered
+        corners, the stripe with every scan line's status, robot pose and joints), from
+        which the paper model's calibration points were derived
+        (:func:`hmlvs.image.paper_session.points_of_views`) and on which the verdict's corner
+        and chain checks run; None otherwise
     """
 
     id: str

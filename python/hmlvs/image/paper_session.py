@@ -1,6 +1,8 @@
 """A session of laser on/off images -> the paper model's calibration data set
-(:func:`dataset_from_images`): every pair's stripe and numbered corners, then the session's
-albedo offset and blur, then the calibration points of each view."""
+(:func:`dataset_from_images`): the session's views (:func:`paper_views`: one pass over the
+pairs, :mod:`hmlvs.image.reading`, every board numbered from the corners the approximate
+parameters predict), then the calibration points of each view derived from its observations
+(:func:`points_of_views`)."""
 
 from __future__ import annotations
 
@@ -11,33 +13,30 @@ import numpy as np
 
 from ..data.views import ViewData
 from .accounts import ImageReport
+from .corner_base import Corners
 from .corners import BoardNotFoundError, find_corners
-from .points import Mode, calibration_points, fit_division_distortion
+from .points import Mode, fit_division_distortion, view_corners, view_points
+from .reading import (
+    PairRead,
+    PairReader,
+    read_pairs,
+    same_size,
+    session_blur,
+    session_offset,
+)
 from .session import (
     BOARD_SMOOTH_ALONG,
     Pair,
     PairRejected,
-    check_stripe,
     checked_blur_var,
     core_options,
-    edge_shift,
     manifest_robot,
     opencv_failure,
-    read_pair,
     read_session_manifest,
-    record_id,
-    record_names,
     require_poses,
-    restripe,
-    session_blur_var,
     smooth_along_of,
-    stripe_pending,
-    with_blur_var,
 )
 from .stripe import StripeResult, extract_stripe
-
-#: a pair on its way: (id, index, pair, corners, info)
-Found = tuple[str, int, Pair, Any, dict[str, Any]]
 
 
 def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
@@ -46,7 +45,9 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                         min_stripe: int = 20, joint_unit: str | None = None,
                         base_from_board: np.ndarray | None = None,
                         **stripe_options: Any) -> tuple[Any, list[ImageReport]]:
-    """Laser on/off image pairs + joint readings -> a calibration :class:`~hmlvs.Dataset`.
+    """Laser on/off image pairs + joint readings -> a calibration :class:`~hmlvs.Dataset`:
+    the session's views (:func:`paper_views`), then their calibration points
+    (:func:`points_of_views`).
 
     For every pair: difference image (albedo-normalised unless ``normalize=False``), stripe
     centres (:func:`extract_stripe` with ``stripe_options``), corners of the laser-off image
@@ -83,28 +84,117 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     (dataset, report) : the data set (ids ``"<pose id>:<point id>"``, ``pose_index`` = pair
         index, joints in rad) and one :class:`ImageReport` per pair.
     """
+    views = paper_views(source, robot=robot, board=board, params=params,
+                        normalize=normalize, channel=channel, min_stripe=min_stripe,
+                        joint_unit=joint_unit, base_from_board=base_from_board,
+                        **stripe_options)
+    return points_of_views(views, mode=mode, tolerance=tolerance, step=step)
+
+
+@dataclass
+class PaperViews:
+    """The views of an image session as the paper model reads them (:func:`paper_views`),
+    from which its calibration points are derived (:func:`points_of_views`, in either mode).
+
+    reports : one account per pair, in the session's order; a pair kept holds its view
+        (:attr:`ImageReport.view`: numbered corners, the stripe with every scan line's
+        status, the robot pose and joints), ``points`` 0 until they are derived
+    board : the board, placed in the base; image_size : (w, h), None when no pair was read
+    normalize : whether the stripes were extracted from the albedo-normalised difference
+    pairs : the number of pairs in the session
+    extraction : what the data set's ``meta`` records of the stripes' extraction
+    albedo_offset : the session's albedo offset, None when no pair fitted one
+    offset_taken : the indices of the pairs that took it
+    """
+
+    reports: list[ImageReport]
+    board: Any
+    image_size: tuple[int, int] | None
+    normalize: bool
+    pairs: int
+    extraction: dict[str, Any]
+    albedo_offset: float | None = None
+    offset_taken: set[int] = field(default_factory=set)
+
+    @property
+    def views(self) -> list[ViewData]:
+        """The views kept, in the session's order."""
+        return [r.view for r in self.reports if r.view is not None]
+
+
+def paper_views(source: Any, *, robot: Any = None, board: Any = None, params: Any = None,
+                normalize: bool = True, channel: int | None = None, min_stripe: int = 20,
+                joint_unit: str | None = None, base_from_board: np.ndarray | None = None,
+                **stripe_options: Any) -> PaperViews:
+    """The views of an image session for the paper model (the arguments as
+    :func:`dataset_from_images` takes them): one pass over the pairs
+    (:mod:`hmlvs.image.reading`), each board numbered from the corners ``params`` predict
+    (:func:`find_corners`; boards they cannot number are numbered again with the hand-eye
+    on which the views agree), the stripes extracted with Steger's smoothing along the stripe
+    :data:`BOARD_SMOOTH_ALONG` unless given, those that cannot fit their albedo offset given
+    the session's, and all corrected for the camera blur fitted to the session unless
+    ``blur_var`` is given."""
     inputs = _session_inputs(source, robot, board, joint_unit, base_from_board)
-    run = _Run(board=inputs.board, robot=inputs.robot, approx=inputs.approx
-               if params is None else params, normalize=normalize, min_stripe=min_stripe,
-               stripe_options=_board_stripe_options(stripe_options))
-    run.fit_blur = stripe_options.get("blur_var") is None
-    run.read_all(inputs, channel)
-    run.session_offset()
-    run.session_blur()
+    options = _board_stripe_options(stripe_options)
+    fit_blur = stripe_options.get("blur_var") is None
+    approx = inputs.approx if params is None else params
+    reader = PairReader(inputs.folder, inputs.unit, inputs.robot, inputs.size, channel,
+                        normalize, min_stripe, options, fit_blur,
+                        _predicted_numbering(approx, inputs.board), defer=True)
+    # one after the other: a pair's numbering may be replaced (tests count its calls)
+    reads = read_pairs(reader, inputs.records)
+    size = same_size(reads, of_loaded=True) or inputs.size
+    if any(r.kept and isinstance(r.found, _Unnumbered) for r in reads):
+        _number_by_agreement(reads, inputs.board, approx, reader)
+    offset, taken = session_offset(reads, reader)
+    fitted = session_blur(reads)
+    blur_var = options["blur_var"] if fitted is None else fitted
+    extraction = {"smooth_along": options["smooth_along"],
+                  **({"albedo_step": options["albedo_step"]}
+                     if options.get("albedo_step") is not None else {}),
+                  "blur_var": blur_var, "blur_var_fitted": fit_blur}
+    return PaperViews([_account(r, blur_var) for r in reads], inputs.board, size, normalize,
+                      len(inputs.records), extraction, offset, taken)
+
+
+def _account(read: PairRead, blur_var: float) -> ImageReport:
+    """A pair's account before its calibration points: a rejected pair's, or a kept pair's
+    holding its view."""
+    pair = read.pair
+    on, off = (pair.on_name, pair.off_name) if pair is not None else read.names
+    if not read.kept:
+        return ImageReport(read.id, read.index, str(on), str(off), False, read.why,
+                           pair.stripe.counts() if pair is not None else {}, 0)
+    corners = read.found
+    view = ViewData(read.id, np.asarray(corners.pixels, float),
+                    np.asarray(corners.index, int), pair.stripe.pixels, pair.pose,
+                    stripe=pair.stripe, joints=pair.joints)
+    return ImageReport(read.id, read.index, on, off, True, "", pair.stripe.counts(),
+                       len(corners), 0, {}, blur_var, view)
+
+
+def points_of_views(views: PaperViews, *, mode: Mode = "corners", tolerance: float = 0.5,
+                    step: int = 8) -> tuple[Any, list[ImageReport]]:
+    """The paper model's calibration data set derived from a session's views
+    (:func:`paper_views`): each view's calibration points (:func:`view_points` in ``mode``;
+    in "homography" mode with the division distortion fitted to the corners of all views),
+    and the pairs' accounts (a view that gives no point is rejected, saying why). As
+    :func:`dataset_from_images` returns them."""
     distortion = None
     if mode == "homography":
-        views = [f[3] for f in run.found if not isinstance(f, ImageReport)]
-        distortion = fit_division_distortion(views) if views else None
+        corners = [view_corners(v, views.board, views.image_size) for v in views.views]
+        distortion = fit_division_distortion(corners) if corners else None
     points = _Points()
-    for item in run.found:
-        points.add(item, run.board, mode, tolerance, step, distortion, run.blur_var)
-    meta = {"source": "images", "mode": mode, "normalize": normalize, **_board_meta(run.board),
-            **run.meta(), "pairs": len(inputs.records),
+    for report in views.reports:
+        points.add(report, views.board, views.image_size, mode, tolerance, step, distortion)
+    taken = views.offset_taken
+    meta = {"source": "images", "mode": mode, "normalize": views.normalize,
+            **_board_meta(views.board), **views.extraction, "pairs": views.pairs,
             "pairs_used": sum(r.ok for r in points.reports),
-            "image_size": list(run.size) if run.size else None,
-            **({"albedo_offset_session": run.offset} if run.taken else {}),
+            "image_size": list(views.image_size) if views.image_size else None,
+            **({"albedo_offset_session": views.albedo_offset} if taken else {}),
             **({"albedo_offset_taken_by": [r.id for r in points.reports
-                                           if r.index in run.taken]} if run.taken else {}),
+                                           if r.index in taken]} if taken else {}),
             **({} if distortion is None else {"division_distortion": {
                 "centre_px": [float(x) for x in distortion[0]],
                 "k_per_px2": float(distortion[1])}})}
@@ -175,188 +265,83 @@ def _board_stripe_options(stripe_options: dict[str, Any]) -> dict[str, Any]:
     return options
 
 
-@dataclass
-class _Run:
-    """A session's pairs on their way to calibration points: first every pair's stripe and
-    corners (:meth:`read_all`), then the albedo offset and the blur variance of the whole
-    session (one board print, one laser, one lens)."""
+@dataclass(frozen=True)
+class _Unnumbered:
+    """A board the approximate parameters could not number (``why``): numbered again once
+    the views' agreement fixes the hand-eye (:func:`_number_by_agreement`)."""
 
-    board: Any
-    robot: Any
-    approx: Any
-    normalize: bool
-    min_stripe: int
-    stripe_options: dict[str, Any]
-    fit_blur: bool = False
-    size: tuple[int, int] | None = None
-    #: per pair, in the session's order: its report (rejected) or its Found tuple
-    found: list[ImageReport | Found] = field(default_factory=list)
-    offset: float | None = None
-    taken: set[int] = field(default_factory=set)
+    why: str
 
-    @property
-    def blur_var(self) -> float:
-        return float(self.stripe_options["blur_var"])
 
-    def accept(self, pid: str, index: int, pair: Pair, corners: Any, info: dict[str, Any]
-               ) -> Found:
-        """A pair whose board was numbered; its images are dropped once its stripe is final."""
-        if not stripe_pending(pair):
-            if self.fit_blur:
-                info["edge"] = edge_shift(pair, self.normalize, self.stripe_options)
-            pair = replace(pair, on=None, off=None)
-        return (pid, index, pair, corners, info)
+def _predicted_numbering(approx: Any, board: Any) -> Any:
+    """The paper model's numbering of a pair's board (for :class:`PairReader`): the corners
+    found where ``approx`` and the pair's pose predict them (:func:`find_corners`), or
+    :class:`_Unnumbered` when the prediction cannot number them."""
 
-    def read_all(self, inputs: _Inputs, channel: int | None) -> None:
-        """Every pair's stripe and numbered corners (or its report); boards the approximate
-        parameters could not number are numbered again by the views' agreement."""
+    def number(pid: str, pair: Pair) -> Corners | _Unnumbered:
         import cv2
 
         from .corners import predicted_corners
 
-        self.size = inputs.size
-        # pairs whose board the prediction could not number: (place in found, pair, info,
-        # error)
-        unnumbered: list[tuple[int, Pair, dict[str, Any], str]] = []
-        for index, rec in enumerate(inputs.records):
-            pid = record_id(rec, index)
-            on_name, off_name = record_names(rec)
-            info: dict[str, Any] = {}
-            try:
-                pair = read_pair(rec, index, inputs.folder, inputs.unit, self.robot,
-                                 self.size, channel, self.normalize, self.stripe_options,
-                                 self.min_stripe, defer=True)
-                on_name, off_name, self.size = pair.on_name, pair.off_name, pair.size
-                info["stripe"] = pair.stripe.counts()
-                try:
-                    corners = find_corners(pair.board_image, self.board,
-                                           expected=predicted_corners(self.approx, pair.pose,
-                                                                      self.board))
-                except BoardNotFoundError as e:
-                    raise PairRejected(f"checkerboard: {e}") from None
-                except ValueError as e:
-                    # numbered again once the views' agreement fixes the hand-eye (below)
-                    unnumbered.append((len(self.found), pair, info, f"checkerboard: {e}"))
-                    self.found.append(ImageReport(pid, index, str(on_name), str(off_name),
-                                                  False, f"checkerboard: {e}",
-                                                  info["stripe"], 0))
-                    continue
-                except cv2.error as e:
-                    raise opencv_failure(e, "checkerboard") from None
-            except PairRejected as e:
-                self.found.append(ImageReport(pid, index, str(on_name), str(off_name), False,
-                                              str(e), info.get("stripe", {}),
-                                              info.get("corners", 0)))
-                continue
-            self.found.append(self.accept(pid, index, pair, corners, info))
-        if unnumbered:
-            _number_by_agreement(self.found, unnumbered, self.board, self.approx, self.accept)
+        try:
+            return find_corners(pair.board_image, board,
+                                expected=predicted_corners(approx, pair.pose, board))
+        except BoardNotFoundError as e:
+            raise PairRejected(f"checkerboard: {e}") from None
+        except ValueError as e:
+            return _Unnumbered(f"checkerboard: {e}")
+        except cv2.error as e:
+            raise opencv_failure(e, "checkerboard") from None
 
-    def session_offset(self) -> None:
-        """One board print and one laser: a pair whose stripe lies on one level of the board
-        only (along a row of light squares) cannot fit the albedo offset; it takes the
-        session's, the median of the other pairs' (with 0 instead, its stripe would be lost
-        on the light squares and pulled towards the dark ones where it touches them)."""
-        offsets = [f[2].offset for f in self.found if not isinstance(f, ImageReport)
-                   and f[2].offset is not None and np.isfinite(f[2].offset)]
-        self.offset = float(np.median(offsets)) if offsets else None
-        for n, item in enumerate(self.found):
-            if isinstance(item, ImageReport) or not stripe_pending(item[2]):
-                continue
-            pid, index, pair, corners, info = item
-            options = self.stripe_options
-            try:
-                if self.offset is not None:
-                    pair = restripe(pair, self.offset, self.normalize, options,
-                                    self.min_stripe)
-                    options = dict(options, albedo_offset=self.offset)
-                else:
-                    check_stripe(pair, self.min_stripe)
-            except PairRejected as e:
-                self.found[n] = ImageReport(pid, index, pair.on_name, pair.off_name, False,
-                                            str(e), pair.stripe.counts(), 0)
-                continue
-            if self.offset is not None:
-                self.taken.add(index)
-            if self.fit_blur:
-                info["edge"] = edge_shift(pair, self.normalize, options)
-            info["stripe"] = pair.stripe.counts()
-            self.found[n] = (pid, index, replace(pair, on=None, off=None), corners, info)
-
-    def session_blur(self) -> None:
-        """Without a given blur variance, the session's (:func:`session_blur_var`) applied to
-        every kept pair's stripe."""
-        if not self.fit_blur:
-            return
-        kept = [f for f in self.found if not isinstance(f, ImageReport)]
-        self.stripe_options["blur_var"] = session_blur_var([(f[2].stripe, f[4]["edge"])
-                                                            for f in kept])
-        for n, item in enumerate(self.found):
-            if not isinstance(item, ImageReport):
-                pid, index, pair, corners, info = item
-                self.found[n] = (pid, index, replace(pair, stripe=with_blur_var(
-                    pair.stripe, info["edge"], self.blur_var)), corners, info)
-
-    def meta(self) -> dict[str, Any]:
-        """What the data set's ``meta`` records of the stripes' extraction."""
-        o = self.stripe_options
-        return {"smooth_along": o["smooth_along"],
-                **({"albedo_step": o["albedo_step"]} if o.get("albedo_step") is not None
-                   else {}),
-                "blur_var": self.blur_var, "blur_var_fitted": self.fit_blur}
+    return number
 
 
 @dataclass
 class _Points:
-    """The calibration points of a session's pairs, gathered view by view."""
+    """The calibration points of a session's views, gathered view by view."""
 
     reports: list[ImageReport] = field(default_factory=list)
     columns: dict[str, list[Any]] = field(default_factory=lambda: {
         k: [] for k in ("pixels", "points", "joints", "poses", "pose_index", "quality")})
     ids: list[str] = field(default_factory=list)
 
-    def add(self, item: ImageReport | Found, board: Any, mode: Mode, tolerance: float,
-            step: int, distortion: Any, blur_var: float) -> None:
-        """One pair's calibration points, or its report saying why it has none."""
+    def add(self, report: ImageReport, board: Any, size: tuple[int, int] | None, mode: Mode,
+            tolerance: float, step: int, distortion: Any) -> None:
+        """One view's calibration points (its account completed), or its account saying why
+        it has none; a rejected pair's account as it is."""
         import cv2
 
-        if isinstance(item, ImageReport):
-            self.reports.append(item)
+        view = report.view
+        if view is None:
+            self.reports.append(report)
             return
-        pid, index, pair, corners, info = item
-        info["corners"] = len(corners)
+        rejected: dict[str, str] = {}
         try:
             try:
-                cp = calibration_points(pair.stripe, corners, board, mode=mode,
-                                        tolerance=tolerance, step=step, distortion=distortion)
+                cp = view_points(view, board, image_size=size, mode=mode, tolerance=tolerance,
+                                 step=step, distortion=distortion)
             except cv2.error as e:
                 raise opencv_failure(e, "calibration points") from None
-            info["rejected"] = dict(cp.rejected)
+            rejected = dict(cp.rejected)
             if len(cp) == 0:
                 raise PairRejected("no calibration points: " + (
                     "; ".join(f"{k}: {v}" for k, v in cp.rejected.items()) or
                     ("no corner lies on the stripe" if mode == "corners" else
                      "the stripe does not cross a square with four found corners")))
         except PairRejected as e:
-            self.reports.append(ImageReport(pid, index, pair.on_name, pair.off_name, False,
-                                            str(e), info.get("stripe", {}),
-                                            info.get("corners", 0), 0,
-                                            info.get("rejected", {})))
+            self.reports.append(replace(report, ok=False, reason=str(e), points=0,
+                                        rejected=rejected, blur_var=None, view=None))
             return
-        self.reports.append(ImageReport(
-            pid, index, pair.on_name, pair.off_name, True, "", info["stripe"],
-            info["corners"], len(cp), info["rejected"], blur_var,
-            ViewData(pid, np.asarray(corners.pixels, float), np.asarray(corners.index, int),
-                     pair.stripe.pixels, pair.pose)))
+        self.reports.append(replace(report, points=len(cp), rejected=rejected))
         c = self.columns
         c["pixels"].append(cp.pixels)
         c["points"].append(cp.points)
-        self.ids += [f"{pid}:{k}" for k in cp.ids]
-        c["joints"].append(None if pair.joints is None
-                           else np.repeat(pair.joints[None], len(cp), axis=0))
-        c["poses"].append(np.repeat(pair.pose[None], len(cp), axis=0))
-        c["pose_index"].append(np.full(len(cp), index, dtype=np.int64))
-        c["quality"].append(_point_quality(pair.stripe, cp))
+        self.ids += [f"{view.id}:{k}" for k in cp.ids]
+        c["joints"].append(None if view.joints is None
+                           else np.repeat(view.joints[None], len(cp), axis=0))
+        c["poses"].append(np.repeat(view.base_from_hand[None], len(cp), axis=0))
+        c["pose_index"].append(np.full(len(cp), report.index, dtype=np.int64))
+        c["quality"].append(_point_quality(view.stripe, cp))
 
     def dataset(self, meta: dict[str, Any]) -> Any:
         """The data set of the points gathered; ValueError when no pair gave one."""
@@ -398,26 +383,53 @@ def _placed(board: Any, base_from_board: np.ndarray) -> Any:
                         col_direction=tuple(float(x) for x in r[:, 1]))
 
 
-def _number_by_agreement(found: list[Any], unnumbered: list[tuple[int, Any, dict, str]],
-                         board: Any, approx: Any, accept: Any) -> None:
+def _number_by_agreement(reads: list[PairRead], board: Any, approx: Any,
+                         reader: PairReader) -> None:
     """Number again the boards the approximate parameters could not (partly visible ones,
     predicted a third of a square or more off): with the camera and hand-eye on which all
     views' corners agree (:mod:`hmlvs.image.consensus`), the board is predicted within a few
-    pixels. ``found`` entries are replaced in place (by ``accept``'s tuple, or by a report
-    saying why the view stays unnumbered)."""
+    pixels. ``reads`` entries are replaced in place (numbered and measured by ``reader``, or
+    rejected saying why the view stays unnumbered)."""
+    import cv2
+
+    waiting = [n for n, r in enumerate(reads) if r.kept and isinstance(r.found, _Unnumbered)]
+    grids: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    for r in reads:
+        if r.kept and isinstance(r.found, Corners):
+            c = r.found
+            grids.append((c.pixels, np.c_[c.index // board.cols, c.index % board.cols],
+                          r.pair.pose))
+    agreed, why = _agreement(grids, [reads[n].pair for n in waiting], board, approx)
+    for n in waiting:
+        r = reads[n]
+        if agreed is None:
+            reads[n] = r.rejected(f"{r.found.why}; {why}")
+            continue
+        from .partial import predicted_board_pixels
+
+        expected = predicted_board_pixels(agreed, r.pair.pose, board)
+        try:
+            corners = find_corners(r.pair.board_image, board, expected=expected)
+        except (ValueError, cv2.error) as e:
+            reads[n] = r.rejected(f"checkerboard: {e} (predicted with the hand-eye the views "
+                                  "agree on)")
+            continue
+        reads[n] = reader.measured(replace(r, found=corners))
+
+
+def _agreement(grids: list[tuple[np.ndarray, np.ndarray, np.ndarray]], waiting: list[Pair],
+               board: Any, approx: Any) -> tuple[Any, str]:
+    """The camera, hand-eye and board on which the numbered views' corners (``grids``: pixels,
+    (row, column), pose) and the grids found in the ``waiting`` pairs agree, as
+    :func:`~hmlvs.image.partial.predicted_board_pixels` reads them; or (None, why not)."""
     import cv2
 
     from .._arrays import as_params
     from .consensus import MIN_VIEWS, consensus_hand_eye, grid_intrinsics
     from .grid import detect_grid
 
-    grids: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-    for item in found:
-        if not isinstance(item, ImageReport):
-            c = item[3]
-            grids.append((c.pixels, np.c_[c.index // board.cols, c.index % board.cols],
-                          item[2].pose))
-    for _, pair, _, _ in unnumbered:
+    grids = list(grids)
+    for pair in waiting:
         try:
             g = detect_grid(pair.board_image, board)
         except ValueError:
@@ -426,40 +438,21 @@ def _number_by_agreement(found: list[Any], unnumbered: list[tuple[int, Any, dict
         ij = np.stack([a.ravel() for a in np.meshgrid(np.arange(m), np.arange(n),
                                                       indexing="ij")], axis=1)
         grids.append((g.pixels.reshape(-1, 2), ij, pair.pose))
-    q = as_params(approx)
-    why = ""
     if len(grids) < MIN_VIEWS:
-        why = (f"only {len(grids)} views show a grid of corners, too few to number partly "
-               "visible boards by their agreement")
-    else:
-        try:
-            k0 = np.array([[q[0] / q[1], 0.0, q[3]], [0.0, q[0] / q[2], q[4]], [0, 0, 1.0]])
-            size = unnumbered[0][1].size
-            k, d = grid_intrinsics([(px, ij) for px, ij, _ in grids], board.square, size, k0)
-            hand_eye = consensus_hand_eye(grids, board, k, d)
-        except (ValueError, cv2.error) as e:
-            why = str(e)
-    if not why:
-        from types import SimpleNamespace
+        return None, (f"only {len(grids)} views show a grid of corners, too few to number "
+                      "partly visible boards by their agreement")
+    q = as_params(approx)
+    try:
+        k0 = np.array([[q[0] / q[1], 0.0, q[3]], [0.0, q[0] / q[2], q[4]], [0, 0, 1.0]])
+        k, d = grid_intrinsics([(px, ij) for px, ij, _ in grids], board.square,
+                               waiting[0].size, k0)
+        hand_eye = consensus_hand_eye(grids, board, k, d)
+    except (ValueError, cv2.error) as e:
+        return None, str(e)
+    from types import SimpleNamespace
 
-        from .partial import predicted_board_pixels
-
-        # the camera, hand-eye and board the views agree on, as predicted_board_pixels reads
-        agreed = SimpleNamespace(camera_matrix=k, dist_coeffs=d, hand_from_camera=hand_eye,
-                                 base_from_board=board.base_from_board())
-    for place, pair, info, error in unnumbered:
-        old = found[place]
-        if not why:
-            expected = predicted_board_pixels(agreed, pair.pose, board)
-            try:
-                corners = find_corners(pair.board_image, board, expected=expected)
-            except (ValueError, cv2.error) as e:
-                found[place] = replace(old, reason=f"checkerboard: {e} (predicted with the "
-                                       "hand-eye the views agree on)")
-                continue
-            found[place] = accept(old.id, old.index, pair, corners, info)
-        else:
-            found[place] = replace(old, reason=f"{error}; {why}")
+    return SimpleNamespace(camera_matrix=k, dist_coeffs=d, hand_from_camera=hand_eye,
+                           base_from_board=board.base_from_board()), ""
 
 
 def _point_quality(stripe: StripeResult, cp: Any) -> dict[str, np.ndarray]:

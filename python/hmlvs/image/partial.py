@@ -157,7 +157,8 @@ def add_partial_views(partial: list[tuple[int, PartialView, Any]], views: list[V
             # no board in the image at all: a laser-only view (the stripe on the board's
             # plane, e.g. taken with the lights off), used through the robot poses
             keyed.append((slot, ViewData(p.id, np.zeros((0, 2)), np.zeros(0, int), p.stripe,
-                                         p.base_from_hand)))
+                                         p.base_from_hand, stripe=pair.stripe,
+                                         joints=pair.joints)))
             reports[slot] = ImageReport(p.id, slot, pair.on_name, pair.off_name, True, "",
                                         pair.stripe.counts(), 0, int(pair.stripe.found.sum()))
             continue
@@ -166,7 +167,7 @@ def add_partial_views(partial: list[tuple[int, PartialView, Any]], views: list[V
             continue
         keyed.append((slot, ViewData(p.id, np.asarray(corners.pixels, float),
                                      np.asarray(corners.index, int), p.stripe,
-                                     p.base_from_hand)))
+                                     p.base_from_hand, stripe=pair.stripe, joints=pair.joints)))
         reports[slot] = ImageReport(p.id, slot, pair.on_name, pair.off_name, True, "",
                                     pair.stripe.counts(), len(corners.index),
                                     int(pair.stripe.found.sum()))

@@ -288,6 +288,34 @@ def _placed_points(stripe: StripeResult, board: Any, spx: np.ndarray, spx_u: np.
                              np.array(out_sig), np.zeros(len(out_px)), mode, rejected)
 
 
+def view_corners(view: Any, board: Any, image_size: tuple[int, int] | None = None
+                 ) -> Corners:
+    """The numbered corners of a view (:class:`hmlvs.data.views.ViewData`: its
+    ``corner_pixels`` and ``corner_index``) on ``board``, the board the view was numbered on
+    (placed in the base for the paper model), as :func:`calibration_points` and
+    :func:`fit_division_distortion` take them; ``image_size`` (w, h): the view's image's."""
+    index = np.asarray(view.corner_index, int)
+    return Corners(np.asarray(view.corner_pixels, float), index, np.ones(len(index), bool),
+                   board, image_size=None if image_size is None else
+                   (int(image_size[0]), int(image_size[1])))
+
+
+def view_points(view: Any, board: Any, *, image_size: tuple[int, int] | None = None,
+                mode: Mode = "corners", tolerance: float = 0.5, window: int = 4,
+                step: int = 8, distortion: Distortion | None = None) -> CalibrationPoints:
+    """The paper model's calibration points of one view, derived from its observations
+    (:class:`hmlvs.data.views.ViewData`): its stripe, every scan line with its status
+    (``view.stripe``), and its numbered corners (:func:`view_corners` on ``board``, the
+    board placed in the base), by :func:`calibration_points` in ``mode``. ValueError for a
+    view without its stripe (one not read from images)."""
+    if not isinstance(view.stripe, StripeResult):
+        raise ValueError(f"view {view.id}: calibration points need the view's stripe with "
+                         "every scan line (ViewData.stripe), as the image pipeline gives it")
+    return calibration_points(view.stripe, view_corners(view, board, image_size), board,
+                              mode=mode, tolerance=tolerance, window=window, step=step,
+                              distortion=distortion)
+
+
 def _undistort(px: np.ndarray, centre: np.ndarray, k: float) -> np.ndarray:
     d = px - centre
     return centre + d / (1.0 + k * np.sum(d * d, axis=1, keepdims=True))

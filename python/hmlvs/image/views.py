@@ -1,9 +1,11 @@
 """Laser on/off images + robot poses -> the views of the general model's joint calibration.
 
-For every pair: the stripe (the same checks, difference image and extraction as the paper
-pipeline, :func:`hmlvs.image.session.stripe_from_pair`) and the whole board, found and numbered
-without any prior model (:func:`hmlvs.image.corners.detect_board`). Which stripe pixels lie on
-the board is decided by the calibration itself, once the board's pose in each view is known.
+For every pair, in the session's one pass (:mod:`hmlvs.image.reading`, as the paper model's
+:func:`hmlvs.image.paper_session.paper_views`): the stripe (the same checks, difference image
+and extraction, :func:`hmlvs.image.session.stripe_from_pair`) and the whole board, found and
+numbered without any prior model (:func:`hmlvs.image.corners.detect_board`). Which stripe
+pixels lie on the board is decided by the calibration itself, once the board's pose in each
+view is known.
 """
 
 from __future__ import annotations
@@ -20,17 +22,13 @@ from .accounts import ImageReport
 from .charuco import detect_charuco
 from .corners import BoardNotFoundError, detect_board, prefer_detected
 from .partial import PartialView, add_partial_views, partial_view
+from .reading import PairRead, PairReader, read_pairs, same_size, session_blur
 from .session import (
+    Pair,
     PairRejected,
     checked_blur_var,
-    edge_shift,
     opencv_failure,
-    read_pair,
     read_session_manifest,
-    record_id,
-    record_names,
-    session_blur_var,
-    with_blur_var,
 )
 
 MIN_CORNERS = 6  # a view needs this many numbered corners (calibrate_joint's minimum)
@@ -89,8 +87,6 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     session (:func:`hmlvs.image.session.session_blur_var`). The views are read on
     ``threads`` threads (default: one per core); the result does not depend on the number.
     """
-    from concurrent.futures import ThreadPoolExecutor
-
     from ..geometry.board import Checkerboard
 
     records, doc, folder = read_session_manifest(source)
@@ -99,33 +95,33 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     options = dict(stripe_options)
     fit_blur = options.get("blur_var") is None
     options["blur_var"] = checked_blur_var(options.get("blur_var"))
-    reader = _ViewReader(
-        board_spec, board_spec if board_spec.unambiguous else Checkerboard(
-            rows=board_spec.rows, cols=board_spec.cols, square=board_spec.square),
+    numbering = _ModelFree(board_spec, board_spec if board_spec.unambiguous else Checkerboard(
+        rows=board_spec.rows, cols=board_spec.cols, square=board_spec.square))
+    reader = PairReader(
         folder, doc.get("joint_unit", "rad") if joint_unit is None else joint_unit,
         _session_robot(doc, records, robot),
         (int(given[0]), int(given[1])) if isinstance(given, list) and len(given) == 2
-        else None, channel, normalize, min_stripe, options, fit_blur)
-    # The views one per core (each view's work depends on its own images alone, OpenCV's
-    # random samples included: the same result whatever the number of threads); then in
-    # the session's order.
-    with ThreadPoolExecutor(max_workers=_threads(threads, len(records))) as pool:
-        done = list(pool.map(reader.read, enumerate(records)))
-    got = _Gathered()
-    for item in done:
-        got.add(*item)
-    if got.size is None:
+        else None, channel, normalize, min_stripe, options, fit_blur, numbering.number,
+        keep_board=_top_left)
+    # the views one per core, then in the session's order
+    reads = read_pairs(reader, records, _threads(threads, len(records)))
+    size = same_size(reads)
+    if size is None:
         where = "" if isinstance(source, (list, tuple)) else f"{source}: "
-        if not got.reports:
+        if not reads:
             raise ValueError(f"{where}the session lists no image pairs (its poses list is "
                              "empty)")
         raise ValueError(f"{where}no image pair could be read: " +
-                         "; ".join(f"{r.id}: {r.reason}" for r in got.reports))
-    var = got.fit_blur(options["blur_var"])
+                         "; ".join(f"{r.id}: {r.why}" for r in reads))
+    fitted = session_blur(reads)
+    var = options["blur_var"] if fitted is None else fitted
+    got = _Gathered(size=size)
+    for read in reads:
+        got.add(read)
     got.prefer_detected()
     if got.partial:
         add_partial_views(got.partial, got.views, got.reports, board_spec, got.size,
-                          reader.detector_board, board_pose, MIN_CORNERS)
+                          numbering.detector_board, board_pose, MIN_CORNERS)
     views, reports = _stripes_on_one_line(got.views, got.reports, var)
     return views, board_spec, got.size, board_pose, reports
 
@@ -145,111 +141,73 @@ def _session_robot(doc: dict[str, Any], records: list[Any], robot: Any) -> Any:
     return Robot.scorbot_er7()
 
 
-@dataclass
-class _ViewReader:
-    """Reads one view of a session (:meth:`read`), on any thread."""
+@dataclass(frozen=True)
+class _ModelFree:
+    """The general model's numbering of a pair's board (for :class:`PairReader`), without
+    any prior model: a whole board's corners (:func:`detect_corners`), or the
+    :class:`PartialView` of a partly visible plain checkerboard, numbered later from a first
+    calibration."""
 
     board_spec: BoardSpec
     detector_board: Any  # the board the detector looks for
-    folder: Any
-    unit: str
-    robot: Any
-    size: tuple[int, int] | None  # the manifest's image size, if it gives one
-    channel: int | None
-    normalize: bool
-    min_stripe: int
-    stripe_options: dict[str, Any]
-    fit_blur: bool
 
-    def read(self, item: tuple[int, Any]) -> tuple[Any, ...]:
-        """One view's pair and board (or why not): (pid, index, names, pair, corners or the
-        PartialView of a board not wholly seen, edge shifts, the whole board's image or
-        None, reject reason)."""
+    def number(self, pid: str, pair: Pair) -> Any:
         import cv2
 
-        index, rec = item
-        pid = record_id(rec, index)
-        names = record_names(rec)
         try:
-            pair = read_pair(rec, index, self.folder, self.unit, self.robot, self.size,
-                             self.channel, self.normalize, self.stripe_options,
-                             self.min_stripe)
-            edge = edge_shift(pair, self.normalize, self.stripe_options) \
-                if self.fit_blur else None
-            try:
-                found: Any = detect_corners(pair.board_image, self.detector_board)
-            except BoardNotFoundError as e:
-                if self.board_spec.unambiguous:
-                    raise PairRejected(str(e)) from None
-                # a partly visible board: numbered later from a first calibration
-                found = partial_view(pid, pair, self.detector_board, e)
-            except ValueError as e:
+            found = detect_corners(pair.board_image, self.detector_board)
+        except BoardNotFoundError as e:
+            if self.board_spec.unambiguous:
                 raise PairRejected(str(e)) from None
-            except cv2.error as e:
-                raise opencv_failure(e, "board", hint="") from None
-            if not isinstance(found, PartialView) and len(found) < MIN_CORNERS:
-                raise PairRejected(f"only {len(found)} board corners found and numbered; a "
-                                   f"view needs at least {MIN_CORNERS}")
-        except PairRejected as e:
-            return pid, index, names, None, None, None, None, str(e)
-        image = None
-        if not isinstance(found, PartialView):
-            # a whole board's image only for prefer_detected; the rest is no longer needed
-            image = pair.board_image if found.rule.startswith("top-left") else None
-            pair = replace(pair, on=None, off=None, board=None)
-        return pid, index, names, pair, found, edge, image, ""
+            return partial_view(pid, pair, self.detector_board, e)
+        except ValueError as e:
+            raise PairRejected(str(e)) from None
+        except cv2.error as e:
+            raise opencv_failure(e, "board", hint="") from None
+        if len(found) < MIN_CORNERS:
+            raise PairRejected(f"only {len(found)} board corners found and numbered; a "
+                               f"view needs at least {MIN_CORNERS}")
+        return found
+
+
+def _top_left(found: Any) -> bool:
+    """Whether a whole board's image is kept: for :func:`prefer_detected`, which may search
+    a board numbered by the top-left rule again."""
+    return found.rule.startswith("top-left")
 
 
 @dataclass
 class _Gathered:
     """The views read, in the session's order, with a report for each."""
 
+    size: tuple[int, int]
     views: list[ViewData] = field(default_factory=list)
     reports: list[Any] = field(default_factory=list)  # None: a partial view's, for now
     partial: list[tuple[int, PartialView, Any]] = field(default_factory=list)
-    size: tuple[int, int] | None = None
-    edges: dict[str, tuple[Any, np.ndarray]] = field(default_factory=dict)
     whole: dict[str, Any] = field(default_factory=dict)  # the whole boards' Corners
     board_images: dict[str, np.ndarray] = field(default_factory=dict)  # and their images
 
-    def add(self, pid: str, index: int, names: tuple[str, str], pair: Any, found: Any,
-            edge: Any, image: Any, why: str) -> None:
-        """One view as :meth:`_ViewReader.read` returned it."""
-        if not why and self.size is not None and pair.size != self.size:
-            why = (f"the images are {pair.size[0]} x {pair.size[1]} pixels but the "
-                   f"session's are {self.size[0]} x {self.size[1]}")
-        if why:
-            self.reports.append(ImageReport(pid, index, names[0], names[1], False, why))
+    def add(self, read: PairRead) -> None:
+        """One pair as the session's pass read it (its stripe corrected for the blur)."""
+        if not read.kept:
+            self.reports.append(ImageReport(read.id, read.index, read.names[0],
+                                            read.names[1], False, read.why))
             return
-        self.size = pair.size
-        if edge is not None:
-            self.edges[pid] = (pair.stripe, edge)
+        pair, found = read.pair, read.found
         if isinstance(found, PartialView):
-            self.partial.append((len(self.reports), found, pair))
+            self.partial.append((len(self.reports), replace(found, stripe=pair.stripe.pixels),
+                                 pair))
             self.reports.append(None)
             return
-        self.whole[pid] = found
-        if image is not None:
-            self.board_images[pid] = image  # for prefer_detected, if it asks
-        self.views.append(ViewData(pid, np.asarray(found.pixels, float),
+        self.whole[read.id] = found
+        if read.image is not None:
+            self.board_images[read.id] = read.image  # for prefer_detected, if it asks
+        self.views.append(ViewData(read.id, np.asarray(found.pixels, float),
                                    np.asarray(found.index, int), pair.stripe.pixels,
-                                   pair.pose))
-        self.reports.append(ImageReport(pid, index, pair.on_name, pair.off_name, True, "",
-                                        pair.stripe.counts(), len(found.index),
+                                   pair.pose, stripe=pair.stripe, joints=pair.joints))
+        self.reports.append(ImageReport(read.id, read.index, pair.on_name, pair.off_name, True,
+                                        "", pair.stripe.counts(), len(found.index),
                                         int(pair.stripe.found.sum())))
-
-    def fit_blur(self, var: float) -> float:
-        """The session's blur variance fitted to the stripes' edge shifts (when they were
-        measured; else ``var``), applied to every view's stripe."""
-        if not self.edges:
-            return var
-        var = session_blur_var(list(self.edges.values()))
-        fixed = {pid: with_blur_var(st, k, var).pixels for pid, (st, k) in self.edges.items()}
-        self.views = [replace(v, laser_pixels=fixed.get(v.id, v.laser_pixels))
-                      for v in self.views]
-        self.partial = [(slot, replace(p, stripe=fixed.get(p.id, p.stripe)), pair)
-                        for slot, p, pair in self.partial]
-        return var
 
     def prefer_detected(self) -> None:
         """The whole boards' corners as the detector gave them, when
