@@ -10,7 +10,6 @@ from hmlvs.cli import main as cli_main
 from hmlvs.image.stripe import StripeResult, StripeStatus
 from hmlvs.report.inspect import (
     CORNER_COLOUR,
-    OFF_LINE_COLOUR,
     STATUS_COLOURS,
     TICK,
     draw_view,
@@ -124,23 +123,50 @@ def test_rejected_scan_lines_are_marked_at_the_border_in_their_status_colour():
 
 
 def test_centres_the_pipeline_dropped_off_the_line_are_drawn_apart():
-    # the pipeline kept the found centres of columns 25-59 (``kept``); those of columns 20-24
-    # it dropped as off the stripe's line (the terminal's OFF_LINE): drawn in their own
-    # colour, marked at the border and named in the header, not in the found centres' green
+    # the pipeline dropped the found centres of columns 20-24 as off the stripe's line
+    # (status OFF_LINE, views_from_images): drawn in their own colour, marked at the border
+    # and named in the header, not in the found centres' green
     n = 200
     status = np.full(n, StripeStatus.NONE, np.uint8)
     status[20:60] = StripeStatus.FOUND
-    centre = np.where(status == StripeStatus.FOUND, 150.0, np.nan)
+    status[20:25] = StripeStatus.OFF_LINE
+    centre = np.where((np.arange(n) >= 20) & (np.arange(n) < 60), 150.0, np.nan)
     nan = np.full(n, np.nan)
     stripe = StripeResult(np.arange(n), centre, nan, nan, nan, status, np.zeros(n, int),
                           "columns", "centroid", 10.0, 1.0)
-    kept = np.column_stack([np.arange(25, 60), np.full(35, 150.0)])
-    img = draw_view(np.full((200, n), 80, np.uint8), None, stripe, "", kept=kept)
+    img = draw_view(np.full((200, n), 80, np.uint8), None, stripe, "")
+    off = STATUS_COLOURS[StripeStatus.OFF_LINE]
     green = np.all(img == STATUS_COLOURS[StripeStatus.FOUND], axis=2)
     assert set(np.nonzero(green)[1].tolist()) == set(range(25, 61))  # (the dots: radius 1)
-    cyan = np.all(img == OFF_LINE_COLOUR, axis=2)
+    cyan = np.all(img == off, axis=2)
     assert set(np.nonzero(cyan[200 - TICK:])[1].tolist()) == set(range(20, 25))
-    assert set(np.nonzero(cyan[140:160])[1].tolist()) == set(range(19, 26))
+    assert set(np.nonzero(cyan[140:160])[1].tolist()) <= set(range(19, 26))
     assert cyan[:40].any()  # the header names OFF_LINE in its colour
+    status[20:25] = StripeStatus.FOUND
     without = draw_view(np.full((200, n), 80, np.uint8), None, stripe, "")
-    assert not np.all(without == OFF_LINE_COLOUR, axis=2).any()
+    assert not np.all(without == off, axis=2).any()
+
+
+def test_the_pipeline_marks_centres_off_the_stripe_line_in_the_view(tmp_path):
+    # a found centre far off the view's stripe line (a glint) is dropped from the view's
+    # stripe pixels and marked OFF_LINE in the view's stripe, and the account counts it
+    from hmlvs.data.views import ViewData
+    from hmlvs.image.accounts import ImageReport
+    from hmlvs.image.views import _stripes_on_one_line
+
+    n = 300
+    status = np.full(n, StripeStatus.NONE, np.uint8)
+    status[20:280] = StripeStatus.FOUND
+    centre = np.where(status == StripeStatus.FOUND, 100.0 + 0.1 * np.arange(n), np.nan)
+    centre[200:205] = 20.0  # a glint 100 px above the line
+    nan = np.full(n, np.nan)
+    stripe = StripeResult(np.arange(n), centre, nan, nan, nan, status, np.zeros(n, int),
+                          "columns", "centroid", 10.0, 1.0)
+    view = ViewData("v", np.zeros((0, 2)), np.zeros(0, int), stripe.pixels, np.eye(4),
+                    stripe=stripe)
+    report = ImageReport("v", 0, "on.png", "off.png", True, "", stripe.counts(), 0, 260)
+    views, reports = _stripes_on_one_line([view], [report], 0.3)
+    out = views[0].stripe
+    assert np.nonzero(out.status == StripeStatus.OFF_LINE)[0].tolist() == list(range(200, 205))
+    assert len(views[0].laser_pixels) == 255 and np.all(views[0].laser_pixels[:, 1] > 50)
+    assert reports[0].stripe["OFF_LINE"] == 5 and reports[0].stripe["FOUND"] == 255

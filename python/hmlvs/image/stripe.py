@@ -42,6 +42,9 @@ class StripeStatus(enum.IntEnum):
     CLIPPED = 7      #: the profile (centre +- one FWHM) runs off the image border
     DOUBLE_PEAK = 8  #: the peak has two humps (a reflection or split line next to it)
     ALBEDO_EDGE = 9  #: the laser-off image (the albedo) steps under the profile
+    # Set by the session pipeline (:func:`hmlvs.image.views.views_from_images`) on found
+    # centres that lie off the view's one stripe line (a reflection or glint beyond it).
+    OFF_LINE = 10    #: a centre off the view's stripe line, left out of the calibration
 
 
 # ------------------------------------------------------------------------------------------

@@ -30,6 +30,7 @@ from .session import (
     opencv_failure,
     read_session_manifest,
 )
+from .stripe import StripeStatus
 
 MIN_CORNERS = 6  # a view needs this many numbered corners (calibrate_joint's minimum)
 
@@ -231,15 +232,20 @@ def _stripes_on_one_line(views: list[ViewData], reports: list[ImageReport], var:
                          ) -> tuple[list[ViewData], list[ImageReport]]:
     """The views with the light off their stripe's line left out
     (:func:`stripe_on_one_line`), and the reports counting it, with the blur variance."""
-    off_line: dict[str, int] = {}
+    counts: dict[str, dict[str, int]] = {}
     for k, v in enumerate(views):
         on_line = stripe_on_one_line(v.laser_pixels)
         if not on_line.all():
-            off_line[v.id] = int((~on_line).sum())
-            views[k] = replace(v, laser_pixels=np.asarray(v.laser_pixels)[on_line])
-    reports = [replace(r, blur_var=var, stripe=_off_line_counts(r.stripe,
-                                                                off_line.get(r.id, 0)))
-               if r.ok else r for r in reports]
+            stripe = v.stripe
+            if stripe is not None:  # its found centres are the view's stripe pixels
+                status = np.array(stripe.status, copy=True)
+                status[np.nonzero(stripe.found)[0][~on_line]] = StripeStatus.OFF_LINE
+                stripe = replace(stripe, status=status)
+                counts[v.id] = stripe.counts()
+            views[k] = replace(v, laser_pixels=np.asarray(v.laser_pixels)[on_line],
+                               stripe=stripe)
+    reports = [replace(r, blur_var=var, stripe=counts.get(r.id, r.stripe)) if r.ok else r
+               for r in reports]
     return views, reports
 
 
@@ -255,16 +261,6 @@ def _threads(threads: int | None, jobs: int) -> int:
     if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
         raise ValueError(f"threads must be a positive integer, got {threads!r}")
     return max(1, min(threads, jobs))
-
-
-def _off_line_counts(counts: dict[str, int], n: int) -> dict[str, int]:
-    """A view's scan-line counts with ``n`` found centres moved to OFF_LINE."""
-    if not n:
-        return counts
-    out = dict(counts)
-    out["FOUND"] = out.get("FOUND", 0) - n
-    out["OFF_LINE"] = n
-    return out
 
 
 def detect_corners(image: np.ndarray, board: Any) -> Any:

@@ -5,10 +5,10 @@ centres and the scan lines whose stripe was rejected, coloured by
 :class:`~hmlvs.image.stripe.StripeStatus`; and one line of text: used or rejected (and why),
 corners found, scan lines per stripe status. Used / rejected and the reason are those of the
 general model's pipeline (:func:`hmlvs.image.views.views_from_images`), and so are the corners
-drawn on a used view (also a partly visible board's, numbered from its robot pose); the
-drawing repeats the stripe extraction on each readable pair and the corner detection on the
-pairs the pipeline rejected, so a view without a board still shows its stripe and a view
-without a stripe its corners.
+and the stripe drawn on a used view (a partly visible board's corners numbered from its
+robot pose; the centres off the stripe's line marked OFF_LINE); the drawing repeats the
+stripe extraction and the corner detection only on the pairs the pipeline rejected, so a
+view without a board still shows its stripe and a view without a stripe its corners.
 """
 
 from __future__ import annotations
@@ -33,10 +33,8 @@ STATUS_COLOURS: dict[StripeStatus, tuple[int, int, int]] = {
     StripeStatus.CLIPPED: (0, 100, 180),     # brown: the profile runs off the image
     StripeStatus.DOUBLE_PEAK: (180, 80, 255),  # violet-pink: a reflection beside the peak
     StripeStatus.ALBEDO_EDGE: (255, 80, 80),   # light blue: the albedo steps under the profile
+    StripeStatus.OFF_LINE: (255, 255, 0),      # cyan: a centre off the view's stripe line
 }
-#: BGR colour of centres the pipeline found but dropped as off the view's one stripe line
-#: (the terminal's OFF_LINE): a dot and a border mark, like a rejected scan line
-OFF_LINE_COLOUR = (255, 255, 0)  # cyan
 CORNER_COLOUR = (0, 255, 255)  # yellow
 FIRST_CORNER_COLOUR = (255, 0, 255)  # magenta: corner 0, so the numbering's origin shows
 TICK = 10  # px: length of a rejected scan line's mark at the image border
@@ -75,14 +73,13 @@ class ViewInspection:
 
 
 def draw_view(image: np.ndarray, corners: Any = None, stripe: StripeResult | None = None,
-              title: str = "", kept: np.ndarray | None = None) -> np.ndarray:
+              title: str = "") -> np.ndarray:
     """A BGR picture of one view: ``image`` (gray or colour, 8 or 16 bit) with ``corners``
     (a :class:`~hmlvs.image.corners.Corners`: a circle and the board index at each, corner
     0 in magenta), the stripe's found centres (green dots) and its rejected scan lines (a
     mark of the status colour at the image border: the bottom for columns, the right side
-    for rows), and ``title`` at the top left followed by the names of the marks drawn.
-    ``kept``: the stripe pixels the pipeline kept (k, 2); found centres on other scan lines
-    were dropped as off the stripe's line and are drawn as such (:data:`OFF_LINE_COLOUR`)."""
+    for rows; an OFF_LINE centre also as a dot of its colour), and ``title`` at the top left
+    followed by the names of the marks drawn."""
     import cv2
 
     gray = as_gray(image, "the image", None)
@@ -100,24 +97,13 @@ def draw_view(image: np.ndarray, corners: Any = None, stripe: StripeResult | Non
                 cv2.line(out, a, b, colour, 1)
 
         status = np.asarray(stripe.status)
-        found = status == StripeStatus.FOUND
-        off = np.zeros_like(found)
-        if kept is not None:
-            used = {int(round(q)) for q in np.asarray(kept, float).reshape(-1, 2)[:, 0 if columns
-                                                                                   else 1]}
-            off = found & ~np.isin(np.asarray(stripe.position).astype(int), list(used))
         for s, colour in STATUS_COLOURS.items():
-            if s == StripeStatus.FOUND:
-                for px in np.asarray(stripe.pixels)[~off[found]]:
+            if s in (StripeStatus.FOUND, StripeStatus.OFF_LINE):  # centres: dots
+                for px in _centres(stripe, status == s):
                     cv2.circle(out, (int(round(px[0])), int(round(px[1]))), 1, colour, -1)
-            elif (status == s).any():
+            if s != StripeStatus.FOUND and (status == s).any():
                 mark(np.asarray(stripe.position)[status == s], colour)
                 legend.append((s.name, colour))
-        if off.any():
-            for px in np.asarray(stripe.pixels)[off[found]]:
-                cv2.circle(out, (int(round(px[0])), int(round(px[1]))), 1, OFF_LINE_COLOUR, -1)
-            mark(np.asarray(stripe.position)[off], OFF_LINE_COLOUR)
-            legend.append(("OFF_LINE", OFF_LINE_COLOUR))
     if corners is not None and len(corners):
         radius = 4 if len(corners) < 200 else 2
         for px, k in zip(np.asarray(corners.pixels), np.asarray(corners.index)):
@@ -129,6 +115,13 @@ def draw_view(image: np.ndarray, corners: Any = None, stripe: StripeResult | Non
     _draw_header(out, title, legend, "bottom" if stripe is None or
                  stripe.direction == "columns" else "right")
     return out
+
+
+def _centres(stripe: StripeResult, lines: np.ndarray) -> np.ndarray:
+    """(k, 2) pixels (u, v) of the centres of the scan lines ``lines`` (a mask)."""
+    pos = np.asarray(stripe.position)[lines].astype(float)
+    c = np.asarray(stripe.centre)[lines]
+    return np.stack([pos, c] if stripe.direction == "columns" else [c, pos], axis=1)
 
 
 def _draw_header(out: np.ndarray, title: str, legend: list[tuple[str, tuple[int, int, int]]],
@@ -181,7 +174,7 @@ def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = Non
     # the corners the pipeline numbered: a partly visible board's come from its robot pose
     # and a first calibration, which detecting this image alone cannot repeat
     numbered = {v.id: _Numbered(np.asarray(v.corner_pixels), np.asarray(v.corner_index),
-                                np.asarray(v.laser_pixels)) for v in used}
+                                v.stripe) for v in used}
     entries, _, folder = read_manifest(source)
     from ..geometry.board import Checkerboard
 
@@ -219,12 +212,14 @@ def _picture(entry: dict, rep: Any, view: ViewInspection, folder: Path, numbered
     on, off = (_read_image(entry.get(key), folder) for key in ("on", "off"))
     if on is None or ("off" in entry and off is None):
         return None
-    try:
-        stripe = stripe_from_pair(on, off, normalize=normalize, channel=channel,
-                                  **stripe_options)
-    except ValueError:
-        stripe = None
     corners = numbered.get(rep.id) if rep.ok else None
+    stripe = None if corners is None else corners.stripe  # the pipeline's, as it kept it
+    if stripe is None:
+        try:
+            stripe = stripe_from_pair(on, off, normalize=normalize, channel=channel,
+                                      **stripe_options)
+        except ValueError:
+            stripe = None
     if corners is None and not (rep.ok and rep.corners == 0):
         try:
             corners = detect_corners(board_gray(on if off is None else off), detector_board)
@@ -238,8 +233,7 @@ def _picture(entry: dict, rep: Any, view: ViewInspection, folder: Path, numbered
     else:
         state = f"used, {view.corners} corners" if view.corners else "used, laser only (no " \
             "board seen)"
-    kept = numbered[rep.id].stripe if rep.id in numbered else None
-    return draw_view(on, corners, stripe, f"{rep.id}: {state}", kept=kept)
+    return draw_view(on, corners, stripe, f"{rep.id}: {state}")
 
 
 def _unique(stem: str, taken: set[str]) -> str:
@@ -269,11 +263,11 @@ def _read_image(name: Any, folder: Path) -> np.ndarray | None:
 @dataclass(frozen=True)
 class _Numbered:
     """Corners as :func:`draw_view` draws them: pixels (k, 2) and board indices (k,); with
-    the stripe pixels the pipeline kept in that view (m, 2)."""
+    the view's stripe as the pipeline kept it (its OFF_LINE centres marked)."""
 
     pixels: np.ndarray
     index: np.ndarray
-    stripe: np.ndarray | None = None
+    stripe: StripeResult | None = None
 
     def __len__(self) -> int:
         return len(self.index)
