@@ -109,3 +109,15 @@ def test_both_models_read_a_pair_alike(rendered):
             np.testing.assert_array_equal(getattr(v.stripe, name),
                                           getattr(paper[v.id].stripe, name), err_msg=name)
         np.testing.assert_array_equal(v.base_from_hand, paper[v.id].base_from_hand)
+
+
+@pytest.mark.parametrize("mode", ["corners", "homography"])
+def test_the_paper_pass_gives_the_same_points_on_any_number_of_threads(rendered, mode):
+    # the pairs are read on all cores by default, each from its own images alone
+    one, rep1 = dataset_from_images(rendered, mode=mode, threads=1)
+    for n in (2, 3):
+        many, rep = dataset_from_images(rendered, mode=mode, threads=n)
+        _same_dataset(one, many)
+        assert [r.to_dict() for r in rep] == [r.to_dict() for r in rep1]
+    with pytest.raises(ValueError, match="threads must be a positive integer"):
+        dataset_from_images(rendered, threads=0)

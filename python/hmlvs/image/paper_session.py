@@ -43,7 +43,7 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
                         params: Any = None, mode: Mode = "corners", normalize: bool = True,
                         channel: int | None = None, tolerance: float = 0.5, step: int = 8,
                         min_stripe: int = 20, joint_unit: str | None = None,
-                        base_from_board: np.ndarray | None = None,
+                        base_from_board: np.ndarray | None = None, threads: int | None = None,
                         **stripe_options: Any) -> tuple[Any, list[ImageReport]]:
     """Laser on/off image pairs + joint readings -> a calibration :class:`~hmlvs.Dataset`:
     the session's views (:func:`paper_views`), then their calibration points
@@ -75,6 +75,8 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     joint_unit : "rad" or "deg" for records (a manifest says its unit)
     base_from_board : where the manifest's board lies in the base (4 x 4), when the manifest
         does not say (e.g. estimated by an opencv calibration of the same session)
+    threads : pairs read at once (default: one per usable core); the result does not depend
+        on the number
     stripe_options : options of :func:`stripe_from_pair`. Without ``blur_var`` the camera's
         blur variance for the correction at the squares' edges is fitted to the session
         (:func:`session_blur_var`); ``meta["blur_var"]`` records the value used.
@@ -87,7 +89,7 @@ def dataset_from_images(source: Any, *, robot: Any = None, board: Any = None,
     views = paper_views(source, robot=robot, board=board, params=params,
                         normalize=normalize, channel=channel, min_stripe=min_stripe,
                         joint_unit=joint_unit, base_from_board=base_from_board,
-                        **stripe_options)
+                        threads=threads, **stripe_options)
     return points_of_views(views, mode=mode, tolerance=tolerance, step=step)
 
 
@@ -125,7 +127,7 @@ class PaperViews:
 def paper_views(source: Any, *, robot: Any = None, board: Any = None, params: Any = None,
                 normalize: bool = True, channel: int | None = None, min_stripe: int = 20,
                 joint_unit: str | None = None, base_from_board: np.ndarray | None = None,
-                **stripe_options: Any) -> PaperViews:
+                threads: int | None = None, **stripe_options: Any) -> PaperViews:
     """The views of an image session for the paper model (the arguments as
     :func:`dataset_from_images` takes them): one pass over the pairs
     (:mod:`hmlvs.image.reading`), each board numbered from the corners ``params`` predict
@@ -141,8 +143,7 @@ def paper_views(source: Any, *, robot: Any = None, board: Any = None, params: An
     reader = PairReader(inputs.folder, inputs.unit, inputs.robot, inputs.size, channel,
                         normalize, min_stripe, options, fit_blur,
                         _predicted_numbering(approx, inputs.board), defer=True)
-    # one after the other: a pair's numbering may be replaced (tests count its calls)
-    reads = read_pairs(reader, inputs.records)
+    reads = read_pairs(reader, inputs.records, threads)
     size = same_size(reads, of_loaded=True) or inputs.size
     if any(r.kept and isinstance(r.found, _Unnumbered) for r in reads):
         _number_by_agreement(reads, inputs.board, approx, reader)

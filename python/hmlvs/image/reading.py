@@ -147,17 +147,32 @@ class PairReader:
         return replace(read, pair=pair, edge=edge)
 
 
-def read_pairs(reader: PairReader, records: Sequence[Any], threads: int = 1
+def read_pairs(reader: PairReader, records: Sequence[Any], threads: int | None = None
                ) -> list[PairRead]:
     """Every record's pair read by ``reader``, in the session's order, on ``threads``
-    threads (each pair's work depends on its own images alone, OpenCV's random samples
-    included: the result does not depend on the number)."""
+    threads (default: one per usable core; each pair's work depends on its own images
+    alone, OpenCV's random samples included: the result does not depend on the number)."""
+    threads = worker_threads(threads, len(records))
     if threads <= 1:
         return [reader.read(item) for item in enumerate(records)]
     from concurrent.futures import ThreadPoolExecutor
 
     with ThreadPoolExecutor(max_workers=threads) as pool:
         return list(pool.map(reader.read, enumerate(records)))
+
+
+def worker_threads(threads: int | None, jobs: int) -> int:
+    """Worker threads for ``jobs`` pairs: ``threads``, by default one per usable core."""
+    import os
+
+    if threads is None:
+        try:
+            threads = len(os.sched_getaffinity(0))
+        except AttributeError:  # not on Linux
+            threads = os.cpu_count() or 1
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise ValueError(f"threads must be a positive integer, got {threads!r}")
+    return max(1, min(threads, jobs))
 
 
 def same_size(reads: list[PairRead], of_loaded: bool = False) -> tuple[int, int] | None:

@@ -105,7 +105,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         else None, channel, normalize, min_stripe, options, fit_blur, numbering.number,
         keep_board=_top_left)
     # the views one per core, then in the session's order
-    reads = read_pairs(reader, records, _threads(threads, len(records)))
+    reads = read_pairs(reader, records, threads)
     size = same_size(reads)
     if size is None:
         where = "" if isinstance(source, (list, tuple)) else f"{source}: "
@@ -247,20 +247,6 @@ def _stripes_on_one_line(views: list[ViewData], reports: list[ImageReport], var:
     reports = [replace(r, blur_var=var, stripe=counts.get(r.id, r.stripe)) if r.ok else r
                for r in reports]
     return views, reports
-
-
-def _threads(threads: int | None, jobs: int) -> int:
-    """Worker threads for ``jobs`` views: ``threads``, by default one per usable core."""
-    import os
-
-    if threads is None:
-        try:
-            threads = len(os.sched_getaffinity(0))
-        except AttributeError:  # not on Linux
-            threads = os.cpu_count() or 1
-    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
-        raise ValueError(f"threads must be a positive integer, got {threads!r}")
-    return max(1, min(threads, jobs))
 
 
 def detect_corners(image: np.ndarray, board: Any) -> Any:
