@@ -198,7 +198,7 @@ struct Workspace {
   // laser-on frame alone, and EstimateBackground's buffers
   template <typename T>
   struct Buffers {
-    Scratch<T> frames, background, opening[2];
+    Scratch<T> frames, background, opening;
   };
   Buffers<std::uint8_t> u8;
   Buffers<std::uint16_t> u16;
