@@ -1,8 +1,12 @@
-// EstimateBackground (frames.h): the laser-on frame opened along its columns.
+// EstimateBackground (frames.h) and OpenColumns (frame_background.h): the laser-on frame
+// opened along its columns.
+#include "hmlvs/image/frame_background.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <sstream>
 #include <stdexcept>
 #include <vector>
@@ -117,8 +121,10 @@ class LinePass {
 template <typename T>
 struct Opening {
   // The body, inlined into each of the entry points below (compiled for their targets).
+  using Rows = std::function<void(int, int)>;
   __attribute__((always_inline)) static inline void Body(const T* base, std::ptrdiff_t rs, int rows,
-                                                         int cols, int h, T* buffer, T* out) {
+                                                         int cols, int h, T* buffer, T* out,
+                                                         const Rows& done) {
     auto lower = [](T a, T b) { return std::min(a, b); };
     auto upper = [](T a, T b) { return std::max(a, b); };
     const int k = 2 * h + 1;
@@ -138,26 +144,33 @@ struct Opening {
       // and j of the ring; the erosion is at most one block ahead)
       const int need = std::min(rows, (j + 1) * k - h);
       while (erode.emitted() < need) erode.Step();
+      const int before = dilate.emitted();
       dilate.Step();
+      if (done && dilate.emitted() > before) done(before, dilate.emitted());
     }
   }
-  static void Run(const T* base, std::ptrdiff_t rs, int rows, int cols, int h, T* buffer, T* out) {
-    Body(base, rs, rows, cols, h, buffer, out);
+  static void Run(const T* base, std::ptrdiff_t rs, int rows, int cols, int h, T* buffer, T* out,
+                  const Rows& done) {
+    Body(base, rs, rows, cols, h, buffer, out, done);
   }
 #if defined(HMLVS_AVX2)
   // the same integer operations 32 bytes at a time, on CPUs with AVX2
   __attribute__((target("avx2"))) static void RunAvx2(const T* base, std::ptrdiff_t rs, int rows,
-                                                      int cols, int h, T* buffer, T* out) {
-    Body(base, rs, rows, cols, h, buffer, out);
+                                                      int cols, int h, T* buffer, T* out,
+                                                      const Rows& done) {
+    Body(base, rs, rows, cols, h, buffer, out, done);
   }
 #endif
 };
 
 }  // namespace
 
+namespace scan {
+
 template <typename T>
-void EstimateBackground(const ImageView<T>& on, double width, T* out) {
-  scan::RequireImage(on, "the laser-on image");
+void OpenColumns(const ImageView<T>& on, double width, T* out,
+                 const std::function<void(int, int)>& done) {
+  RequireImage(on, "the laser-on image");
   if (!std::isfinite(width)) {
     std::ostringstream msg;
     msg << "the stripe width must be a finite number, got " << width;
@@ -166,7 +179,7 @@ void EstimateBackground(const ImageView<T>& on, double width, T* out) {
   const int rows = on.rows, cols = on.cols;
   const int k = std::max(9, 2 * static_cast<int>(std::ceil(1.5 * width)) + 1);
   const int h = k / 2;
-  scan::Workspace& ws = scan::ThreadWorkspace();
+  Workspace& ws = ThreadWorkspace();
   T* buffer = ws.Of<T>().opening.Get(9 * static_cast<size_t>(2 * h + 1) * cols);
   std::vector<T> contiguous;
   const T* base = on.data;
@@ -180,12 +193,24 @@ void EstimateBackground(const ImageView<T>& on, double width, T* out) {
     rs = cols;
   }
 #if defined(HMLVS_AVX2)
-  if (scan::UseAvx2()) {
-    Opening<T>::RunAvx2(base, rs, rows, cols, h, buffer, out);
+  if (UseAvx2()) {
+    Opening<T>::RunAvx2(base, rs, rows, cols, h, buffer, out, done);
     return;
   }
 #endif
-  Opening<T>::Run(base, rs, rows, cols, h, buffer, out);
+  Opening<T>::Run(base, rs, rows, cols, h, buffer, out, done);
+}
+
+template void OpenColumns<std::uint8_t>(const ImageView<std::uint8_t>&, double, std::uint8_t*,
+                                        const std::function<void(int, int)>&);
+template void OpenColumns<std::uint16_t>(const ImageView<std::uint16_t>&, double, std::uint16_t*,
+                                         const std::function<void(int, int)>&);
+
+}  // namespace scan
+
+template <typename T>
+void EstimateBackground(const ImageView<T>& on, double width, T* out) {
+  scan::OpenColumns(on, width, out, {});
 }
 
 template void EstimateBackground<std::uint8_t>(const ImageView<std::uint8_t>&, double,

@@ -14,7 +14,8 @@
 // frame_buffers.h (planes, marks, runs, the thread's workspace), frame_stats (the pass over
 // every pixel), frame_albedo (the albedo offset's fit), frame_views.h (the difference and its
 // smoothing where read), frame_detect (runs and scan lines), frame_refine with refine_batch.h
-// (the refinement, four scan lines at a time) and frame_background.cpp (the opening).
+// (the refinement, four scan lines at a time) and frame_background (the opening, whose rows a
+// laser-on frame alone gathers its statistics from as they come out).
 #include "hmlvs/image/frames.h"
 
 #include <algorithm>
@@ -29,6 +30,7 @@
 #include <vector>
 
 #include "hmlvs/image/frame_albedo.h"
+#include "hmlvs/image/frame_background.h"
 #include "hmlvs/image/frame_buffers.h"
 #include "hmlvs/image/frame_detect.h"
 #include "hmlvs/image/frame_refine.h"
@@ -54,12 +56,14 @@ using scan::kNaN;
 using scan::kSb;
 using scan::MakeKernels;
 using scan::NoiseFromHistogram;
+using scan::OpenColumns;
 using scan::Percentile;
 using scan::RequireImage;
 using scan::RequireSameSize;
 using scan::ScanLines;
 using scan::ScanView;
 using scan::Stats;
+using scan::StatsCollector;
 using scan::SView;
 using scan::ThreadWorkspace;
 using scan::ValidateOptions;
@@ -118,12 +122,15 @@ class PairStripe {
   PairStripe(const Frames<T>& f, const FrameStripeOptions& o)
       : f_(f), o_(o), ws_(ThreadWorkspace()) {}
 
+  // the statistics of the frames, for a caller that gathers them (StatsCollector) before Run
+  Stats<T>* stats() { return &st_; }
+
   // `alone`: a laser-on frame alone against its estimated background (AloneStripe), whose
-  // scan lines with a centre that jumps from its neighbours' are dropped (DropJumps, on
-  // Steger's centres) before the refinement (which then skips them; the caller drops jumps
-  // again on the refined centres)
+  // statistics were gathered into stats() and whose scan lines with a centre that jumps from
+  // its neighbours' are dropped (DropJumps, on Steger's centres) before the refinement (which
+  // then skips them; the caller drops jumps again on the refined centres)
   FrameStripe Run(bool alone = false) {
-    CollectStats(f_, &st_);
+    if (!alone) CollectStats(f_, &st_);
     plain_noise_ = NoiseFromHistogram(st_.diff_hist, st_.diff_n);
     Normalise();
     DifferenceOptions dopt;
@@ -432,10 +439,17 @@ FrameStripe AloneStripe(Frames<T>* f, const FrameStripeOptions& o, T* background
     oa.stripe.steger_sigma = std::isnan(width) ? 3.0 : std::clamp(0.5 * width, 3.0, 20.0);
     oa.steger_sigma_given = true;
   }
-  EstimateBackground(on_w, std::isnan(width) ? FrameStripeOptions::kAloneFirstWidth : width, bg);
   f->off = bg;
   f->off_rs = f->cols;
-  FrameStripe out = PairStripe<T>(*f, oa).Run(true);
+  // the statistics gathered as the background's rows come out of the opening
+  PairStripe<T> pass(*f, oa);
+  {
+    StatsCollector<T> stats(*f, pass.stats());
+    OpenColumns(on_w, std::isnan(width) ? FrameStripeOptions::kAloneFirstWidth : width, bg,
+                [&stats](int r0, int r1) { stats.Rows(r0, r1); });
+    stats.Finish();
+  }
+  FrameStripe out = pass.Run(true);
   if (out.no_pixel) return out;
   out.offset_fitted = false;
   out.albedo_offset = kNaN;
