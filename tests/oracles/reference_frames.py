@@ -8,8 +8,9 @@ whole-image extraction (ExtractStripe, itself checked against
 tests/oracles/reference_stripe.py), the denoised laser-off frame (cv2.bilateralFilter) and the
 refinement image smoothed along the stripe (cv2.sepFilter2D) -- glued by NumPy, the way the C++
 kernel must reproduce them while computing only what scan lines read. The laser-on frame alone:
-its background by cv2.morphologyEx, scipy's median filter for the jumps. Grey frames only (the
-caller picks the channel). tests/parity/test_frames.py compares the two.
+the stripe's width first measured on a sample of its columns (the library's extraction on
+them), its background by cv2.morphologyEx, scipy's median filter for the jumps. Grey frames
+only (the caller picks the channel). tests/parity/test_frames.py compares the two.
 """
 
 from __future__ import annotations
@@ -62,19 +63,49 @@ def _stripe_and_background(on_g: np.ndarray, off_g: np.ndarray | None, normalize
     if stripe_options.get("direction", "columns") != "columns":
         raise ValueError("a laser-on image without a laser-off frame needs a roughly "
                          "horizontal stripe (direction='columns')")
-    # a first pass at a generous width finds the stripe's FWHM; the second fits the
-    # opening to it (a longer line than needed would also open up small squares). What the
-    # opening leaves of the board (short white segments of a column near the squares'
-    # corners) is fainter than the laser: the stripe is taken when 1.5 x brighter than it.
+    # the stripe's FWHM, first measured on a sample of the columns against an opening at a
+    # generous width, sizes the opening that stands for the laser-off frame (a longer line
+    # than needed would also open up small squares). What the opening leaves of the board
+    # (short white segments of a column near the squares' corners) is fainter than the
+    # laser: the stripe is taken when 1.5 x brighter than it.
     if "dominance" not in stripe_options:
         stripe_options = dict(stripe_options, dominance=1.5)
-    bg = estimate_background(on_g, 16.0)
-    first = stripe_from_pair(on_g, bg, normalize=normalize, **stripe_options)
-    w = first.width[first.found]
-    if w.size:
-        bg = estimate_background(on_g, float(np.median(w)))
-    stripe = stripe_from_pair(on_g, bg, normalize=normalize, **stripe_options)
+    width = _first_width(on_g, stripe_options)
+    bg = estimate_background(on_g, FIRST_WIDTH if np.isnan(width) else width)
+    if stripe_options.get("method") is None and stripe_options.get("steger_sigma") is None:
+        # Steger's scale from the same width (the pipeline's rule)
+        stripe_options = dict(stripe_options, steger_sigma=3.0 if np.isnan(width) else
+                              float(np.clip(0.5 * width, 3.0, 20.0)))
+    o = dict(stripe_options)
+    assess = o.pop("assess", True)
+    step, offset = o.pop("albedo_step", None), o.pop("albedo_offset", None)
+    blur_var = checked_blur_var(o.pop("blur_var", None))
+    stripe, _ = _pair_stripe(on_g, bg, normalize, assess, step, offset, o, blur_var,
+                             drop_jumps=True)
     return _drop_jumps(stripe), bg, None
+
+
+#: a laser-on frame alone: the stripe width of the first opening, and the most columns the
+#: stripe's width is first measured on
+FIRST_WIDTH = 16.0
+FIRST_COLUMNS = 160
+
+
+def _first_width(on: np.ndarray, stripe_options: dict[str, Any]) -> float:
+    """The stripe's width as first measured on a laser-on frame alone: the median FWHM of
+    the scan lines extract_stripe finds (centroid centres; the options' dominance, widths,
+    threshold and noise) on every k-th column (k = ceil(columns / FIRST_COLUMNS)) of the
+    frame minus its opening at FIRST_WIDTH; NaN when none is found."""
+    step = -(-on.shape[1] // FIRST_COLUMNS)
+    a = on[:, ::step]
+    b = estimate_background(on, FIRST_WIDTH)[:, ::step]  # the opening works column by column
+    d = np.ascontiguousarray(a - np.minimum(a, b))
+    keep = ("dominance", "min_width", "max_width", "threshold", "noise")
+    first = extract_stripe(d, method="centroid",
+                           **{k: stripe_options[k] for k in keep
+                              if stripe_options.get(k) is not None})
+    w = first.width[first.found]
+    return float(np.median(w)) if w.size else float("nan")
 
 
 def _drop_jumps(stripe: StripeResult, window: int = 41, jump: float = 1.0) -> StripeResult:
@@ -116,11 +147,13 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
 
 def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: bool,
                  albedo_step: float | None, albedo_offset_: float | None,
-                 stripe_options: dict[str, Any], blur_var: float = 0.0
-                 ) -> tuple[StripeResult, float | None]:
+                 stripe_options: dict[str, Any], blur_var: float = 0.0,
+                 drop_jumps: bool = False) -> tuple[StripeResult, float | None]:
     """:func:`stripe_from_pair` of gray frames, and the albedo offset it fitted: NaN when
     the stripe does not lie on two clearly different levels (0 is used), None when none was
-    fitted (given, or no normalisation)."""
+    fitted (given, or no normalisation). With ``drop_jumps`` (a laser-on frame alone against
+    its estimated background) Steger's centres that jump from their neighbours' are dropped
+    (:func:`_drop_jumps`) before the refinement (the caller drops them again after it)."""
     opts = dict(stripe_options)
     along = smooth_along_of(opts.pop("smooth_along", None))
     offset, noise = 0.0, None
@@ -167,6 +200,8 @@ def _pair_stripe(on_g: np.ndarray, off_g: np.ndarray, normalize: bool, assess: b
     if automatic and not stripe.found.any() and stripe.threshold >= float(d.max()):
         raise ValueError(f"the automatic threshold {stripe.threshold:.4g} leaves no pixel of "
                          f"the difference image (its maximum is {int(d.max())}): no stripe")
+    if drop_jumps:
+        stripe = _drop_jumps(stripe)
     if weighted:
         stripe = _weighted_centres(stripe, on_g, off_g, normalize, offset, noise,
                                    opts.get("steger_sigma_along") or opts["steger_sigma"],

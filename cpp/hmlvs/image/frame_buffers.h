@@ -195,10 +195,11 @@ struct Workspace {
   Marks marks, marks2;
   Detector detectors[2];
   // per pixel type: the frames in the working orientation, the background estimated for a
-  // laser-on frame alone, and EstimateBackground's buffers
+  // laser-on frame alone, EstimateBackground's buffers, and the columns of a laser-on frame
+  // alone its stripe's first width is measured on (and their opening)
   template <typename T>
   struct Buffers {
-    Scratch<T> frames, background, opening[2];
+    Scratch<T> frames, background, opening, sample[2];
   };
   Buffers<std::uint8_t> u8;
   Buffers<std::uint16_t> u16;

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <type_traits>
 #include <vector>
 
@@ -524,13 +525,29 @@ class StatsPass {
 }  // namespace
 
 template <typename T>
-void CollectStats(const Frames<T>& f, Stats<T>* st) {
-  StatsPass<T> pass(f, st);
-  for (int r = 0; r < f.rows; ++r) {
-    pass.Row(r);
-    pass.Sample(r);
+class StatsCollector<T>::Pass : public StatsPass<T> {
+ public:
+  using StatsPass<T>::StatsPass;
+};
+
+template <typename T>
+StatsCollector<T>::StatsCollector(const Frames<T>& f, Stats<T>* st)
+    : pass_(std::make_unique<Pass>(f, st)) {}
+
+template <typename T>
+StatsCollector<T>::~StatsCollector() = default;
+
+template <typename T>
+void StatsCollector<T>::Rows(int r0, int r1) {
+  for (int r = r0; r < r1; ++r) {
+    pass_->Row(r);
+    pass_->Sample(r);
   }
-  pass.Finish();
+}
+
+template <typename T>
+void StatsCollector<T>::Finish() {
+  pass_->Finish();
 }
 
 // The statistics of the normalised difference over the caller's every 4th row: its noise
@@ -568,8 +585,8 @@ void DifferenceStats(const Frames<T>& f, const Stats<T>& st, const DifferenceRul
   *maximum = static_cast<double>(top);
 }
 
-template void CollectStats<std::uint8_t>(const Frames<std::uint8_t>&, Stats<std::uint8_t>*);
-template void CollectStats<std::uint16_t>(const Frames<std::uint16_t>&, Stats<std::uint16_t>*);
+template class StatsCollector<std::uint8_t>;
+template class StatsCollector<std::uint16_t>;
 template void DifferenceStats<std::uint8_t>(const Frames<std::uint8_t>&, const Stats<std::uint8_t>&,
                                             const DifferenceRule<std::uint8_t>&, double*, double*);
 template void DifferenceStats<std::uint16_t>(const Frames<std::uint16_t>&,

@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "hmlvs/image/difference_rule.h"
@@ -37,9 +38,29 @@ struct Stats {
   int blocks = 0;
 };
 
-// The statistics of the frames `f` (one pass over every pixel).
+// The statistics of the frames `f` (one pass over every pixel), a few rows at a time as the
+// frames' rows become final: Rows(r0, r1) for rows r0 .. r1 - 1 (in order, every row once),
+// then Finish.
 template <typename T>
-void CollectStats(const Frames<T>& f, Stats<T>* st);
+class StatsCollector {
+ public:
+  StatsCollector(const Frames<T>& f, Stats<T>* st);
+  ~StatsCollector();
+  void Rows(int r0, int r1);
+  void Finish();
+
+ private:
+  class Pass;
+  std::unique_ptr<Pass> pass_;
+};
+
+// The statistics of the frames `f`, in one pass over the rows.
+template <typename T>
+void CollectStats(const Frames<T>& f, Stats<T>* st) {
+  StatsCollector<T> stats(f, st);
+  stats.Rows(0, f.rows);
+  stats.Finish();
+}
 
 // The statistics of the normalised difference over the caller's every 4th row: its noise
 // (EstimateDifferenceNoise) and its maximum.

@@ -14,7 +14,8 @@
 // frame_buffers.h (planes, marks, runs, the thread's workspace), frame_stats (the pass over
 // every pixel), frame_albedo (the albedo offset's fit), frame_views.h (the difference and its
 // smoothing where read), frame_detect (runs and scan lines), frame_refine with refine_batch.h
-// (the refinement, four scan lines at a time) and frame_background.cpp (the opening).
+// (the refinement, four scan lines at a time) and frame_background (the opening, whose rows a
+// laser-on frame alone gathers its statistics from as they come out).
 #include "hmlvs/image/frames.h"
 
 #include <algorithm>
@@ -29,6 +30,7 @@
 #include <vector>
 
 #include "hmlvs/image/frame_albedo.h"
+#include "hmlvs/image/frame_background.h"
 #include "hmlvs/image/frame_buffers.h"
 #include "hmlvs/image/frame_detect.h"
 #include "hmlvs/image/frame_refine.h"
@@ -54,12 +56,14 @@ using scan::kNaN;
 using scan::kSb;
 using scan::MakeKernels;
 using scan::NoiseFromHistogram;
+using scan::OpenColumns;
 using scan::Percentile;
 using scan::RequireImage;
 using scan::RequireSameSize;
 using scan::ScanLines;
 using scan::ScanView;
 using scan::Stats;
+using scan::StatsCollector;
 using scan::SView;
 using scan::ThreadWorkspace;
 using scan::ValidateOptions;
@@ -118,8 +122,15 @@ class PairStripe {
   PairStripe(const Frames<T>& f, const FrameStripeOptions& o)
       : f_(f), o_(o), ws_(ThreadWorkspace()) {}
 
-  FrameStripe Run() {
-    CollectStats(f_, &st_);
+  // the statistics of the frames, for a caller that gathers them (StatsCollector) before Run
+  Stats<T>* stats() { return &st_; }
+
+  // `alone`: a laser-on frame alone against its estimated background (AloneStripe), whose
+  // statistics were gathered into stats() and whose scan lines with a centre that jumps from
+  // its neighbours' are dropped (DropJumps, on Steger's centres) before the refinement (which
+  // then skips them; the caller drops jumps again on the refined centres)
+  FrameStripe Run(bool alone = false) {
+    if (!alone) CollectStats(f_, &st_);
     plain_noise_ = NoiseFromHistogram(st_.diff_hist, st_.diff_n);
     Normalise();
     DifferenceOptions dopt;
@@ -134,6 +145,7 @@ class PairStripe {
     StripeResult& res = out_.stripe;
     Extract(second_, &res);
     if (automatic_ && !(res.status.array() == 0).any() && NoPixel()) return std::move(out_);
+    if (alone) DropJumps(&res);
     if (weighted_) {
       const double along =
           second_.steger_sigma_along > 0.0 ? second_.steger_sigma_along : second_.steger_sigma;
@@ -321,8 +333,99 @@ void CheckFrames(const ImageView<T>& on, const ImageView<T>& off, const FrameStr
   }
 }
 
-// The laser-on frame of `f` alone: against its background (`f->off`), estimated at a
-// generous width, then at the stripe's median FWHM; copied to `background` if not null.
+// A bit per value of x[0 .. m) above t (m <= kSb).
+template <typename T>
+unsigned AboveBits(const T* x, int m, T t) {
+#if defined(__SSE2__)
+  if constexpr (sizeof(T) == 1) {
+    if (m == kSb) {  // x > t <=> max(x, t + 1) == x, for t < 255
+      if (t == 255) return 0;
+      const __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(x));
+      const __m128i next = _mm_set1_epi8(static_cast<char>(t + 1));
+      return static_cast<unsigned>(_mm_movemask_epi8(_mm_cmpeq_epi8(_mm_max_epu8(v, next), v)));
+    }
+  }
+#endif
+  unsigned bits = 0;
+  for (int i = 0; i < m; ++i) bits |= static_cast<unsigned>(x[i] > t) << i;
+  return bits;
+}
+
+// ExtractStripe(image, o) with centroid centres, without the residuals: the widths of its
+// found scan lines (columns), for their median.
+template <typename T>
+StripeResult FoundWidths(const ImageView<T>& image, StripeOptions o) {
+  o.direction = StripeDirection::kColumns;
+  o.method = StripeMethod::kCentroid;
+  o.detect_sigma_along = 0.0;
+  const int rows = image.rows, n = image.cols;
+  StripeResult res;
+  res.noise = o.noise >= 0.0 ? o.noise : EstimateDifferenceNoise(image);
+  if (o.threshold >= 0.0) {
+    res.threshold = o.threshold;
+  } else {
+    T m = 0;  // the automatic threshold: the maximum over every 4th row
+    for (int r = 0; r < rows; r += 4) {
+      for (int c = 0; c < n; ++c) m = std::max(m, image(r, c));
+    }
+    res.threshold = std::max(5.0 * res.noise, 0.15 * static_cast<double>(m));
+  }
+  // the runs above the threshold (v > threshold <=> v > floor(threshold): whole numbers),
+  // streamed over the rows a block of kSb columns at a time
+  const T t = static_cast<T>(
+      std::min(std::floor(res.threshold), static_cast<double>(std::numeric_limits<T>::max())));
+  const int blocks = (n + kSb - 1) / kSb;
+  Detector det;
+  det.Init(n, blocks);
+  for (int r = 0; r < rows; ++r) {
+    const T* x = image.data + r * image.row_stride;
+    for (int b = 0; b < blocks; ++b) {
+      const unsigned above = AboveBits(x + b * kSb, std::min(kSb, n - b * kSb), t);
+      if (above != 0 || det.open[b] != 0) det.Row(r, b, static_cast<std::uint16_t>(above));
+    }
+  }
+  det.Finish(rows);
+  scan::ResetResult(n, &res);
+  const ScanView<T> v{image.data, n, rows, 1, image.row_stride};
+  const scan::StegerKernels none;  // centroid centres
+  for (int s = 0; s < n; ++s) {
+    const size_t at = static_cast<size_t>(s) * scan::kMaxRuns;
+    scan::ScanLine(v, v, s, &det.runs.begin[at], &det.runs.end[at], det.runs.count[s], o, none,
+                   &res, false);
+  }
+  return res;
+}
+
+// The first measure of the stripe's width on a laser-on frame `f` alone, to size the opening
+// that estimates its background: the median FWHM of the scan lines ExtractStripe finds
+// (centroid centres; the options' dominance, widths, threshold and noise) on the plain
+// difference of every k-th column of the frame (at most kAloneFirstColumns of them) and its
+// opening at a generous stripe width, kAloneFirstWidth (the opening works column by column:
+// that of the columns taken alone). NaN when none is found.
+template <typename T>
+double FirstWidth(const Frames<T>& f, const StripeOptions& o) {
+  const int rows = f.rows, cols = f.cols;
+  const int step =
+      (cols + FrameStripeOptions::kAloneFirstColumns - 1) / FrameStripeOptions::kAloneFirstColumns;
+  const int n = (cols + step - 1) / step;
+  const size_t size = static_cast<size_t>(rows) * n;
+  Workspace& ws = ThreadWorkspace();
+  T* on = ws.Of<T>().sample[0].Get(size);
+  T* d = ws.Of<T>().sample[1].Get(size);
+  for (int r = 0; r < rows; ++r) {
+    const T* a = f.on + r * f.on_rs;
+    T* to = on + static_cast<size_t>(r) * n;
+    for (int j = 0; j < n; ++j) to[j] = a[static_cast<std::ptrdiff_t>(j) * step];
+  }
+  EstimateBackground(ImageView<T>{on, rows, n, n, 1}, FrameStripeOptions::kAloneFirstWidth, d);
+  // the opening lies at or below the frame: the plain difference, in place of the opening
+  for (size_t i = 0; i < size; ++i) d[i] = static_cast<T>(std::max(on[i], d[i]) - d[i]);
+  return MedianFoundWidth(FoundWidths(ImageView<T>{d, rows, n, n, 1}, o));
+}
+
+// The laser-on frame of `f` alone: against its background (`f->off`), estimated at the
+// stripe's width as first measured (FirstWidth; kAloneFirstWidth when none was found); copied
+// to `background` if not null.
 template <typename T>
 FrameStripe AloneStripe(Frames<T>* f, const FrameStripeOptions& o, T* background) {
   FrameStripeOptions oa = o;
@@ -330,20 +433,27 @@ FrameStripe AloneStripe(Frames<T>* f, const FrameStripeOptions& o, T* background
   const size_t n = static_cast<size_t>(f->rows) * f->cols;
   T* bg = ThreadWorkspace().Of<T>().background.Get(n);
   const ImageView<T> on_w{f->on, f->rows, f->cols, f->on_rs, 1};
-  EstimateBackground(on_w, FrameStripeOptions::kAloneFirstWidth, bg);
+  const double width = FirstWidth(*f, oa.stripe);
+  if (!o.method_given && !o.steger_sigma_given) {
+    // Steger's scale from the same width (the pipeline's rule: half of it, at least 3 px)
+    oa.stripe.steger_sigma = std::isnan(width) ? 3.0 : std::clamp(0.5 * width, 3.0, 20.0);
+    oa.steger_sigma_given = true;
+  }
   f->off = bg;
   f->off_rs = f->cols;
-  FrameStripe out = PairStripe<T>(*f, oa).Run();
-  if (out.no_pixel) return out;
-  const double median = MedianFoundWidth(out.stripe);
-  if (!std::isnan(median)) {
-    EstimateBackground(on_w, median, bg);
-    out = PairStripe<T>(*f, oa).Run();
-    if (out.no_pixel) return out;
+  // the statistics gathered as the background's rows come out of the opening
+  PairStripe<T> pass(*f, oa);
+  {
+    StatsCollector<T> stats(*f, pass.stats());
+    OpenColumns(on_w, std::isnan(width) ? FrameStripeOptions::kAloneFirstWidth : width, bg,
+                [&stats](int r0, int r1) { stats.Rows(r0, r1); });
+    stats.Finish();
   }
+  FrameStripe out = pass.Run(true);
+  if (out.no_pixel) return out;
   out.offset_fitted = false;
   out.albedo_offset = kNaN;
-  DropJumps(&out.stripe);
+  DropJumps(&out.stripe);  // again on the refined centres
   if (background != nullptr) std::copy(bg, bg + n, background);
   return out;
 }

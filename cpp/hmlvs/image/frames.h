@@ -50,10 +50,12 @@ struct FrameStripeOptions {
   /// the image a normalised stripe's peaks are found on when the threshold is automatic
   /// (detect_sigma_along, px: 2.7x less noise, at most 4 px of a jump's ends blurred
   /// together), and for a laser-on frame alone the dominance its peaks need (what the opening
-  /// leaves of a board is fainter than the laser) and the stripe width of its first opening.
+  /// leaves of a board is fainter than the laser), the stripe width of its first opening and
+  /// the most columns the stripe's width is first measured on.
   static constexpr double kDetectAlong = 2.0;
   static constexpr double kAloneDominance = 1.5;
   static constexpr double kAloneFirstWidth = 16.0;
+  static constexpr int kAloneFirstColumns = 160;
 };
 
 /// The outcome of StripeFromFrames.
@@ -74,10 +76,13 @@ struct FrameStripe {
 };
 
 /// The stripe of a laser-on frame `on` with its laser-off frame `off` (same size), or, when
-/// `off` has no data, of `on` alone: its background estimated by EstimateBackground at a
-/// stripe width of 16 px, then at the median FWHM of the stripe found on it, the stripe found
-/// against it with dominance 1.5 unless given, and scan lines whose centre jumps from its
-/// neighbours' marked kMultiple (DropJumps). `background`, if not null, receives the background
+/// `off` has no data, of `on` alone: its background estimated by EstimateBackground at the
+/// stripe's width (the median FWHM of the peaks ExtractStripe finds, centroid centres, on
+/// every k-th column of the frame minus its opening at a width of 16 px, k = ceil(cols /
+/// 160); 16 px when none is found), the stripe found against it with dominance 1.5 unless
+/// given, and scan lines whose centre jumps from its neighbours' marked kMultiple (DropJumps:
+/// on Steger's centres before the refinement, and again on the refined ones); Steger's scale,
+/// unless given, from the same first width. `background`, if not null, receives the background
 /// used (rows x cols, contiguous). Throws std::invalid_argument for empty or mismatched
 /// frames, invalid options, or a laser-on frame alone with direction kRows.
 template <typename T>

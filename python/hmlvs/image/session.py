@@ -260,10 +260,11 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
     px RMS, each view's mean error 0.0041 -> 0.0023 px. Calibration sessions fit it
     (:func:`session_blur_var`).
     ``off``
-    None: a laser-on image alone, its background estimated (:func:`estimate_background` at a
-    stripe width of 16 px, then at the median FWHM of the stripe found against it), the
-    peaks taken when 1.5 x brighter than any other (``dominance``, unless given) and centres
-    that jump from their neighbours' dropped (MULTIPLE).
+    None: a laser-on image alone, its background estimated (:func:`estimate_background` at
+    the stripe's median FWHM, first measured on a sample of at most 160 columns against an
+    opening at a stripe width of 16 px, which also sets Steger's scale), the peaks taken
+    when 1.5 x brighter than any other (``dominance``, unless given) and centres that jump
+    from their neighbours' dropped (MULTIPLE; before the refinement, and again after it).
     Colour frames use ``channel``, by default the laser's (:func:`laser_channel`); a colour
     laser-on frame alone without a channel goes to :func:`~hmlvs.image.colour.colour_stripe`.
 
