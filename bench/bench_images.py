@@ -129,6 +129,7 @@ def measurer_rows(frames: int = 80) -> list[str]:
 def session_rows(views: int) -> list[str]:
     from hmlvs.calibration.joint import calibrate_joint
     from hmlvs.data.calibration_file import Calibration
+    from hmlvs.image.reading import worker_threads
     import hmlvs.image.views as iv
     from hmlvs.sim.general import general_session, render_general_session
 
@@ -159,7 +160,7 @@ def session_rows(views: int) -> list[str]:
         t3 = time.perf_counter()
     total = t3 - t0
     return [f"| whole session, {views} views 1024 x 768, images -> calibration file "
-            f"({iv._threads(None, views)} threads) | {total:.2f} s | images -> views "
+            f"({worker_threads(None, views)} threads) | {total:.2f} s | images -> views "
             f"{t1 - t0:.2f} s (boards {stages['detect']:.2f} s summed over the threads), "
             f"joint calibration {t2 - t1:.2f} s ({r.iterations} LM iterations), file "
             f"{1000 * (t3 - t2):.0f} ms (target < 3 s) |"]
