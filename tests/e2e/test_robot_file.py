@@ -148,3 +148,21 @@ def test_cli_calibrate_stores_the_robot_file(tmp_path, capsys):
         cli_main(["calibrate", str(ds), "--robot", str(tmp_path / "none.yaml")])
     assert e.value.code == 2
     assert "none.yaml: no such robot description file" in capsys.readouterr().err
+
+
+def test_the_general_models_views_take_the_manifests_robot_as_the_others_do(tmp_path):
+    # views_from_images' arm is the manifest's as for the scans and the paper model's pass
+    # (a DH mapping, a built-in name); an unknown name asks for its description
+    from hmlvs.image.views import _session_robot
+
+    arm = _other_arm()
+    records = [{"id": "p0", "on": "a.png", "joints": JOINTS[0]}]
+    got = _session_robot({"robot": arm.to_dict()}, records, None, "m.json")
+    np.testing.assert_allclose(got.poses(JOINTS), arm.poses(JOINTS), atol=1e-9)
+    assert _session_robot({}, records, None, "m.json").name == "SCORBOT ER-VII"
+    assert _session_robot({"robot": arm.to_dict()}, records, arm, "m.json") is arm
+    with pytest.raises(ValueError, match="the robot 'UR10e' is not a built-in arm"):
+        _session_robot({"robot": "UR10e"}, records, None, "m.json")
+    # entries that give their pose need no arm: the name is not read
+    posed = [{"id": "p0", "on": "a.png", "pose": np.eye(4).tolist()}]
+    assert _session_robot({"robot": "UR10e"}, posed, None, "m.json").name == "SCORBOT ER-VII"

@@ -199,10 +199,15 @@ class StripeResult:
     @property
     def pixels(self) -> np.ndarray:
         """(k, 2) pixels (u, v) of the found centres."""
-        f = self.found
+        return self.pixels_of(self.found)
+
+    def pixels_of(self, lines: np.ndarray) -> np.ndarray:
+        """(k, 2) pixels (u, v) of the centres of the scan lines ``lines`` (a mask)."""
+        pos = np.asarray(self.position)[lines].astype(float)
+        centre = np.asarray(self.centre)[lines]
         if self.direction == "columns":
-            return np.stack([self.position[f].astype(float), self.centre[f]], axis=1)
-        return np.stack([self.centre[f], self.position[f].astype(float)], axis=1)
+            return np.stack([pos, centre], axis=1)
+        return np.stack([centre, pos], axis=1)
 
     def counts(self) -> dict[str, int]:
         """Number of scan lines per status, by name (``{"FOUND": 612, "NONE": 28, ...}``)."""

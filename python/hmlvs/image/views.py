@@ -27,6 +27,7 @@ from .session import (
     Pair,
     PairRejected,
     checked_blur_var,
+    manifest_robot,
     opencv_failure,
     read_session_manifest,
 )
@@ -100,7 +101,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
         rows=board_spec.rows, cols=board_spec.cols, square=board_spec.square))
     reader = PairReader(
         folder, doc.get("joint_unit", "rad") if joint_unit is None else joint_unit,
-        _session_robot(doc, records, robot),
+        _session_robot(doc, records, robot, source),
         (int(given[0]), int(given[1])) if isinstance(given, list) and len(given) == 2
         else None, channel, normalize, min_stripe, options, fit_blur, numbering.number,
         keep_board=_top_left)
@@ -127,19 +128,16 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     return views, board_spec, got.size, board_pose, reports
 
 
-def _session_robot(doc: dict[str, Any], records: list[Any], robot: Any) -> Any:
-    """The arm of an image session: ``robot``, else SCORBOT ER-VII, which a session whose
-    manifest names another arm with joint readings refuses (its DH table is needed)."""
+def _session_robot(doc: dict[str, Any], records: list[Any], robot: Any, source: Any) -> Any:
+    """The arm of an image session, as the paper model's pass and the scans take it
+    (:func:`~hmlvs.image.session.manifest_robot`: ``robot``, else the manifest's built-in
+    name or DH mapping), else SCORBOT ER-VII; a session whose entries all give their pose
+    needs no arm, and its manifest's ``robot:`` is not read."""
     from ..geometry.robot import Robot
 
-    if robot is not None:
-        return robot
-    name = doc.get("robot")
-    needs_robot = any(isinstance(r, dict) and "joints" in r for r in records)
-    if needs_robot and name not in (None, Robot.scorbot_er7().name):
-        raise ValueError(f"the images were taken with robot {name!r}; pass its DH table "
-                         "(robot=hmlvs.Robot(...) or --robot FILE)")
-    return Robot.scorbot_er7()
+    if robot is None and not any(isinstance(r, dict) and "joints" in r for r in records):
+        return Robot.scorbot_er7()
+    return manifest_robot(doc, robot, source) or Robot.scorbot_er7()
 
 
 @dataclass(frozen=True)

@@ -99,7 +99,7 @@ def draw_view(image: np.ndarray, corners: Any = None, stripe: StripeResult | Non
         status = np.asarray(stripe.status)
         for s, colour in STATUS_COLOURS.items():
             if s in (StripeStatus.FOUND, StripeStatus.OFF_LINE):  # centres: dots
-                for px in _centres(stripe, status == s):
+                for px in stripe.pixels_of(status == s):
                     cv2.circle(out, (int(round(px[0])), int(round(px[1]))), 1, colour, -1)
             if s != StripeStatus.FOUND and (status == s).any():
                 mark(np.asarray(stripe.position)[status == s], colour)
@@ -115,13 +115,6 @@ def draw_view(image: np.ndarray, corners: Any = None, stripe: StripeResult | Non
     _draw_header(out, title, legend, "bottom" if stripe is None or
                  stripe.direction == "columns" else "right")
     return out
-
-
-def _centres(stripe: StripeResult, lines: np.ndarray) -> np.ndarray:
-    """(k, 2) pixels (u, v) of the centres of the scan lines ``lines`` (a mask)."""
-    pos = np.asarray(stripe.position)[lines].astype(float)
-    c = np.asarray(stripe.centre)[lines]
-    return np.stack([pos, c] if stripe.direction == "columns" else [c, pos], axis=1)
 
 
 def _draw_header(out: np.ndarray, title: str, legend: list[tuple[str, tuple[int, int, int]]],
