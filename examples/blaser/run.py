@@ -14,10 +14,13 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
+import math
 from pathlib import Path
 import subprocess
 import sys
 import time
+
+import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -39,11 +42,12 @@ def hmlvs_command() -> list[str]:
     return [str(exe)] if exe.exists() else [sys.executable, "-m", "hmlvs"]
 
 
-def calibrate(session: Path, out: Path) -> tuple[float, list[str]]:
-    """`hmlvs calibrate SESSION --out OUT` with its defaults: (wall seconds, output lines)."""
+def calibrate(session: Path, out: Path, *options: str) -> tuple[float, list[str]]:
+    """`hmlvs calibrate SESSION --out OUT` with its defaults (or ``options``): (wall seconds,
+    output lines)."""
     start = time.perf_counter()
-    r = subprocess.run([*hmlvs_command(), "calibrate", str(session), "--out", str(out)],
-                       capture_output=True, text=True)
+    r = subprocess.run([*hmlvs_command(), "calibrate", str(session), "--out", str(out),
+                        *options], capture_output=True, text=True)
     seconds = time.perf_counter() - start
     if r.returncode not in (0, 3):
         raise RuntimeError(f"hmlvs calibrate {session} failed ({r.returncode}): {r.stderr}")
@@ -63,9 +67,59 @@ def run_resolution(checkout: Path, work: Path, res: str) -> dict:
     authors.authors_calibration(authors.state_from_mat(mat, MATS[res]),
                                 sess.image_size, MATS[res]).save(auth)
     scores = [score.score(auth, "the authors' own", sess),
-              score.score(cal, "hmlvs calibrate (defaults)", sess)]
+            score.score(cal, "hmlvs calibrate (defaults)", sess)]
+    bench = bench_workflow(session, work, res)
+    scores += [score.score(bench["robot"], "hmlvs: bench session, then the hand-eye", sess),
+               score.score(bench["uncertain"], "hmlvs calibrate --robot-poses uncertain", sess)]
+    bench["agreement"] = {name: agreement(bench["bench"], other) for name, other in
+                          (("defaults", cal), ("uncertain", bench["uncertain"]))}
     return {"res": res, "seconds": seconds, "lines": lines, "session": sess, "scores": scores,
-            "verdict": hmlvs.Calibration.load(cal).verdict}
+            "verdict": hmlvs.Calibration.load(cal).verdict, "bench": bench}
+
+
+def bench_session(session: Path, out: Path) -> Path:
+    """The session's frames as a bench session: the same images, the manifest without robot
+    poses (the laser-only frames, which need robot poses, are reported and left out)."""
+    doc = yaml.safe_load((session / "manifest.yaml").read_text())
+    for e in doc["poses"]:
+        del e["pose"]
+        e["on"] = str((session / e["on"]).resolve())
+    doc.pop("pose_format", None)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "manifest.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    return out
+
+
+def bench_workflow(session: Path, work: Path, res: str) -> dict:
+    """Issue 36's bench workflow on the real frames: the camera and laser plane from the
+    board frames alone (no robot poses), then the robot session holding them for the
+    hand-eye (`--initial`); and the full session with uncertain robot poses."""
+    bench = bench_session(session, work / f"bl{res}_bench")
+    out = {k: work / f"hmlvs{res}_{k}.yaml" for k in ("bench", "robot", "uncertain")}
+    calibrate(bench, out["bench"])
+    calibrate(session, out["robot"], "--initial", str(out["bench"]))
+    calibrate(session, out["uncertain"], "--robot-poses", "uncertain")
+    return out
+
+
+def agreement(a_path: Path, b_path: Path) -> dict:
+    """The camera and laser plane of two calibrations: differences, and in units of their
+    combined standard deviations (the files' own)."""
+    a, b = (hmlvs.Calibration.load(p) for p in (a_path, b_path))
+    out = {}
+    for name in ("fx", "fy", "cx", "cy"):
+        d = getattr(b.sensor, name) - getattr(a.sensor, name)
+        sig = math.hypot(a.std.get(name) or 0.0, b.std.get(name) or 0.0)
+        out[name] = (d, d / sig if sig else float("nan"))
+    na, nb = a.sensor.laser_plane[:3], b.sensor.laser_plane[:3]
+    angle = math.acos(min(1.0, abs(float(na @ nb))))
+    sig = math.sqrt(sum((c.std.get(k) or 0.0) ** 2 for c in (a, b)
+                        for k in ("plane_n1", "plane_n2")))
+    out["plane_deg"] = (math.degrees(angle), angle / sig if sig else float("nan"))
+    d = abs(b.sensor.laser_plane[3]) - abs(a.sensor.laser_plane[3])
+    sig = math.hypot(a.std.get("plane_d") or 0.0, b.std.get("plane_d") or 0.0)
+    out["plane_mm"] = (d, d / sig if sig else float("nan"))
+    return out
 
 
 def section(results: list[dict]) -> list[str]:
@@ -97,6 +151,21 @@ def section(results: list[dict]) -> list[str]:
             "fit) 0.284 / 2.38 and 0.393 / 4.96, vision-calibration 0.9 with its defaults "
             "0.239 / 2.55 and 0.417 / 9.74; the authors' own calibration scores 0.298 / 5.30 "
             "and 0.377 / 13.70 here, so this scorer's planarity runs a few per cent higher."]
+    out += ["", "The bench workflow on the same frames (`hmlvs calibrate BENCH` of a manifest "
+            "without robot poses: the camera and laser plane from the board frames alone; then "
+            "`hmlvs calibrate SESSION --initial BENCH.yaml`: the hand-eye with them held), and "
+            "the bench calibration's camera and plane against the full session's, in units of "
+            "their combined standard deviations (the files' own):", "",
+            "| session | against | fx | fy | cx | cy | plane normal | plane offset |",
+            "|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        for name, a in r["bench"]["agreement"].items():
+            cells = [f"{a[k][0]:+.2f} px ({a[k][1]:+.1f} sd)" for k in ("fx", "fy", "cx", "cy")]
+            cells += [f"{a['plane_deg'][0]:.3f} deg ({a['plane_deg'][1]:.1f} sd)",
+                      f"{a['plane_mm'][0]:+.3f} mm ({a['plane_mm'][1]:+.1f} sd)"]
+            label = {"defaults": "hmlvs calibrate (defaults)",
+                     "uncertain": "--robot-poses uncertain"}[name]
+            out.append(f"| {r['res']} | {label} | " + " | ".join(cells) + " |")
     out += ["", "hmlvs' own verdict on each of its calibrations (`hmlvs calibrate` exits 3 "
             "when it is not trustworthy):", ""]
     for r in results:

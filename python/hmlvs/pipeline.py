@@ -162,7 +162,7 @@ class SessionCalibration:
 def calibrate_session(source: str | os.PathLike, *, robot: Robot | None = None,
                       distortion: Sequence[str] = DISTORTION_NAMES, holdout: float = 0.0,
                       seed: int = 0, camera: OpenCvSensor | None = None,
-                      require: float | None = None,
+                      require: float | None = None, robot_poses: str = "exact",
                       on_views: Callable[[list[ImageReport]], None] | None = None
                       ) -> SessionCalibration:
     """What ``hmlvs calibrate --model opencv`` does, as a library call: the session's images
@@ -172,9 +172,13 @@ def calibrate_session(source: str | os.PathLike, *, robot: Robot | None = None,
     mm as the most predicted 95th-percentile 3D uncertainty, if given) -> the calibration
     file's content. ``camera``: an opencv calibration whose camera and laser plane are held
     (e.g. a bench session's); only the hand-eye transform and the board pose are then
-    calibrated. :func:`calibrate` with ``model="opencv"`` gives the same calibration
-    (without the hold-out)."""
+    calibrated. ``robot_poses``: "exact" or "uncertain"
+    (:func:`~hmlvs.calibration.joint.calibrate_joint`). :func:`calibrate` with
+    ``model="opencv"`` gives the same calibration (without the hold-out)."""
+    from .calibration.joint_solve import robot_poses_uncertain
     from .data.views import split_views
+
+    robot_poses_uncertain(robot_poses)  # checked before the images are read
     from .image.views import views_from_images
 
     views, board, size, board_pose, reports = views_from_images(source, robot=robot)
@@ -183,11 +187,14 @@ def calibrate_session(source: str | os.PathLike, *, robot: Robot | None = None,
     if not views:
         raise ValueError("no view has both the whole board and a stripe:\n" + "\n".join(
             f"  {r.id}: {r.reason}" for r in reports))
+    if robot_poses == "uncertain" and any(v.base_from_hand is None for v in views):
+        raise ValueError("robot poses uncertain: this session has views without a robot pose "
+                         "(a bench session's board poses are all free already)")
     views, test_views = split_views(views, holdout, seed)
     cal = _joint(views, board, size, reports, robot=robot, test=test_views or None,
                  judge=True, require=require,
                  options={"distortion": tuple(distortion), "base_from_board": board_pose,
-                          "camera": camera})
+                          "camera": camera, "robot_poses": robot_poses})
     assert cal.solve is not None and cal.judged is not None
     return SessionCalibration(cal.solve, cal.judged, cal, reports, views, board, size)
 

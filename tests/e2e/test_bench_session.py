@@ -101,3 +101,38 @@ def test_a_bench_calibration_does_not_measure_in_the_base_frame(sessions, tmp_pa
                          str(tmp_path / "c.ply")], capsys)
     assert code == 2 and "bench session's (camera mode)" in err
     assert not (tmp_path / "c.ply").exists()
+
+
+def test_robot_poses_uncertain_from_the_command_line(sessions, tmp_path, capsys):
+    """--robot-poses uncertain reaches the joint solve: each view keeps its own board pose and
+    the poses' spread is estimated (near zero on a render with exact poses) and printed."""
+    s, robot, _ = sessions
+    code, out, err = run_cli(["calibrate", str(robot), "--robot-poses", "uncertain", "--out",
+                           str(tmp_path / "u.yaml")], capsys)
+    assert code in (0, None), err
+    line = next(ln for ln in out.splitlines() if ln.startswith("robot poses: uncertain"))
+    spread_mm = float(line.split("estimated at ")[1].split(" mm")[0])
+    assert spread_mm < 0.1  # the render's poses are exact
+    cal = load_calibration(tmp_path / "u.yaml")
+    assert abs(cal.sensor.fx / s.sensor.camera_matrix[0, 0] - 1) < 2e-3
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--robot-poses", "sometimes"], "--robot-poses must be exact or uncertain"),
+    (["--robot-poses", "uncertain", "--model", "paper"], "--robot-poses applies to the opencv"),
+])
+def test_robot_poses_option_is_checked_before_anything_is_read(sessions, tmp_path, capsys,
+                                                                args, message):
+    _, robot, _ = sessions
+    code, _, err = run_cli(["calibrate", str(robot), *args, "--out", str(tmp_path / "x.yaml")],
+                           capsys)
+    assert code == 2 and message in err
+    assert not (tmp_path / "x.yaml").exists()
+
+
+def test_a_bench_session_has_no_robot_poses_to_doubt(sessions, tmp_path, capsys):
+    _, _, bench = sessions
+    code, _, err = run_cli(["calibrate", str(bench), "--robot-poses", "uncertain", "--out",
+                         str(tmp_path / "x.yaml")], capsys)
+    assert code == 2 and "views without a robot pose" in err
+    assert not (tmp_path / "x.yaml").exists()

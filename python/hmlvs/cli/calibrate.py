@@ -43,6 +43,12 @@ _MODEL_OPTION = typer.Option(
     "together, no guess needed) or paper (the paper's 14 parameters, from calibration "
     "points). auto: opencv for images whose manifest gives no board pose, else paper.")
 
+_ROBOT_POSES_OPTION = typer.Option(
+    "exact", help="opencv model: exact (every view's board pose follows from its robot pose) "
+    "or uncertain (each view keeps its own board pose, tied to the chain's by the robot pose "
+    "error it implies, whose spread is estimated: for robots whose poses disagree with the "
+    "images; the verdict's checks tell).")
+
 _BOUNDS_OPTION = typer.Option(
     None, help="paper model: search bounds, a YAML/JSON mapping of parameter names to "
     "[lower, upper] or {plus_minus: h} around the initial guess; others keep Table 2.")
@@ -56,7 +62,8 @@ def _paper_only_options(**given: bool) -> None:
         raise ValueError("--" + ", --".join(names) + (" applies" if len(names) == 1 else
                                                         " apply") +
                          " to the paper model only (--model paper); the opencv model takes "
-                         "--distortion, --holdout, --initial, --robot, --report and --seed")
+                         "--distortion, --holdout, --initial, --robot, --robot-poses, "
+                         "--report, --require and --seed")
 
 
 def _held_camera(initial: Optional[Path]) -> Any:
@@ -77,7 +84,7 @@ def _held_camera(initial: Optional[Path]) -> Any:
 def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: Optional[Path],
                       distortion: str, report: Optional[Path], quiet: bool,
                       as_json: bool, initial: Optional[Path] = None,
-                      require: Optional[float] = None) -> None:
+                      require: Optional[float] = None, robot_poses: str = "exact") -> None:
     """hmlvs calibrate --model opencv: images -> views -> joint calibration -> verdict ->
     file. With ``initial`` (an opencv calibration, e.g. of a bench session) its camera and
     laser plane are held and the hand-eye transform and board pose calibrated. Exits 3 when
@@ -87,7 +94,7 @@ def _calibrate_opencv(data: Path, out: Path, holdout: float, seed: int, robot: O
     with command(as_json) as caught:
         run = calibrate_session(
             data, robot=load_robot(robot), camera=_held_camera(initial), holdout=holdout,
-            seed=seed, require=require,
+            seed=seed, require=require, robot_poses=robot_poses,
             distortion=[t.strip() for t in distortion.split(",") if t.strip()],
             on_views=None if (as_json or quiet) else _echo_views)
         result, verdict, reports = run.result, run.verdict, run.reports
@@ -177,6 +184,7 @@ def calibrate(
     require: Optional[float] = typer.Option(
         None, "--require", help="Also call the calibration untrustworthy (exit 3) when its "
         "predicted 95th-percentile 3D uncertainty exceeds this many mm."),
+    robot_poses: str = _ROBOT_POSES_OPTION,
 ) -> None:
     """Calibrate the sensor from laser on/off images (or, paper model, a calibration data set).
 
@@ -203,9 +211,14 @@ def calibrate(
                 loss_scale=loss_scale != LmOptions.loss_scale, threads=threads is not None,
                 bounds=bounds is not None, test=test is not None,
                 save_data=save_data is not None, mode=mode != "corners")
+        if robot_poses not in ("exact", "uncertain"):
+            raise ValueError(f"--robot-poses must be exact or uncertain, got {robot_poses!r}")
+        if robot_poses == "uncertain" and chosen != "opencv":
+            raise ValueError("--robot-poses applies to the opencv model only (--model "
+                             "opencv): the paper model maps its points through exact poses")
     if chosen == "opencv":
         _calibrate_opencv(data, out, holdout, seed, robot, distortion, report, quiet, as_json,
-                          initial, require)
+                          initial, require, robot_poses)
         return
     _calibrate_paper(_PaperRun(data, out, method, test, holdout, fixed, free, runs, iterations,
                                loss, loss_scale, seed, threads, report, mode, save_data, robot,
