@@ -167,9 +167,9 @@ class Measurer:
 
 
 def _checked_only(options: dict[str, Any]) -> dict[str, Any]:
-    """The options as stripe_from_pair checks them on a blank pair (no automatic threshold
-    to trip over: a fixed one)."""
-    out = dict(options)
+    """The options as stripe_from_pair checks them on a blank grey pair (no automatic
+    threshold to trip over: a fixed one; no channel, which each frame's check takes)."""
+    out = {k: v for k, v in options.items() if k != "channel"}
     out.setdefault("threshold", 1.0)
     return out
 
