@@ -113,7 +113,9 @@ template <typename T>
 FrameProfile MeasureFrames(const ImageView<T>& on, const ImageView<T>& off,
                            const FrameStripeOptions& options, const LaserSensor& sensor,
                            const Eigen::Matrix4d& base_from_hand) {
-  const FrameStripe r = StripeFromFrames(on, off, options);
+  FrameStripeOptions o = options;
+  o.residual = false;  // a profile has none
+  const FrameStripe r = StripeFromFrames(on, off, o);
   if (r.no_pixel) return EmptyProfile(on.cols);
   return MeasureStripe(sensor, r.stripe, options.stripe.direction, base_from_hand);
 }

@@ -80,8 +80,9 @@ FrameProfile EmptyProfile(Eigen::Index scan_lines);
 FrameProfile MeasureStripe(const LaserSensor& sensor, const StripeResult& stripe,
                            StripeDirection direction, const Eigen::Matrix4d& base_from_hand);
 
-/// StripeFromFrames(on, off, options), then MeasureStripe; when an automatic threshold leaves
-/// no pixel of the frame (no stripe), EmptyProfile of the frame's columns.
+/// StripeFromFrames(on, off, options) without the residuals (a profile has none), then
+/// MeasureStripe; when an automatic threshold leaves no pixel of the frame (no stripe),
+/// EmptyProfile of the frame's columns.
 template <typename T>
 FrameProfile MeasureFrames(const ImageView<T>& on, const ImageView<T>& off,
                            const FrameStripeOptions& options, const LaserSensor& sensor,
