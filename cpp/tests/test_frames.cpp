@@ -127,6 +127,23 @@ TEST(Frames, DefaultPipelineFindsTheStripe) {
   EXPECT_LT(std::sqrt(sum2_alone / found_alone), 0.2);
 }
 
+TEST(Frames, ResidualsAreMeasuredUnlessAskedNotTo) {
+  // without the residuals (measurement's call) the same stripe, to the bit, residuals NaN
+  Frame on, off;
+  MakePair(2, &on, &off);
+  FrameStripeOptions without;
+  without.residual = false;
+  for (const ImageView<std::uint8_t>& o : {View(off), ImageView<std::uint8_t>()}) {
+    const StripeResult a = StripeFromFrames(View(on), o, FrameStripeOptions()).stripe;
+    const StripeResult b = StripeFromFrames(View(on), o, without).stripe;
+    ExpectSame(b, a);
+    EXPECT_TRUE((a.centre.array() == b.centre.array() || a.centre.array().isNaN()).all());
+    EXPECT_TRUE((a.sigma.array() == b.sigma.array() || a.sigma.array().isNaN()).all());
+    EXPECT_GT(a.residual.array().isFinite().count(), 0.8 * kCols);
+    EXPECT_TRUE(b.residual.array().isNaN().all());
+  }
+}
+
 TEST(Frames, BackgroundIsTheOpeningOfEveryColumn) {
   std::mt19937 gen(3);
   std::uniform_int_distribution<int> value(0, 255);

@@ -5,52 +5,19 @@
 #include <pybind11/pybind11.h>
 
 #include <cstdint>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 
 #include "bindings.h"
 #include "hmlvs/image/frames.h"
 #include "hmlvs/image/image.h"
+#include "image_arrays.h"
 
 namespace py = pybind11;
 
 namespace hmlvs::python {
 
 namespace {
-
-enum class Depth { kU8, kU16 };
-
-Depth DepthOf(const py::array& a, const char* name) {
-  if (py::isinstance<py::array_t<std::uint8_t>>(a)) return Depth::kU8;
-  if (py::isinstance<py::array_t<std::uint16_t>>(a)) return Depth::kU16;
-  std::ostringstream msg;
-  msg << name << " must be an 8- or 16-bit grayscale image (uint8 or uint16), got dtype "
-      << std::string(py::str(a.dtype()));
-  throw std::invalid_argument(msg.str());
-}
-
-template <typename T>
-ImageView<T> ViewOf(const py::array& a, const char* name) {
-  if (a.ndim() != 2) {
-    std::ostringstream msg;
-    msg << name << " must be a 2D (rows x cols) grayscale array, got " << a.ndim() << " dimensions";
-    throw std::invalid_argument(msg.str());
-  }
-  const auto item = static_cast<py::ssize_t>(sizeof(T));
-  if (a.strides(0) % item != 0 || a.strides(1) % item != 0) {
-    throw std::invalid_argument(std::string(name) +
-                                " has strides that are not a multiple of "
-                                "its pixel size");
-  }
-  ImageView<T> v;
-  v.data = static_cast<const T*>(a.data());
-  v.rows = static_cast<int>(a.shape(0));
-  v.cols = static_cast<int>(a.shape(1));
-  v.row_stride = a.strides(0) / item;
-  v.col_stride = a.strides(1) / item;
-  return v;
-}
 
 template <typename T>
 py::array Difference(const py::array& on, const py::array& off, const DifferenceOptions& o) {
@@ -72,23 +39,11 @@ StripeResult Extract(const py::array& image, const StripeOptions& options) {
   return ExtractStripe(v, options);
 }
 
-// The frames' common bit depth (the laser-off frame may be None).
-Depth FramesDepth(const py::array& on, const py::object& off) {
-  const Depth d = DepthOf(on, "the laser-on image");
-  if (!off.is_none() && DepthOf(off.cast<py::array>(), "the laser-off image") != d) {
-    throw std::invalid_argument("the laser-on and laser-off images have different bit depths (" +
-                                std::string(py::str(on.dtype())) + " and " +
-                                std::string(py::str(off.attr("dtype"))) + ")");
-  }
-  return d;
-}
-
 template <typename T>
 py::tuple FromFrames(const py::array& on, const py::object& off, const FrameStripeOptions& o,
                      bool want_background) {
   const ImageView<T> a = ViewOf<T>(on, "the laser-on image");
-  const ImageView<T> b =
-      off.is_none() ? ImageView<T>() : ViewOf<T>(off.cast<py::array>(), "the laser-off image");
+  const ImageView<T> b = OptionalViewOf<T>(off, "the laser-off image");
   py::object background = py::none();
   T* bg = nullptr;
   if (want_background && off.is_none()) {
@@ -125,10 +80,8 @@ Eigen::Matrix<std::uint8_t, Eigen::Dynamic, 1> AssessFrames(
   auto run = [&](auto tag) {
     using T = decltype(tag);
     const ImageView<T> v = ViewOf<T>(image, "the image");
-    const ImageView<T> a =
-        on.is_none() ? ImageView<T>() : ViewOf<T>(on.cast<py::array>(), "the laser-on image");
-    const ImageView<T> b =
-        off.is_none() ? ImageView<T>() : ViewOf<T>(off.cast<py::array>(), "the laser-off image");
+    const ImageView<T> a = OptionalViewOf<T>(on, "the laser-on image");
+    const ImageView<T> b = OptionalViewOf<T>(off, "the laser-off image");
     py::gil_scoped_release release;
     AssessStripe(v, a, b, direction, options, &out);
   };

@@ -10,5 +10,6 @@ void BindSolvers(pybind11::module_& m);
 void BindImage(pybind11::module_& m);
 void BindGeneral(pybind11::module_& m);
 void BindSim(pybind11::module_& m);
+void BindMeasure(pybind11::module_& m);
 
 }  // namespace hmlvs::python

@@ -16,4 +16,5 @@ PYBIND11_MODULE(_core, m) {
   hmlvs::python::BindImage(m);
   hmlvs::python::BindGeneral(m);
   hmlvs::python::BindSim(m);
+  hmlvs::python::BindMeasure(m);
 }

@@ -85,6 +85,18 @@ def test_bad_frames_and_calibrations_are_refused(rendered, tmp_path):
         m.points("frame.png", s.base_from_hand[0])
     with pytest.raises(ValueError, match="bogus"):
         hmlvs.Measurer(s.sensor, bogus=1)
+    # a channel is checked against each frame (grey frames have none)
+    with pytest.raises(ValueError, match="channel=2 was given but the laser-on image is "
+                       "grayscale"):
+        hmlvs.Measurer(s.sensor, channel=2).points(r.on[0], s.base_from_hand[0])
+
+    class Other:  # a SensorModel neither of the two models
+        model = "other"
+        points_in_camera = points_in_base = s.sensor.points_in_camera
+        hand_from_camera_matrix = s.sensor.hand_from_camera_matrix
+
+    with pytest.raises(ValueError, match="with the paper or the opencv model, not a Other"):
+        hmlvs.Measurer(Other())
 
 
 def test_measure_streams_a_scan_into_the_cloud_file(rendered, tmp_path):

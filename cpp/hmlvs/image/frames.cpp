@@ -143,7 +143,7 @@ class PairStripe {
     Detect();
     if (weighted_) StegerScale();
     StripeResult& res = out_.stripe;
-    Extract(second_, &res);
+    Extract(second_, &res, o_.residual);
     if (automatic_ && !(res.status.array() == 0).any() && NoPixel()) return std::move(out_);
     if (alone) DropJumps(&res);
     if (weighted_) {

@@ -46,6 +46,9 @@ struct FrameStripeOptions {
   double blur_var = 0.0;
   /// Steger's smoothing along the stripe as a multiple of its scale across, in [1, 10].
   double smooth_along = 1.0;
+  /// Measure the found centres' residuals (StripeResult::residual, the profiles' asymmetry);
+  /// false leaves them NaN (a caller that does not read them, as measurement).
+  bool residual = true;
   /// The defaults of the pipeline (hmlvs.image.session): the smoothing along the stripe of
   /// the image a normalised stripe's peaks are found on when the threshold is automatic
   /// (detect_sigma_along, px: 2.7x less noise, at most 4 px of a jump's ends blurred

@@ -75,8 +75,6 @@ void ValidateIntrinsics(const Vector9d& in) {
   }
 }
 
-namespace {
-
 Eigen::Vector4d UnitPlane(const Eigen::Vector4d& plane) {
   const double n = plane.head<3>().norm();
   if (!std::isfinite(n) || !(n > 0.0) || !std::isfinite(plane[3])) {
@@ -84,6 +82,8 @@ Eigen::Vector4d UnitPlane(const Eigen::Vector4d& plane) {
   }
   return plane / n;
 }
+
+namespace {
 
 // Pixels of `rows` inputs with a validity mask: `pixel_of(i, pixel)` writes input i's two
 // numbers and says whether they are valid; invalid rows hold NaN.
@@ -124,9 +124,6 @@ PixelsResult UndistortPixels(const Vector9d& in, PixelsRef pixels) {
   });
 }
 
-namespace {
-
-// Pixel i's camera-frame point on the laser plane, or false with the reason in `why`.
 bool LaserPoint(const Vector9d& in, const Eigen::Vector4d& plane, double u, double v, double* point,
                 const char** why) {
   double x, y;
@@ -150,6 +147,8 @@ bool LaserPoint(const Vector9d& in, const Eigen::Vector4d& plane, double u, doub
   }
   return true;
 }
+
+namespace {
 
 template <typename ToOutput>
 PointsResult MapLaserPixels(const Vector9d& in, const Eigen::Vector4d& laser_plane,

@@ -141,6 +141,17 @@ PixelsResult ProjectCameraPoints(const Vector9d& intrinsics, Points3Ref camera_p
 /// solved to convergence). Pixels where the inversion fails are invalid (NaN).
 PixelsResult UndistortPixels(const Vector9d& intrinsics, PixelsRef pixels);
 
+/// The laser plane (a, b, c, d) scaled to a unit normal. Throws std::invalid_argument unless
+/// its normal is finite and non-zero and d finite.
+Eigen::Vector4d UnitPlane(const Eigen::Vector4d& laser_plane);
+
+/// Stripe pixel (u, v) -> its camera-frame point on the laser plane `unit_plane` (UnitPlane):
+/// false, with the reason in `why`, when the pixel's undistortion fails or its ray meets the
+/// plane behind the camera, not at all or at a grazing angle (sine below kMinRaySine). The
+/// step of LaserPointsInCamera for one pixel.
+bool LaserPoint(const Vector9d& intrinsics, const Eigen::Vector4d& unit_plane, double u, double v,
+                double* point, const char** why);
+
 /// Stripe pixels -> camera-frame points on the laser plane (a, b, c, d). A pixel whose ray
 /// meets the plane behind the camera (or not at all), or whose undistortion fails, is invalid;
 /// with `throw_on_invalid` the first one raises std::invalid_argument naming it.

@@ -79,6 +79,14 @@ void ValidateParams(const Vector14d& q) {
   }
 }
 
+double RayPlaneSine(const double* q, double cos_theta, double sin_theta, double u, double v) {
+  double xd, yd;
+  const double s = DistortedSensorPoint(q, u, v, &xd, &yd);
+  const double xu = xd / s, yu = yd / s;
+  return std::abs(yu * cos_theta + q[kF] * sin_theta) /
+         std::sqrt(xu * xu + yu * yu + q[kF] * q[kF]);
+}
+
 namespace {
 
 // Pixels -> points with a validity mask: `point_of(i, u, v, point)` writes pixel i's point and
@@ -95,13 +103,7 @@ PointsResult MapPixels(const Vector14d& q, PixelsRef pixels, bool throw_on_inval
     double point[3];
     const double u = pixels(i, 0), v = pixels(i, 1);
     const double plane = point_of(i, u, v, point);
-    // The sine of the angle between the pixel's ray (Xu, Yu, f) and the laser plane, whose
-    // normal is (0, cos theta, sin theta).
-    double xd, yd;
-    const double s = DistortedSensorPoint(q.data(), u, v, &xd, &yd);
-    const double xu = xd / s, yu = yd / s;
-    const double grazing =
-        std::abs(yu * cos_theta + q[kF] * sin_theta) / std::sqrt(xu * xu + yu * yu + q[kF] * q[kF]);
+    const double grazing = RayPlaneSine(q.data(), cos_theta, sin_theta, u, v);
     if (plane > 0.0 && grazing >= min_ray_sine) {
       out.points.row(i) << point[0], point[1], point[2];
       out.valid[i] = 1;

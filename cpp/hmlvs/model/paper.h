@@ -182,6 +182,11 @@ struct Model {
 /// (f, Su, Sv, H > 0, |theta| < pi/2).
 void ValidateParams(const Vector14d& q);
 
+/// The sine of the angle between pixel (u, v)'s ray (Xu, Yu, f) and the laser plane, whose normal
+/// is (0, cos theta, sin theta): the batch functions below refuse a pixel whose sine is below
+/// their `min_ray_sine`.
+double RayPlaneSine(const double* q, double cos_theta, double sin_theta, double u, double v);
+
 /// Stripe pixels -> camera-frame points (mm), docs/model.md steps 1-3. Pixels whose ray misses the
 /// laser plane are marked invalid; with `throw_on_invalid` the first one raises
 /// std::invalid_argument.

@@ -3,10 +3,11 @@ points, frame after frame, from one or several threads.
 
 ``Measurer(calibration).points(frame, base_from_hand)`` extracts the stripe as the session
 pipeline does (:func:`hmlvs.image.session.stripe_from_pair`: a laser-on frame alone, or with
-its laser-off frame; one C++ call per frame) and maps every found centre through the
-calibration to the camera and the robot base. Nothing is shared between calls but the
-calibration and the options, which are read only: one ``Measurer`` serves several threads, and
-the heavy parts (the C++ kernels) release the GIL.
+its laser-off frame) and maps every found centre through the calibration to the camera and the
+robot base, as the sensor model's ``points_in_camera`` does: for a grey frame all in one C++
+call (cpp/hmlvs/measure/profile.h), which fills the profile's arrays. Nothing is shared
+between calls but the calibration and the options, which are read only: one ``Measurer``
+serves several threads, and the C++ kernels release the GIL.
 """
 
 from __future__ import annotations
@@ -18,9 +19,14 @@ from typing import Any
 
 import numpy as np
 
-from .._arrays import as_matrix
+from .. import _core
+from .._arrays import as_matrix, as_params
 from ..data.calibration_file import Calibration
-from ..image.stripe import StripeStatus
+from ..image.colour import is_colour
+from ..image.session import frames_options, stripe_from_pair
+from ..image.stripe import as_gray
+from ..models.opencv import OpenCvSensor
+from ..models.paper import PaperSensor
 from .measure import require_hand_eye, sensor_model
 
 
@@ -86,8 +92,6 @@ class Measurer:
         options = dict(stripe_options)
         if options.get("blur_var") is None and getattr(calibration, "blur_var", None):
             options["blur_var"] = calibration.blur_var
-        from ..image.session import frames_options, stripe_from_pair
-
         # a typo in the options is the caller's error, found now rather than at frame one
         try:
             stripe_from_pair(np.zeros((16, 16), np.uint8), np.zeros((16, 16), np.uint8),
@@ -100,7 +104,7 @@ class Measurer:
         fast = {k: v for k, v in options.items() if k != "channel"}
         self._channel = options.get("channel")
         self._core = frames_options(**fast)
-        self._hand_from_camera = np.asarray(self._model.hand_from_camera_matrix(), float)
+        self._sensor = _laser_sensor(self._model)
 
     def points(self, frame: np.ndarray, base_from_hand: Any,
                off: np.ndarray | None = None) -> Profile:
@@ -118,58 +122,44 @@ class Measurer:
         if pose.shape != (4, 4) or not np.isfinite(pose).all():
             raise ValueError(f"base_from_hand must be a finite 4 x 4 transform, got shape "
                              f"{pose.shape}")
+        if self._channel is None and is_colour(frame):
+            return Profile(*self._colour_profile(frame, off, pose))
+        on_g = as_gray(frame, "the laser-on image", self._channel)
+        off_g = None if off is None else as_gray(off, "the laser-off image", self._channel)
+        return Profile(*_core._measure_frames(on_g, off_g, self._core, self._sensor, pose))
+
+    def _colour_profile(self, frame: np.ndarray, off: np.ndarray | None,
+                        pose: np.ndarray) -> tuple[np.ndarray, ...]:
+        """A colour frame's profile arrays: its stripe from stripe_from_pair (which picks the
+        laser's channel), measured in C++."""
         try:
-            stripe = self._stripe(frame, off)
+            stripe = stripe_from_pair(frame, off, **self._options)
         except ValueError as e:
             if "leaves no pixel" not in str(e):
                 raise
-            stripe = None  # nothing above the automatic threshold: no stripe in this frame
-        n = frame.shape[1]
-        pixels = np.full((n, 2), np.nan)
-        points = np.full((n, 3), np.nan)
-        camera = np.full((n, 3), np.nan)
-        status = np.full(n, PointStatus.NO_STRIPE, np.uint8)
-        stripe_status = np.full(n, StripeStatus.NONE, np.uint8)
-        if stripe is None:
-            return Profile(pixels, points, camera, status, stripe_status)
-        if stripe.direction != "columns":
-            raise ValueError("Measurer measures a roughly horizontal stripe (scan lines are "
-                             "image columns)")
-        cols = np.asarray(stripe.position, np.intp)
-        stripe_status[cols] = stripe.status
-        is_found = stripe.status == StripeStatus.FOUND
-        found = cols[is_found]
-        if found.size:
-            px = np.empty((found.size, 2))  # stripe.pixels: (u, v) of the found centres
-            px[:, 0] = found
-            px[:, 1] = stripe.centre[is_found]
-            cam, ok = self._model.points_in_camera(px, on_invalid="mask")
-            base_from_camera = pose @ self._hand_from_camera
-            pixels[found] = px
-            good, cam_ok = found[ok], cam[ok]
-            camera[good] = cam_ok
-            points[good] = cam_ok @ base_from_camera[:3, :3].T + base_from_camera[:3, 3]
-            status[found] = np.where(ok, PointStatus.MEASURED, PointStatus.NO_POINT)
-        return Profile(pixels, points, camera, status, stripe_status)
+            return _core._empty_profile(frame.shape[1])  # nothing above the threshold
+        direction = (_core._StripeDirection.columns if stripe.direction == "columns"
+                     else _core._StripeDirection.rows)
+        return _core._measure_stripe(self._sensor, stripe.centre, stripe.status, direction,
+                                     pose)
 
-    def _stripe(self, frame: np.ndarray, off: np.ndarray | None) -> Any:
-        """The frame's stripe: grey frames (or with a given channel) through the C++ options
-        built once, colour ones through stripe_from_pair (which picks the laser's channel)."""
-        from ..image.colour import is_colour
-        from ..image.session import frames_stripe, stripe_from_pair
-        from ..image.stripe import as_gray
 
-        if self._channel is None and is_colour(frame):
-            return stripe_from_pair(frame, off, **self._options)
-        on_g = as_gray(frame, "the laser-on image", self._channel)
-        off_g = None if off is None else as_gray(off, "the laser-off image", self._channel)
-        return frames_stripe(on_g, off_g, self._core)[0]
+def _laser_sensor(model: Any) -> Any:
+    """The C++ measurement kernel's sensor (cpp/hmlvs/measure/profile.h) of either model."""
+    if isinstance(model, PaperSensor):
+        return _core._LaserSensor.paper(as_params(model.params))
+    if isinstance(model, OpenCvSensor):
+        width, height = model.image_size
+        return _core._LaserSensor.opencv(model.intrinsics_vector(), model.laser_plane,
+                                         model.hand_from_camera_matrix(), width, height)
+    raise ValueError(f"Measurer measures with the paper or the opencv model, not a "
+                     f"{type(model).__name__}")
 
 
 def _checked_only(options: dict[str, Any]) -> dict[str, Any]:
-    """The options as stripe_from_pair checks them on a blank pair (no automatic threshold
-    to trip over: a fixed one)."""
-    out = dict(options)
+    """The options as stripe_from_pair checks them on a blank grey pair (no automatic
+    threshold to trip over: a fixed one; no channel, which each frame's check takes)."""
+    out = {k: v for k, v in options.items() if k != "channel"}
     out.setdefault("threshold", 1.0)
     return out
 
