@@ -1,6 +1,7 @@
 """How good can any calibration be on a Blaser session? The trade-off of the two scores.
 
     python examples/blaser/frontier.py SESSION START_CAL [--weights 0.5 1.5 5 50]
+                                       [--pixels scorer|hmlvs]
 
 score.py rates a calibration by stripe planarity (mm) and chain reprojection (px). Both run
 through the same nominal robot poses, whose errors no calibration can remove; they pull the
@@ -119,18 +120,63 @@ class Problem:
         return Calibration.from_dict(d)
 
 
+def hmlvs_stripes(session: Path, like: dict[str, np.ndarray], start: Calibration
+                  ) -> dict[str, np.ndarray]:
+    """The stripe pixels hmlvs' own pipeline finds in each view of the session (an empty
+    array where it finds none), keyed as the scorer's, less those its calibration's robust
+    step would drop: mapped by START to the base, beyond 5 robust sigmas from their plane
+    (the fit here is plain least squares, which a few stray pixels would pull)."""
+    from hmlvs.image.views import views_from_images
+
+    views = views_from_images(session / "manifest.yaml")[0]
+    own = {v.id: np.asarray(v.laser_pixels, float).reshape(-1, 2) for v in views}
+    poses = {v.id: v.base_from_hand for v in views}
+    pts = {k: start.sensor.points_in_base(px, np.repeat(poses[k][None], len(px), 0),
+                                          on_invalid="mask")[0] for k, px in own.items()}
+    every = np.concatenate([p for p in pts.values() if len(p)])
+    every = every[np.isfinite(every).all(axis=1)]
+    centre = every.mean(axis=0)
+    normal = np.linalg.svd(every - centre)[2][2]
+    dist = {k: np.abs((p - centre) @ normal) for k, p in pts.items()}
+    d_all = np.concatenate(list(dist.values()))
+    d_all = d_all[np.isfinite(d_all)]
+    limit = 5 * 1.4826 * np.median(np.abs(d_all - np.median(d_all)))
+    return {k: own[k][dist[k] <= limit] if k in own else np.empty((0, 2)) for k in like}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("session", type=Path)
     ap.add_argument("start", type=Path, help="an hmlvs opencv calibration of the session")
     ap.add_argument("--weights", type=float, nargs="+", default=[0.5, 1.5, 5.0, 50.0])
     ap.add_argument("--cache-dir", type=Path, default=score.default_cache_dir())
+    ap.add_argument("--pixels", choices=("scorer", "hmlvs"), default="scorer",
+                    help="the stripe pixels fitted: the scorer's own (the oracle) or those "
+                    "hmlvs' pipeline finds (views_from_images); scored on the scorer's and, "
+                    "with hmlvs, on those too")
     a = ap.parse_args(argv)
     sess = score.load_session(a.session, a.cache_dir)
     start = Calibration.load(a.start)
+    scorer_px = sess.stripes
+    own_px = hmlvs_stripes(a.session, scorer_px, start) if a.pixels == "hmlvs" else None
+    sess.stripes = own_px or scorer_px  # the pixels fitted
     prob = Problem(sess, start)
-    print("| weight (1/mm) | planarity (mm) | chain (px) | fx | fy |")
-    print("|---|---|---|---|---|")
+
+    def scores(path: Path) -> str:
+        """planarity on the scorer's pixels, chain (and planarity on hmlvs' pixels)"""
+        sess.stripes = scorer_px
+        s = score.score(path, "", sess)
+        out = f"{s.planarity.rms_mm:.3f} | {s.chain.rms_px:.2f} | "
+        if own_px is not None:
+            sess.stripes = own_px
+            out += f"{score.score(path, '', sess).planarity.rms_mm:.3f} | "
+        return out
+
+    extra = ("planarity on hmlvs' pixels (mm) | ", "---|") if own_px is not None else ("", "")
+    print(f"| weight (1/mm) | planarity (mm) | chain (px) | {extra[0]}fx | fy |")
+    print(f"|---|---|---|{extra[1]}---|---|")
+    s0 = start.sensor
+    print(f"| START | {scores(a.start)}{s0.fx:.1f} | {s0.fy:.1f} |", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         for w in a.weights:
             def weighted(x: np.ndarray, w: float = w) -> np.ndarray:
@@ -140,9 +186,7 @@ def main(argv: list[str] | None = None) -> int:
             sol = least_squares(weighted, prob.x0, x_scale="jac", max_nfev=200)
             path = Path(tmp) / f"w{w}.yaml"
             prob.calibration(sol.x, start).save(path)
-            s = score.score(path, f"w {w}", sess)
-            print(f"| {w:g} | {s.planarity.rms_mm:.3f} | {s.chain.rms_px:.2f} | "
-                  f"{sol.x[0]:.1f} | {sol.x[1]:.1f} |", flush=True)
+            print(f"| {w:g} | {scores(path)}{sol.x[0]:.1f} | {sol.x[1]:.1f} |", flush=True)
     return 0
 
 
