@@ -154,12 +154,15 @@ def main(argv: list[str] | None = None) -> int:
                     help="the stripe pixels fitted: the scorer's own (the oracle) or those "
                     "hmlvs' pipeline finds (views_from_images); scored on the scorer's and, "
                     "with hmlvs, on those too")
+    ap.add_argument("--hmlvs-column", action="store_true",
+                    help="also score every fit on hmlvs' pixels (with --pixels scorer)")
     a = ap.parse_args(argv)
     sess = score.load_session(a.session, a.cache_dir)
     start = Calibration.load(a.start)
     scorer_px = sess.stripes
-    own_px = hmlvs_stripes(a.session, scorer_px, start) if a.pixels == "hmlvs" else None
-    sess.stripes = own_px or scorer_px  # the pixels fitted
+    own_px = hmlvs_stripes(a.session, scorer_px, start) \
+        if a.pixels == "hmlvs" or a.hmlvs_column else None
+    sess.stripes = own_px if a.pixels == "hmlvs" else scorer_px  # the pixels fitted
     prob = Problem(sess, start)
 
     def scores(path: Path) -> str:
