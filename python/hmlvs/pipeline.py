@@ -177,9 +177,9 @@ def calibrate_session(source: str | os.PathLike, *, robot: Robot | None = None,
     ``model="opencv"`` gives the same calibration (without the hold-out)."""
     from .calibration.joint_solve import robot_poses_uncertain
     from .data.views import split_views
+    from .image.views import views_from_images
 
     robot_poses_uncertain(robot_poses)  # checked before the images are read
-    from .image.views import views_from_images
 
     views, board, size, board_pose, reports = views_from_images(source, robot=robot)
     if on_views is not None:

@@ -98,6 +98,12 @@ double NormalisedThreshold(const Stats<T>& st, double offset, double noise, doub
   return std::max(noise_term * (along > 0.0 ? SmoothingNoiseGain(along) : 1.0), top);
 }
 
+// Steger's scale for a stripe of FWHM `width` px (the pipeline's rule: half of it, 3-20 px;
+// 3 px when no width was measured).
+double StegerSigmaOfWidth(double width) {
+  return std::isnan(width) ? 3.0 : std::clamp(0.5 * width, 3.0, 20.0);
+}
+
 // The median of the widths of the found scan lines of `res`; NaN when none was found.
 double MedianFoundWidth(const StripeResult& res) {
   std::vector<double> w;
@@ -251,8 +257,7 @@ class PairStripe {
     if (need_first_) {
       StripeResult r1;
       Extract(first_, &r1, false);  // only its found widths are read
-      const double median = MedianFoundWidth(r1);
-      second_.steger_sigma = std::isnan(median) ? 3.0 : std::clamp(0.5 * median, 3.0, 20.0);
+      second_.steger_sigma = StegerSigmaOfWidth(MedianFoundWidth(r1));
     }
     if (!o_.steger_sigma_along_given && o_.smooth_along != 1.0) {
       second_.steger_sigma_along = std::min(o_.smooth_along * second_.steger_sigma, 40.0);
@@ -333,67 +338,14 @@ void CheckFrames(const ImageView<T>& on, const ImageView<T>& off, const FrameStr
   }
 }
 
-// A bit per value of x[0 .. m) above t (m <= kSb).
-template <typename T>
-unsigned AboveBits(const T* x, int m, T t) {
-#if defined(__SSE2__)
-  if constexpr (sizeof(T) == 1) {
-    if (m == kSb) {  // x > t <=> max(x, t + 1) == x, for t < 255
-      if (t == 255) return 0;
-      const __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(x));
-      const __m128i next = _mm_set1_epi8(static_cast<char>(t + 1));
-      return static_cast<unsigned>(_mm_movemask_epi8(_mm_cmpeq_epi8(_mm_max_epu8(v, next), v)));
-    }
-  }
-#endif
-  unsigned bits = 0;
-  for (int i = 0; i < m; ++i) bits |= static_cast<unsigned>(x[i] > t) << i;
-  return bits;
-}
-
-// ExtractStripe(image, o) with centroid centres, without the residuals: the widths of its
-// found scan lines (columns), for their median.
+// ExtractStripe(image, o) with centroid centres along image columns: the widths of its found
+// scan lines, for their median.
 template <typename T>
 StripeResult FoundWidths(const ImageView<T>& image, StripeOptions o) {
   o.direction = StripeDirection::kColumns;
   o.method = StripeMethod::kCentroid;
   o.detect_sigma_along = 0.0;
-  const int rows = image.rows, n = image.cols;
-  StripeResult res;
-  res.noise = o.noise >= 0.0 ? o.noise : EstimateDifferenceNoise(image);
-  if (o.threshold >= 0.0) {
-    res.threshold = o.threshold;
-  } else {
-    T m = 0;  // the automatic threshold: the maximum over every 4th row
-    for (int r = 0; r < rows; r += 4) {
-      for (int c = 0; c < n; ++c) m = std::max(m, image(r, c));
-    }
-    res.threshold = std::max(5.0 * res.noise, 0.15 * static_cast<double>(m));
-  }
-  // the runs above the threshold (v > threshold <=> v > floor(threshold): whole numbers),
-  // streamed over the rows a block of kSb columns at a time
-  const T t = static_cast<T>(
-      std::min(std::floor(res.threshold), static_cast<double>(std::numeric_limits<T>::max())));
-  const int blocks = (n + kSb - 1) / kSb;
-  Detector det;
-  det.Init(n, blocks);
-  for (int r = 0; r < rows; ++r) {
-    const T* x = image.data + r * image.row_stride;
-    for (int b = 0; b < blocks; ++b) {
-      const unsigned above = AboveBits(x + b * kSb, std::min(kSb, n - b * kSb), t);
-      if (above != 0 || det.open[b] != 0) det.Row(r, b, static_cast<std::uint16_t>(above));
-    }
-  }
-  det.Finish(rows);
-  scan::ResetResult(n, &res);
-  const ScanView<T> v{image.data, n, rows, 1, image.row_stride};
-  const scan::StegerKernels none;  // centroid centres
-  for (int s = 0; s < n; ++s) {
-    const size_t at = static_cast<size_t>(s) * scan::kMaxRuns;
-    scan::ScanLine(v, v, s, &det.runs.begin[at], &det.runs.end[at], det.runs.count[s], o, none,
-                   &res, false);
-  }
-  return res;
+  return ExtractStripe(image, o);
 }
 
 // The first measure of the stripe's width on a laser-on frame `f` alone, to size the opening
@@ -435,8 +387,7 @@ FrameStripe AloneStripe(Frames<T>* f, const FrameStripeOptions& o, T* background
   const ImageView<T> on_w{f->on, f->rows, f->cols, f->on_rs, 1};
   const double width = FirstWidth(*f, oa.stripe);
   if (!o.method_given && !o.steger_sigma_given) {
-    // Steger's scale from the same width (the pipeline's rule: half of it, at least 3 px)
-    oa.stripe.steger_sigma = std::isnan(width) ? 3.0 : std::clamp(0.5 * width, 3.0, 20.0);
+    oa.stripe.steger_sigma = StegerSigmaOfWidth(width);  // from the same width
     oa.steger_sigma_given = true;
   }
   f->off = bg;

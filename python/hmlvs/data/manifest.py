@@ -165,7 +165,10 @@ def _entry(e: Any, i: int, path: Path, seen: dict[str, int], in_pose_file: bool,
 
 def is_manifest(path: str | os.PathLike) -> bool:
     """An image manifest: a folder, ``manifest.json``/``.yaml``, or a JSON/YAML file of any
-    name whose format is ``hmlvs-images`` (wherever the file puts its ``format`` key)."""
+    name whose format is ``hmlvs-images`` (wherever the file puts its ``format`` key), or a
+    :class:`Manifest` already read."""
+    if isinstance(path, Manifest):
+        return True
     path = Path(path)
     if path.is_dir() or path.name in ("manifest.json", "manifest.yaml", "manifest.yml"):
         return True

@@ -158,9 +158,10 @@ def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = Non
     """
 
     from .._io import atomic_folder
-    from ..data.manifest import read_manifest, write_png
+    from ..data.manifest import load_manifest, read_manifest, write_png
     from ..image.views import views_from_images
 
+    source = load_manifest(source)  # read once, for the views and the pictures
     used, spec, _, _, reports = views_from_images(source, robot=robot, board=board,
                                                   channel=channel, normalize=normalize,
                                                   **stripe_options)
