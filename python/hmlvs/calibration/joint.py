@@ -35,6 +35,7 @@ from ..geometry.transforms import (
     invert_transform,
 )
 from ..models.opencv import DISTORTION_NAMES, OpenCvSensor
+from .joint_covariance import chain_covariance, inverse_normal
 from .joint_result import JointCalibration
 from .joint_setup import (  # noqa: F401 (initial_intrinsics, on_board: re-exported)
     board_plane_points,
@@ -339,7 +340,13 @@ def _assemble(su: _Setup, board: BoardSpec, image_size: tuple[int, int], state: 
     n_l = int(sum(len(r) for r in laser_r))
     jac = np.array(jac, float)
     jac[n_c:n_c + n_l] /= math.sqrt(stripe_corr)
-    cov, rank, cond = _covariance(jac)
+    cov, rank, cond = inverse_normal(jac)
+    counted = None
+    if su.chain and not pose_sigma:
+        counted_cov, counted = chain_covariance(jv, state, opts, jac, cov, stripe_corr,
+                                                (su.cv_rms / math.sqrt(2), su.sigma_l0),
+                                                _own_poses(su, board, state, keep_c))
+        cov = counted_cov
     std = {n: float(math.sqrt(max(cov[k, k], 0.0))) for k, n in enumerate(names)}
     if rank < len(names):
         su.warnings.append(f"the data determine {rank} of the {len(names)} unknowns; add views "
@@ -366,13 +373,29 @@ def _assemble(su: _Setup, board: BoardSpec, image_size: tuple[int, int], state: 
         camera_from_board={} if su.chain else {v.id: state.camera_from_board[i]
                                                for i, v in enumerate(su.views)},
         warnings=su.warnings, test_rms_mm=test_rms, test_views=len(test or ()),
-        robot_pose_sigma=pose_sigma, stripe_correlation=stripe_corr,
+        robot_pose_sigma=pose_sigma, pose_errors_counted=counted,
+        stripe_correlation=stripe_corr,
         free_rms_px=float(su.cv_rms),
         residuals={v.id: {"corner_pixels": np.asarray(v.corner_pixels, float)[keep_c[i]],
                           "corner_residuals": np.asarray(corners_r[i]),
                           "laser_pixels": su.laser_px[i][keep_l[i]],
                           "laser_residuals": np.asarray(laser_r[i])}
                    for i, v in enumerate(su.views)}, rejected=su.rejected)
+
+
+def _own_poses(su: _Setup, board: BoardSpec, state: Any, keep_c: list[np.ndarray]
+               ) -> list[np.ndarray | None]:
+    """Per view, camera_from_board from its own kept corners with the solved camera
+    (``cv2.solvePnP``); None for a laser-only view."""
+    st = np.asarray(state.intrinsics, float)
+    k = np.array([[st[0], 0, st[2]], [0, st[1], st[3]], [0, 0, 1.0]])
+    out: list[np.ndarray | None] = []
+    for i, v in enumerate(su.views):
+        idx = su.corner_index[i][keep_c[i]]
+        out.append(board_pose_from_corners(
+            board.points(idx), np.asarray(v.corner_pixels, float).reshape(-1, 2)[keep_c[i]],
+            k, st[4:]) if len(idx) else None)
+    return out
 
 
 def _warn_pose_disagreement(su: _Setup, corners_r: Sequence[np.ndarray],
@@ -440,25 +463,6 @@ def stripe_correlation(residuals: Sequence[np.ndarray], max_lag: int = 60) -> fl
             total += 2.0 * rho
         lengths.append(total)
     return max(1.0, float(np.median(lengths))) if lengths else 1.0
-
-
-def _covariance(jac: np.ndarray) -> tuple[np.ndarray, int, float]:
-    """(J^T J)^-1 of the weighted residuals' Jacobian via the column-scaled SVD; its numerical
-    rank and condition number."""
-    scale = np.linalg.norm(jac, axis=0)
-    scale[scale == 0] = 1.0
-    js = jac / scale
-    # QR first: the SVD of the small triangular factor has the same singular values and
-    # right vectors, and costs nothing next to the SVD of the tall Jacobian.
-    r = np.linalg.qr(np.asfortranarray(js), mode="r") if js.shape[0] > js.shape[1] else js
-    _, s, vt = np.linalg.svd(r, full_matrices=False)
-    tol = 1e-10 * s[0] if s.size else 0.0
-    rank = int((s > tol).sum())
-    inv = np.where(s > tol, 1.0 / np.where(s > tol, s, 1.0) ** 2, 0.0)
-    cov_s = (vt.T * inv) @ vt
-    cov = cov_s / np.outer(scale, scale)
-    cond = float(s[0] / s[rank - 1]) if rank else float("inf")
-    return cov, rank, cond
 
 
 def board_plane_errors(sensor: OpenCvSensor, views: Sequence[ViewData], board: Any,

@@ -64,6 +64,10 @@ class JointCalibration:
     #: chain mode with uncertain robot poses: the estimated spread of the robot pose errors,
     #: (translation mm, rotation deg) per axis; None with exact poses
     robot_pose_sigma: tuple[float, float] | None = None
+    #: chain mode with exact robot poses: the spread of the robot pose errors the residuals
+    #: show (translation mm, rotation deg, per axis), counted in the covariance
+    #: (:mod:`hmlvs.calibration.joint_covariance`); None when they show none
+    pose_errors_counted: tuple[float, float] | None = None
     #: RMS corner reprojection (px) of the camera calibration with every view's board pose
     #: free (Zhang's, or the held camera's solvePnP): what the detector's noise leaves
     free_rms_px: float | None = None
@@ -111,7 +115,11 @@ class JointCalibration:
                     self.sensor.hand_from_camera[:3, :3])],
                 "mode": self.mode, "corner_rms_px": float(self.corner_rms_px),
                 "views": len(self.per_view), "dropped": dict(self.dropped),
-                "flipped": list(self.flipped)}
+                "flipped": list(self.flipped),
+                "robot_pose_sigma": None if self.robot_pose_sigma is None
+                else [float(x) for x in self.robot_pose_sigma],
+                "pose_errors_counted": None if self.pose_errors_counted is None
+                else [float(x) for x in self.pose_errors_counted]}
 
     @property
     def determined(self) -> bool:
@@ -141,6 +149,11 @@ class JointCalibration:
             lines.append(f"robot poses: uncertain, their errors estimated at "
                          f"{self.robot_pose_sigma[0]:.3f} mm and "
                          f"{self.robot_pose_sigma[1]:.4f} deg RMS per axis")
+        if self.pose_errors_counted is not None:
+            lines.append(f"robot poses: exact in the solve; the residuals show pose errors of "
+                         f"about {self.pose_errors_counted[0]:.3f} mm and "
+                         f"{self.pose_errors_counted[1]:.4f} deg RMS per axis, counted in "
+                         "the uncertainties")
         if self.mode == "chain":
             t = s.hand_from_camera[:3, 3]
             rv = rotation_to_vector(s.hand_from_camera[:3, :3])

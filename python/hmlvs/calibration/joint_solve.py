@@ -70,7 +70,7 @@ def robot_poses_uncertain(mode: str) -> bool:
     return mode == "uncertain"
 
 
-def _pose_sigmas(errors: list[np.ndarray]) -> tuple[float, float]:
+def pose_sigmas(errors: list[np.ndarray]) -> tuple[float, float]:
     """The robot pose errors' RMS per axis (rad, mm), less the 6 + 6 degrees of freedom the
     hand-eye and board poses take out of the 6 n components."""
     e = np.asarray(errors, float).reshape(-1, 6)
@@ -91,14 +91,14 @@ def solve_uncertain_poses(make_views: Any, state: Any, opts: Any, keep_c: list[n
     meaningless hand-eye). Returns the result, the state and the spread (mm, deg) per
     axis."""
     opts.pose_sigma_r, opts.pose_sigma_t = 1.0, 1.0
-    top_r, top_t = _pose_sigmas(_core._joint_pose_errors(make_views(keep_c, keep_l), state,
+    top_r, top_t = pose_sigmas(_core._joint_pose_errors(make_views(keep_c, keep_l), state,
                                                          opts))
     sig_r, sig_t = top_r, top_t
     result = None
     for _ in range(8):
         opts.pose_sigma_r, opts.pose_sigma_t = sig_r, sig_t
         result, state = solve_weighted(make_views, state, opts, keep_c, keep_l, robust)
-        sig_r, sig_t = _pose_sigmas(_core._joint_pose_errors(make_views(keep_c, keep_l), state,
+        sig_r, sig_t = pose_sigmas(_core._joint_pose_errors(make_views(keep_c, keep_l), state,
                                                              opts))
         sig_r, sig_t = min(sig_r, top_r), min(sig_t, top_t)
         if abs(sig_r / opts.pose_sigma_r - 1) < 0.1 and abs(sig_t / opts.pose_sigma_t - 1) < 0.1:
