@@ -30,16 +30,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from .. import _core
+from ..diagnostics.pose_errors import pose_error_part
 from ..geometry.transforms import make_transform, rotation_from_vector
 from .joint_solve import pose_sigmas
-
-#: The residuals show robot pose errors when their sum of squares exceeds the white noise's
-#: expectation by more than this many standard deviations of its chi-square spread
-#: (sqrt(2 n)). On renders with exact poses the excess is about 1 such standard deviation
-#: (the free-pose noise estimate runs a little low), which, counted, would widen every
-#: standard deviation by 1.6 times for errors that are not there; on renders with 0.3 mm and
-#: 0.1 degree pose errors it is hundreds, on the Blaser sessions 11-17.
-EXCESS_SD = 3.0
 
 #: central-difference steps for J_e: rotation (rad) and translation (mm)
 _STEP_R, _STEP_T = 1e-6, 1e-4
@@ -106,35 +99,6 @@ def pose_spread(views: Sequence[Any], state: Any, opts: Any,
     return pose_sigmas(errors)
 
 
-def pose_error_part(jw: np.ndarray, a_inv: np.ndarray, rows: Sequence[np.ndarray],
-                    pose_jac: Sequence[np.ndarray], residuals: np.ndarray,
-                    white_share: np.ndarray) -> tuple[np.ndarray, float] | None:
-    """The pose errors' part of the covariance and their estimated scale, or None when the
-    residuals show none beyond the white noise (:data:`EXCESS_SD`).
-
-    jw : the weighted Jacobian (n x p) with the solve's own weights; a_inv : (jw^T jw)^-1
-    rows, pose_jac : per view, its rows of ``jw`` and the weighted derivative of those
-        residuals with respect to its pose error, each column scaled by the shape's sigma
-    residuals : the weighted residuals (n); white_share : each row's white-noise variance
-        in the weighted units (at most 1)
-    Returns ``(s^2 A^-1 (sum_i G_i G_i^T) A^-1, s)`` with ``G_i = jw[rows_i]^T pose_jac_i``.
-    """
-    gram = np.zeros_like(a_inv)
-    trace_m = 0.0
-    for r, je in zip(rows, pose_jac):
-        trace_m += float(np.sum(je ** 2))
-        g = jw[r].T @ je
-        gram += g @ g.T
-    # E[r^T r] = tr(P C) with P = I - jw A^-1 jw^T: the white part and s^2 times the pose part
-    white = float(white_share.sum() - np.trace(a_inv @ (jw.T @ (jw * white_share[:, None]))))
-    pose = trace_m - float(np.trace(a_inv @ gram))
-    excess = float(residuals @ residuals) - white
-    if pose <= 0 or excess <= EXCESS_SD * math.sqrt(2.0 * max(white, 1.0)):
-        return None
-    scale2 = excess / pose
-    return scale2 * (a_inv @ gram @ a_inv), math.sqrt(scale2)
-
-
 def chain_covariance(views: Sequence[Any], state: Any, opts: Any, jac: np.ndarray,
                      cov: np.ndarray, stripe_corr: float, white: tuple[float, float],
                      own_poses: Sequence[np.ndarray | None]
@@ -171,7 +135,12 @@ def chain_covariance(views: Sequence[Any], state: Any, opts: Any, jac: np.ndarra
     c_r, l_r = _core._evaluate_joint(list(views), state, opts)
     residuals = np.r_[np.concatenate([np.asarray(c).ravel() for c in c_r]) * wc,
                       np.concatenate([np.asarray(x) for x in l_r]) * wl]
-    part = pose_error_part(jw, inverse_normal(jw)[0], rows, pose_jac, residuals, share)
+    a_inv = inverse_normal(jw)[0]
+    # white noise's expected sum of squares, tr(P diag(share)), P = I - jw A^-1 jw^T, and
+    # its chi-square spread
+    white = float(share.sum() - np.trace(a_inv @ (jw.T @ (jw * share[:, None]))))
+    part = pose_error_part(jw, a_inv, rows, pose_jac, residuals, white,
+                           math.sqrt(2.0 * float(np.sum(share ** 2))))
     if part is None:
         return cov, None
     return cov_white + part[0], (part[1] * sig_t, math.degrees(part[1] * sig_r))

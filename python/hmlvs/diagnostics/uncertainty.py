@@ -39,6 +39,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from ..data.dataset import Dataset
+from ..models.paper import hand_from_camera, points_in_camera
 from ..models.params import NAMES, Bounds, Parameters, param_index
 from .identifiability import (
     EULER_INDEX,
@@ -50,6 +51,7 @@ from .identifiability import (
     check_inputs,
     report_of,
 )
+from .pose_errors import pose_error_part
 
 _DETERMINED_TOL = 1e-6  # fraction of a gradient inside the null space still "determined"
 
@@ -124,6 +126,10 @@ class Uncertainty:
     flat: tuple[str, ...]
     warnings: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    #: the robot pose errors the residuals show (translation mm, rotation deg, RMS per axis),
+    #: counted in the covariance (:mod:`hmlvs.diagnostics.pose_errors`); None when they show
+    #: none, or the noise levels were given
+    pose_errors: tuple[float, float] | None = None
 
     def combination(self, name: str) -> Combination:
         """The combination called ``name`` ("f/Su", "f/Sv", "k Su^2", "omega + varphi")."""
@@ -149,6 +155,10 @@ class Uncertainty:
                 f"{self.point_noise or 0:.3g} mm ({how}; residual std {self.sigma:.3g} mm, "
                 f"{self.dof} degrees of freedom)")
         lines = [head]
+        if self.pose_errors is not None:
+            lines.append(f"  and robot pose errors of about {self.pose_errors[0]:.3g} mm and "
+                         f"{self.pose_errors[1]:.3g} deg RMS per axis, which the residuals "
+                         "show (the points of a pose move together)")
         for n in self.free:
             flag = "" if self.determined[n] else "  (not determined)"
             lines.append(f"  {n:<7} std {self.std[n]:.3g}{flag}")
@@ -207,7 +217,8 @@ def check_noise(pixel_noise: Any, point_noise: Any) -> None:
                          "neither to estimate them from the residuals")
 
 
-def _estimate_noise(an: Analysis, wp: np.ndarray, rank: int) -> tuple[float, float]:
+def _estimate_noise(an: Analysis, wp: np.ndarray, rank: int,
+                    extra: np.ndarray | None = None) -> tuple[float, float]:
     """Pixel noise (px) and point noise (mm) from the residuals, by the method of moments.
 
     Pixel noise moves a point within the laser plane (W_p,i = G_i G_i^T, rank 2), point noise
@@ -216,10 +227,32 @@ def _estimate_noise(an: Analysis, wp: np.ndarray, rank: int) -> tuple[float, flo
     the laser plane (M_1 = diag(n_i n_i^T)) and within it (M_2 = I - M_1) have expectations
     E[r^T M_k r] = sp^2 tr((I-P) M_k (I-P) W_p) + st^2 tr((I-P) M_k (I-P)): two linear
     equations for sp^2 and st^2 (each clipped at 0). Unbiased for the linearised model.
+    ``extra``: columns the residuals are also projected off (each pose's own pose error:
+    then the levels are the noise without the pose errors' share).
     """
+    u = _basis(an.scaled, rank) if extra is None else _basis(np.c_[an.scaled, extra])
+    return _solve_moments(*_noise_moments(an, wp, u))
+
+
+def _basis(a: np.ndarray, rank: int | None = None) -> np.ndarray:
+    """An orthonormal basis U of the span of ``a``'s columns (P = U U^T): its leading left
+    singular vectors, ``rank`` of them or (None) those above 1e-9 of the largest singular
+    value of the column-normalised matrix."""
+    if rank is None:
+        norms = np.linalg.norm(a, axis=0)
+        a = a / np.where(norms > 0, norms, 1.0)
+    u, sv, _ = np.linalg.svd(a, full_matrices=False)
+    if rank is None:
+        rank = int(np.sum(sv > 1e-9 * sv[0])) if sv.size and sv[0] > 0 else 0
+    return u[:, :rank]
+
+
+def _noise_moments(an: Analysis, wp: np.ndarray, u: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The moment equations of :func:`_estimate_noise` for the projector P = U U^T: y_k =
+    r^T M_k r (r the residuals projected off U) and
+    c[k] = (tr((I-P) M_k (I-P) W_p), tr((I-P) M_k (I-P)))."""
     m = len(an.dataset)
-    a = an.scaled
-    u = np.linalg.svd(a, full_matrices=False)[0][:, :rank]  # P = U U^T
     g = an.jacobian[:, :, [param_index("Cu"), param_index("Cv")]]
     normal = np.cross(g[:, :, 0], g[:, :, 1])
     nn = np.linalg.norm(normal, axis=1, keepdims=True)
@@ -240,9 +273,17 @@ def _estimate_noise(an: Analysis, wp: np.ndarray, rank: int) -> tuple[float, flo
         uwu = u.T @ blockmul(w, u)
         return t + float(np.sum(umu * uwu.T))
 
-    r = an.residuals.reshape(m, 3)
+    # the residuals projected off U as well: at the solution they are already orthogonal to
+    # the Jacobian's columns; off U's other columns (``extra``) they are (I - P) e
+    r = an.residuals.ravel()
+    r = (r - u @ (u.T @ r)).reshape(m, 3)
     y = np.array([np.einsum("mi,mij,mj->", r, mk, r) for mk in (m1, m2)])
     c = np.array([[expectation(mk, w) for w in (wp, eye)] for mk in (m1, m2)])
+    return y, c
+
+
+def _solve_moments(y: np.ndarray, c: np.ndarray) -> tuple[float, float]:
+    """Pixel and point noise from the two moment equations c (sp^2, st^2) = y."""
     try:
         sp2, st2 = np.linalg.solve(c, y)
     except np.linalg.LinAlgError:
@@ -252,6 +293,68 @@ def _estimate_noise(an: Analysis, wp: np.ndarray, rank: int) -> tuple[float, flo
     elif st2 < 0:  # all of it is pixel noise
         sp2, st2 = float(y.sum() / (c[0, 0] + c[1, 0])), 0.0
     return float(np.sqrt(max(sp2, 0.0))), float(np.sqrt(max(st2, 0.0)))
+
+
+def _noise_levels(an: Analysis, wp: np.ndarray, rank: int, a_inv: np.ndarray
+                  ) -> tuple[float, float, np.ndarray | None, tuple[float, float] | None]:
+    """The noise levels estimated from the residuals: pixel noise (px), point noise (mm) and,
+    when the residuals show robot pose errors, their part of the covariance (scaled data
+    coordinates) and spread (:func:`_pose_errors`; else None, None)."""
+    counted = _pose_errors(an, wp, rank, a_inv)
+    if counted is not None:
+        return counted
+    return (*_estimate_noise(an, wp, rank), None, None)
+
+
+def _pose_errors(an: Analysis, wp: np.ndarray, rank: int, a_inv: np.ndarray
+                 ) -> tuple[float, float, np.ndarray, tuple[float, float]] | None:
+    """The robot pose errors the residuals show (:mod:`hmlvs.diagnostics.pose_errors`), when
+    the data set says which points share a pose (``pose_index``) and some pose has several:
+    the pixel and point noise without the pose errors' share (the residuals projected off
+    each pose's own pose error as well), the pose errors' part of the covariance (scaled data
+    coordinates) and their spread (mm, deg RMS per axis); None when they show none.
+
+    A pose error (rotation vector w, translation t, in the hand frame) moves a point p_h
+    (hand frame) of its pose by R_bh (w x p_h + t). With no board poses to give the spread's
+    shape, a rotation and a translation that move the points as much count alike: the
+    rotation's sigma is the translation's over the points' RMS distance from the flange."""
+    ds = an.dataset
+    if ds.pose_index is None:
+        return None
+    index = np.asarray(ds.pose_index)
+    groups = [np.flatnonzero(index == k) for k in np.unique(index)]
+    if max(len(g) for g in groups) < 2:
+        return None
+    cam, valid = points_in_camera(an.q, ds.pixels, on_invalid="mask")
+    if not valid.all():
+        return None
+    hfc = hand_from_camera(an.q)
+    hand = cam @ hfc[:3, :3].T + hfc[:3, 3]
+    lever = float(np.sqrt(np.mean(np.sum(hand ** 2, axis=1))))
+    x, y, z = hand.T
+    zero = np.zeros(len(hand))
+    cross = np.stack([np.stack([zero, -z, y], 1), np.stack([z, zero, -x], 1),
+                      np.stack([-y, x, zero], 1)], 1)  # [p_h]x, (m, 3, 3)
+    rot = np.asarray(ds.poses)[:, :3, :3]
+    je = np.concatenate([-np.einsum("mij,mjk->mik", rot, cross) / lever, rot], axis=2)
+    m = len(ds)
+    extra = np.zeros((3 * m, 6 * len(groups)))
+    rows, pose_jac = [], []
+    for k, g in enumerate(groups):
+        rw = (3 * g[:, None] + np.arange(3)).ravel()
+        rows.append(rw)
+        pose_jac.append(je[g].reshape(-1, 6))
+        extra[rw, 6 * k:6 * k + 6] = pose_jac[-1]
+    sp, st = _estimate_noise(an, wp, rank, extra)
+    c = _noise_moments(an, wp, _basis(an.scaled, rank))[1]
+    white = sp ** 2 * (c[0, 0] + c[1, 0]) + st ** 2 * (c[0, 1] + c[1, 1])
+    var = sp ** 2 * wp + st ** 2 * np.eye(3)[None]
+    white_sd = math.sqrt(2.0 * float(np.einsum("mij,mji->", var, var)))
+    part = pose_error_part(an.scaled, a_inv, rows, pose_jac, an.residuals.ravel(), white,
+                           white_sd)
+    if part is None:
+        return None
+    return sp, st, part[0], (part[1], math.degrees(part[1] / lever))
 
 
 def _uncertainty_warnings(r: int, p: int, names: tuple[str, ...], det: dict[str, bool],
@@ -343,16 +446,16 @@ def _compute(an: Analysis, pixel_noise: float | None = None,
     gp = an.jacobian[:, :, [param_index("Cu"), param_index("Cv")]]  # = -dE/d(u, v)
     wp = np.einsum("mik,mjk->mij", gp, gp)  # residual covariance per unit pixel noise
     estimated = not given
-    if estimated:
-        pixel_noise, point_noise = _estimate_noise(an, wp, r)
+    pixel_noise, point_noise, pose_cov_x, pose_errors = _noise_levels(
+        an, wp, r, pinv_info) if estimated else (pixel_noise, point_noise, None, None)
     meat = np.zeros((p, p))
     if pixel_noise:
         meat += pixel_noise ** 2 * np.einsum("mip,mij,mjq->pq", ai, wp, ai)
     if point_noise:
         meat += point_noise ** 2 * (a.T @ a)
-    cov_x = pinv_info @ meat @ pinv_info
+    cov_x = pinv_info @ meat @ pinv_info + (0.0 if pose_cov_x is None else pose_cov_x)
     # the correlation does not depend on the noise level (noise-free data: every std is 0)
-    shape_x = cov_x if np.any(meat) else pinv_info
+    shape_x = cov_x if np.any(cov_x) else pinv_info
     s = an.scales[free_idx]
     # data coordinates -> paper parameters: Euler rates = B^+ delta
     ts, euler_pos, chart_singular = _to_paper(an, s)
@@ -402,7 +505,7 @@ def _compute(an: Analysis, pixel_noise: float | None = None,
         noise_model="estimated" if estimated else "given", sigma=sigma,
         pixel_noise=None if pixel_noise is None else float(pixel_noise),
         point_noise=None if point_noise is None else float(point_noise), dof=int(dof),
-        rank=r, flat=flat_names, warnings=warnings_, notes=notes)
+        rank=r, flat=flat_names, warnings=warnings_, notes=notes, pose_errors=pose_errors)
 
 
 def uncertainty(dataset: Dataset, params: Parameters | np.ndarray,
