@@ -138,8 +138,8 @@ def chain_covariance(views: Sequence[Any], state: Any, opts: Any, jac: np.ndarra
     a_inv = inverse_normal(jw)[0]
     # white noise's expected sum of squares, tr(P diag(share)), P = I - jw A^-1 jw^T, and
     # its chi-square spread
-    white = float(share.sum() - np.trace(a_inv @ (jw.T @ (jw * share[:, None]))))
-    part = pose_error_part(jw, a_inv, rows, pose_jac, residuals, white,
+    expect = float(share.sum() - np.trace(a_inv @ (jw.T @ (jw * share[:, None]))))
+    part = pose_error_part(jw, a_inv, rows, pose_jac, residuals, expect,
                            math.sqrt(2.0 * float(np.sum(share ** 2))))
     if part is None:
         return cov, None
