@@ -262,3 +262,14 @@ def test_exact_poses_show_no_robot_pose_errors():
         _, r = _session_with_pose_errors(seed, 0.0, 0.0)
         assert r.uncertainty.pose_errors is None
         assert r.uncertainty.pixel_noise == pytest.approx(0.1, rel=0.25)
+
+
+def test_robot_pose_errors_are_not_counted_beyond_the_memory_bound(monkeypatch):
+    """A data set too large for the poses' error columns keeps the white-noise covariance
+    (and its noise estimate) rather than allocating them."""
+    from hmlvs.diagnostics import uncertainty as unc
+
+    monkeypatch.setattr(unc, "MAX_POSE_ENTRIES", 100)
+    _, r = _session_with_pose_errors(0, 0.3, 0.1)
+    assert r.uncertainty.pose_errors is None
+    assert r.uncertainty.point_noise > 0.1  # the pose errors read as point noise again

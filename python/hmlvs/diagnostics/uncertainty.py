@@ -54,6 +54,10 @@ from .identifiability import (
 from .pose_errors import pose_error_part
 
 _DETERMINED_TOL = 1e-6  # fraction of a gradient inside the null space still "determined"
+#: robot pose errors are counted on data sets whose residuals times the poses' error
+#: columns (3 m x 6 poses) stay within this many numbers (160 MB of doubles: e.g. 5,000
+#: points from 150 poses); a larger one keeps the white-noise covariance (a memory bound)
+MAX_POSE_ENTRIES = 20_000_000
 
 
 @dataclass(frozen=True)
@@ -323,7 +327,7 @@ def _pose_errors(an: Analysis, wp: np.ndarray, rank: int, a_inv: np.ndarray
         return None
     index = np.asarray(ds.pose_index)
     groups = [np.flatnonzero(index == k) for k in np.unique(index)]
-    if max(len(g) for g in groups) < 2:
+    if max(len(g) for g in groups) < 2 or 18 * len(ds) * len(groups) > MAX_POSE_ENTRIES:
         return None
     cam, valid = points_in_camera(an.q, ds.pixels, on_invalid="mask")
     if not valid.all():
