@@ -119,8 +119,6 @@ def chain_covariance(views: Sequence[Any], state: Any, opts: Any, jac: np.ndarra
     c0, l0 = np.cumsum([0] + n_c), sum(n_c) + np.cumsum([0] + n_l)
     share = np.r_[np.full(sum(n_c), min(white[0] / opts.corner_sigma, 1.0) ** 2),
                   np.full(sum(n_l), min(white[1] / opts.laser_sigma, 1.0) ** 2)]
-    # white noise: the residuals' own part of the solve's sigmas
-    cov_white = cov @ (jac.T @ (jac * share[:, None])) @ cov
     jw = jac.copy()
     jw[sum(n_c):] *= math.sqrt(stripe_corr)  # the solve's own weights
     wc, wl = 1.0 / opts.corner_sigma, 1.0 / opts.laser_sigma
@@ -143,4 +141,6 @@ def chain_covariance(views: Sequence[Any], state: Any, opts: Any, jac: np.ndarra
                            math.sqrt(2.0 * float(np.sum(share ** 2))))
     if part is None:
         return cov, None
+    # white noise: the residuals' own part of the solve's sigmas
+    cov_white = cov @ (jac.T @ (jac * share[:, None])) @ cov
     return cov_white + part[0], (part[1] * sig_t, math.degrees(part[1] * sig_r))

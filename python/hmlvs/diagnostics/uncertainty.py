@@ -41,6 +41,7 @@ import numpy as np
 from ..data.dataset import Dataset
 from ..models.paper import hand_from_camera, points_in_camera
 from ..models.params import NAMES, Bounds, Parameters, param_index
+from .analysis import skew
 from .identifiability import (
     EULER_INDEX,
     GIMBAL_PHI,
@@ -221,8 +222,7 @@ def check_noise(pixel_noise: Any, point_noise: Any) -> None:
                          "neither to estimate them from the residuals")
 
 
-def _estimate_noise(an: Analysis, wp: np.ndarray, rank: int,
-                    extra: np.ndarray | None = None) -> tuple[float, float]:
+def _estimate_noise(an: Analysis, wp: np.ndarray, u: np.ndarray) -> tuple[float, float]:
     """Pixel noise (px) and point noise (mm) from the residuals, by the method of moments.
 
     Pixel noise moves a point within the laser plane (W_p,i = G_i G_i^T, rank 2), point noise
@@ -231,10 +231,10 @@ def _estimate_noise(an: Analysis, wp: np.ndarray, rank: int,
     the laser plane (M_1 = diag(n_i n_i^T)) and within it (M_2 = I - M_1) have expectations
     E[r^T M_k r] = sp^2 tr((I-P) M_k (I-P) W_p) + st^2 tr((I-P) M_k (I-P)): two linear
     equations for sp^2 and st^2 (each clipped at 0). Unbiased for the linearised model.
-    ``extra``: columns the residuals are also projected off (each pose's own pose error:
-    then the levels are the noise without the pose errors' share).
+    ``u``: an orthonormal basis of P's columns (:func:`_basis`): the Jacobian's, or with
+    each pose's own pose error beside them (then the levels are the noise without the pose
+    errors' share).
     """
-    u = _basis(an.scaled, rank) if extra is None else _basis(np.c_[an.scaled, extra])
     return _solve_moments(*_noise_moments(an, wp, u))
 
 
@@ -304,13 +304,14 @@ def _noise_levels(an: Analysis, wp: np.ndarray, rank: int, a_inv: np.ndarray
     """The noise levels estimated from the residuals: pixel noise (px), point noise (mm) and,
     when the residuals show robot pose errors, their part of the covariance (scaled data
     coordinates) and spread (:func:`_pose_errors`; else None, None)."""
-    counted = _pose_errors(an, wp, rank, a_inv)
+    moments = _noise_moments(an, wp, _basis(an.scaled, rank))
+    counted = _pose_errors(an, wp, a_inv, moments[1])
     if counted is not None:
         return counted
-    return (*_estimate_noise(an, wp, rank), None, None)
+    return (*_solve_moments(*moments), None, None)
 
 
-def _pose_errors(an: Analysis, wp: np.ndarray, rank: int, a_inv: np.ndarray
+def _pose_errors(an: Analysis, wp: np.ndarray, a_inv: np.ndarray, c: np.ndarray
                  ) -> tuple[float, float, np.ndarray, tuple[float, float]] | None:
     """The robot pose errors the residuals show (:mod:`hmlvs.diagnostics.pose_errors`), when
     the data set says which points share a pose (``pose_index``) and some pose has several:
@@ -321,7 +322,9 @@ def _pose_errors(an: Analysis, wp: np.ndarray, rank: int, a_inv: np.ndarray
     A pose error (rotation vector w, translation t, in the hand frame) moves a point p_h
     (hand frame) of its pose by R_bh (w x p_h + t). With no board poses to give the spread's
     shape, a rotation and a translation that move the points as much count alike: the
-    rotation's sigma is the translation's over the points' RMS distance from the flange."""
+    rotation's sigma is the translation's over the points' RMS distance from the flange.
+    ``c``: the white noise's moment coefficients for the Jacobian's own projector
+    (:func:`_noise_moments`)."""
     ds = an.dataset
     if ds.pose_index is None:
         return None
@@ -335,12 +338,8 @@ def _pose_errors(an: Analysis, wp: np.ndarray, rank: int, a_inv: np.ndarray
     hfc = hand_from_camera(an.q)
     hand = cam @ hfc[:3, :3].T + hfc[:3, 3]
     lever = float(np.sqrt(np.mean(np.sum(hand ** 2, axis=1))))
-    x, y, z = hand.T
-    zero = np.zeros(len(hand))
-    cross = np.stack([np.stack([zero, -z, y], 1), np.stack([z, zero, -x], 1),
-                      np.stack([-y, x, zero], 1)], 1)  # [p_h]x, (m, 3, 3)
     rot = np.asarray(ds.poses)[:, :3, :3]
-    je = np.concatenate([-np.einsum("mij,mjk->mik", rot, cross) / lever, rot], axis=2)
+    je = np.concatenate([-np.einsum("mij,mjk->mik", rot, skew(hand)) / lever, rot], axis=2)
     m = len(ds)
     extra = np.zeros((3 * m, 6 * len(groups)))
     rows, pose_jac = [], []
@@ -349,8 +348,7 @@ def _pose_errors(an: Analysis, wp: np.ndarray, rank: int, a_inv: np.ndarray
         rows.append(rw)
         pose_jac.append(je[g].reshape(-1, 6))
         extra[rw, 6 * k:6 * k + 6] = pose_jac[-1]
-    sp, st = _estimate_noise(an, wp, rank, extra)
-    c = _noise_moments(an, wp, _basis(an.scaled, rank))[1]
+    sp, st = _estimate_noise(an, wp, _basis(np.c_[an.scaled, extra]))
     white = sp ** 2 * (c[0, 0] + c[1, 0]) + st ** 2 * (c[0, 1] + c[1, 1])
     var = sp ** 2 * wp + st ** 2 * np.eye(3)[None]
     white_sd = math.sqrt(2.0 * float(np.einsum("mij,mji->", var, var)))
