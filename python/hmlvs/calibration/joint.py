@@ -35,7 +35,7 @@ from ..geometry.transforms import (
     invert_transform,
 )
 from ..models.opencv import DISTORTION_NAMES, OpenCvSensor
-from .joint_covariance import chain_covariance, inverse_normal
+from .joint_covariance import camera_mode_covariance, chain_covariance, inverse_normal
 from .joint_result import JointCalibration
 from .joint_setup import (  # noqa: F401 (initial_intrinsics, on_board: re-exported)
     board_plane_points,
@@ -347,6 +347,10 @@ def _assemble(su: _Setup, board: BoardSpec, image_size: tuple[int, int], state: 
                                                 (su.cv_rms / math.sqrt(2), su.sigma_l0),
                                                 _own_poses(su, board, state, keep_c))
         cov = counted_cov
+    view_cameras = None
+    if not su.chain:
+        cov, view_cameras = _camera_mode_cov(jac, list(names), cov, corners_r, laser_r, opts,
+                                             stripe_corr)
     std = {n: float(math.sqrt(max(cov[k, k], 0.0))) for k, n in enumerate(names)}
     if rank < len(names):
         su.warnings.append(f"the data determine {rank} of the {len(names)} unknowns; add views "
@@ -374,6 +378,7 @@ def _assemble(su: _Setup, board: BoardSpec, image_size: tuple[int, int], state: 
                                                for i, v in enumerate(su.views)},
         warnings=su.warnings, test_rms_mm=test_rms, test_views=len(test or ()),
         robot_pose_sigma=pose_sigma, pose_errors_counted=counted,
+        view_cameras_counted=view_cameras,
         stripe_correlation=stripe_corr,
         free_rms_px=float(su.cv_rms),
         residuals={v.id: {"corner_pixels": np.asarray(v.corner_pixels, float)[keep_c[i]],
@@ -381,6 +386,21 @@ def _assemble(su: _Setup, board: BoardSpec, image_size: tuple[int, int], state: 
                           "laser_pixels": su.laser_px[i][keep_l[i]],
                           "laser_residuals": np.asarray(laser_r[i])}
                    for i, v in enumerate(su.views)}, rejected=su.rejected)
+
+
+def _camera_mode_cov(jac: np.ndarray, names: list[str], cov: np.ndarray,
+                     corners_r: Sequence[np.ndarray], laser_r: Sequence[np.ndarray], opts: Any,
+                     stripe_corr: float) -> tuple[np.ndarray, dict[str, float] | None]:
+    """:func:`camera_mode_covariance` with each view's rows and the weighted residuals."""
+    n_c = [np.asarray(c).size for c in corners_r]
+    n_l = [len(x) for x in laser_r]
+    c0, l0 = np.cumsum([0] + n_c), sum(n_c) + np.cumsum([0] + n_l)
+    rows = [np.r_[np.arange(c0[i], c0[i + 1]), np.arange(l0[i], l0[i + 1])]
+            for i in range(len(n_c))]
+    residuals = np.r_[np.concatenate([np.asarray(c).ravel() for c in corners_r])
+                      / opts.corner_sigma,
+                      np.concatenate([np.asarray(x) for x in laser_r]) / opts.laser_sigma]
+    return camera_mode_covariance(jac, names, cov, rows, residuals, sum(n_c), stripe_corr)
 
 
 def _own_poses(su: _Setup, board: BoardSpec, state: Any, keep_c: list[np.ndarray]

@@ -144,3 +144,82 @@ def chain_covariance(views: Sequence[Any], state: Any, opts: Any, jac: np.ndarra
     # white noise: the residuals' own part of the solve's sigmas
     cov_white = cov @ (jac.T @ (jac * share[:, None])) @ cov
     return cov_white + part[0], (part[1] * sig_t, math.degrees(part[1] * sig_r))
+
+
+#: the intrinsics that a view's own camera may differ in (the free ones of them are used)
+_VIEW_INTRINSICS = ("fx", "fy", "cx", "cy")
+
+
+def camera_mode_covariance(jac: np.ndarray, names: Sequence[str], cov: np.ndarray,
+                           rows: Sequence[np.ndarray], residuals: np.ndarray,
+                           n_corner_rows: int, stripe_corr: float
+                           ) -> tuple[np.ndarray, dict[str, float] | None]:
+    """Camera mode's covariance with the views' own cameras counted (the module doc's
+    method, the views' differing intrinsics in place of robot pose errors), and the spread of
+    those differences the residuals show (None when they show none).
+
+    With free board poses a robot pose error cannot show; what does show on real sessions is
+    that each view fits a camera of its own: at 640 x 480 on the Blaser bench frames the
+    views' own focal lengths differ by 2.9 % RMS and their principal points by 6-7 px, 4-5
+    times what their corners' noise explains (chi-square 269 on 13 and 530 on 26 degrees of
+    freedom), and the two halves of the views disagreed by 5.3 times the uncertainty claimed.
+    The cause can be focus, heat, a lens that is not locked, or a lens model the views fit
+    differently; counted as white noise, it makes the shared camera look far surer than it is.
+
+    Model: view i's residuals are white noise plus ``G_i b_i``, ``G_i`` their derivative with
+    respect to the camera's fx, fy, cx, cy and ``b_i ~ N(0, S)`` independent over the views.
+    Each view's own deviation ``d_i`` (its rows fitted with its board pose and those
+    intrinsics free, the rest held) estimates ``b_i`` plus noise; ``S``'s shape is their
+    second moment less their noise's, and its scale the method of moments'
+    (:func:`pose_error_part`). The white noise per row kind (corners, stripe) is what the
+    views' own fits leave.
+
+    jac : the weighted Jacobian (corners of every view, then stripe pixels of every view),
+        its stripe rows divided by sqrt(stripe_corr); cov : (J^T J)^-1 of it
+    rows : per view (the i-th owns the columns ``view{i}_*``), its rows of ``jac``;
+        residuals : weighted as the solve did
+    n_corner_rows : the number of corner rows (the stripe rows follow)
+    """
+    a = [names.index(n) for n in _VIEW_INTRINSICS if n in names]
+    if not a or len(rows) < 3:
+        return cov, None
+    jw = jac.copy()
+    jw[n_corner_rows:] *= math.sqrt(stripe_corr)  # the solve's own weights
+    fits = [_own_deviation(jw, names, a, i, r, residuals) for i, r in enumerate(rows)]
+    n_rows, n_fit = len(residuals), jw.shape[1] + len(a) * len(rows)
+    dof = max(1.0 - n_fit / n_rows, 1e-3)
+    is_corner = np.arange(n_rows) < n_corner_rows
+    left = np.concatenate([f[2] for f in fits])
+    kinds = np.concatenate([is_corner[r] for r in rows])
+    share = np.ones(n_rows)
+    for k in (True, False):
+        if np.any(kinds == k):
+            share[is_corner == k] = min(float(np.mean(left[kinds == k] ** 2)) / dof, 1.0)
+    dev = np.array([f[0] for f in fits])
+    noise = np.mean([(f[1] * share[r]) @ f[1].T for f, r in zip(fits, rows)], axis=0)
+    lam, vec = np.linalg.eigh(dev.T @ dev / len(dev) - noise)
+    if lam.max() <= 0:
+        return cov, None
+    root = vec * np.sqrt(np.clip(lam, 0.0, None))
+    a_inv = inverse_normal(jw)[0]
+    expect = float(share.sum() - np.trace(a_inv @ (jw.T @ (jw * share[:, None]))))
+    part = pose_error_part(jw, a_inv, rows, [jw[r][:, a] @ root for r in rows], residuals,
+                           expect, math.sqrt(2.0 * float(np.sum(share ** 2))))
+    if part is None:
+        return cov, None
+    spread = part[1] ** 2 * (root @ root.T)
+    sd = {names[c]: float(math.sqrt(spread[k, k])) for k, c in enumerate(a)}
+    cov_white = cov @ (jac.T @ (jac * share[:, None])) @ cov
+    return cov_white + part[0], sd
+
+
+def _own_deviation(jw: np.ndarray, names: Sequence[str], a: list[int], i: int,
+                   rows: np.ndarray, residuals: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """View i's own deviation in the intrinsics ``a`` (its rows ``rows`` fitted with those and
+    its board pose free), the map from its residuals to it and what its fit leaves."""
+    own = a + [k for k, n in enumerate(names) if n.startswith(f"view{i}_")]
+    j = jw[rows][:, own]
+    solve = np.linalg.pinv(j)
+    h = solve @ residuals[rows]
+    return h[:len(a)], solve[:len(a)], residuals[rows] - j @ h

@@ -68,6 +68,11 @@ class JointCalibration:
     #: show (translation mm, rotation deg, per axis), counted in the covariance
     #: (:mod:`hmlvs.calibration.joint_covariance`); None when they show none
     pose_errors_counted: tuple[float, float] | None = None
+    #: camera mode: how much the views' own cameras differ (px RMS from view to view, per
+    #: intrinsic: fx, fy, cx, cy), counted in the covariance
+    #: (:func:`hmlvs.calibration.joint_covariance.camera_mode_covariance`); None when the
+    #: residuals show no such differences
+    view_cameras_counted: dict[str, float] | None = None
     #: RMS corner reprojection (px) of the camera calibration with every view's board pose
     #: free (Zhang's, or the held camera's solvePnP): what the detector's noise leaves
     free_rms_px: float | None = None
@@ -119,7 +124,9 @@ class JointCalibration:
                 "robot_pose_sigma": None if self.robot_pose_sigma is None
                 else [float(x) for x in self.robot_pose_sigma],
                 "pose_errors_counted": None if self.pose_errors_counted is None
-                else [float(x) for x in self.pose_errors_counted]}
+                else [float(x) for x in self.pose_errors_counted],
+                "view_cameras_counted": None if self.view_cameras_counted is None
+                else {k: float(v) for k, v in self.view_cameras_counted.items()}}
 
     @property
     def determined(self) -> bool:
@@ -154,6 +161,11 @@ class JointCalibration:
                          f"about {self.pose_errors_counted[0]:.3f} mm and "
                          f"{self.pose_errors_counted[1]:.4f} deg RMS per axis, counted in "
                          "the uncertainties")
+        if self.view_cameras_counted is not None:
+            each = ", ".join(f"{k} {v:.2f}" for k, v in self.view_cameras_counted.items())
+            lines.append(f"the views fit cameras of their own, differing by about {each} px "
+                         "RMS from view to view (focus, heat, a loose lens?), counted in the "
+                         "uncertainties")
         if self.mode == "chain":
             t = s.hand_from_camera[:3, 3]
             rv = rotation_to_vector(s.hand_from_camera[:3, :3])
