@@ -162,7 +162,8 @@ def camera_mode_covariance(jac: np.ndarray, names: Sequence[str], cov: np.ndarra
     that each view fits a camera of its own: at 640 x 480 on the Blaser bench frames the
     views' own focal lengths differ by 2.9 % RMS and their principal points by 6-7 px, 4-5
     times what their corners' noise explains (chi-square 269 on 13 and 530 on 26 degrees of
-    freedom), and the two halves of the views disagreed by 5.3 times the uncertainty claimed.
+    freedom), and the two halves of the views disagreed by up to 8.3 standard deviations
+    (at most 2.8 with the differences counted).
     The cause can be focus, heat, a lens that is not locked, or a lens model the views fit
     differently; counted as white noise, it makes the shared camera look far surer than it is.
 
