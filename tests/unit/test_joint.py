@@ -183,6 +183,7 @@ def test_views_with_cameras_of_their_own_are_counted_in_camera_mode():
         # the spread shown: fx 8-14 px against the true 11, cx 2-5 px against 2 (six seeds)
         assert got is not None and 4 < got["fx"] < 25 and 0.7 < got["cx"] < 8, got
         assert "the views fit cameras of their own" in r.summary()
+        assert any("is the focus locked" in w for w in r.warnings), r.warnings
         k = t.camera_matrix
         zs += [(r.sensor.fx - k[0, 0]) / r.std["fx"], (r.sensor.fy - k[1, 1]) / r.std["fy"],
                (r.sensor.cx - k[0, 2]) / r.std["cx"], (r.sensor.cy - k[1, 2]) / r.std["cy"],
@@ -219,6 +220,7 @@ def test_camera_mode_without_robot_poses():
     r = calibrate_joint(views, board, (1024, 768))
     assert r.mode == "camera" and r.rank == r.num_unknowns
     assert r.view_cameras_counted is None  # every view saw the same camera
+    assert not any("cameras of their own" in w for w in r.warnings), r.warnings
     got = r.sensor.intrinsics()
     assert abs(got["fx"] - 1100) < 4 * r.std["fx"]
     assert abs(r.sensor.laser_plane[3] - t.plane[3]) < 4 * r.std["plane_d"]

@@ -351,6 +351,7 @@ def _assemble(su: _Setup, board: BoardSpec, image_size: tuple[int, int], state: 
     if not su.chain:
         cov, view_cameras = _camera_mode_cov(jac, list(names), cov, corners_r, laser_r, opts,
                                              stripe_corr)
+        _warn_view_cameras(su, view_cameras, np.asarray(state.intrinsics, float))
     std = {n: float(math.sqrt(max(cov[k, k], 0.0))) for k, n in enumerate(names)}
     if rank < len(names):
         su.warnings.append(f"the data determine {rank} of the {len(names)} unknowns; add views "
@@ -401,6 +402,19 @@ def _camera_mode_cov(jac: np.ndarray, names: list[str], cov: np.ndarray,
                       / opts.corner_sigma,
                       np.concatenate([np.asarray(x) for x in laser_r]) / opts.laser_sigma]
     return camera_mode_covariance(jac, names, cov, rows, residuals, sum(n_c), stripe_corr)
+
+
+def _warn_view_cameras(su: _Setup, spread: dict[str, float] | None,
+                       intrinsics: np.ndarray) -> None:
+    """Say so when the views fit cameras of their own (their spread counted in camera mode)."""
+    if spread is None:
+        return
+    focal = [spread[n] / intrinsics[k] for k, n in enumerate(("fx", "fy")) if n in spread]
+    size = f"focal lengths about {100 * max(focal):.2g} % apart" if focal else "cameras apart"
+    su.warnings.append(f"the views fit cameras of their own ({size} from view to view, more "
+                       "than the corners' noise explains): is the focus locked (autofocus "
+                       "off) and the lens fixed, and did the camera warm up first? The "
+                       "differences are counted in the uncertainties")
 
 
 def _own_poses(su: _Setup, board: BoardSpec, state: Any, keep_c: list[np.ndarray]
