@@ -21,6 +21,17 @@ using geometry::CheckTransform;
 
 namespace {
 
+// LaserScales of a view's stripe pixels for the board pose camera_from_board and the laser
+// plane (normal, offset) as the solver holds them (the offset for the unit normal).
+Eigen::VectorXd ScalesAt(const JointView& v, const double* intrinsics,
+                         const Eigen::Matrix4d& camera_from_board, const Eigen::Vector3d& normal,
+                         double offset) {
+  const Eigen::Vector3d nb = camera_from_board.topLeftCorner<3, 3>().col(2);
+  const double ob = -nb.dot(camera_from_board.topRightCorner<3, 1>());
+  const Eigen::Vector3d unit = normal.normalized();
+  return LaserScales(intrinsics, nb.data(), ob, unit.data(), offset, v.laser_pixels);
+}
+
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 void CheckInput(const std::vector<JointView>& views, const JointState& s, const JointOptions& o) {
@@ -155,7 +166,9 @@ class JointProblem {
       AddBlock(NewFreeCornerCost(v, wc), {intrinsics_.data(), p.q.data(), p.t.data()}, nc);
     }
     if (o.laser && nl > 0) {
-      AddBlock(NewLaserCost(v, wl, false),
+      // The scale-free residual (LaserLineDistance): nothing else fixes this board's scale.
+      const Eigen::VectorXd scales = ScalesAt(*v, intrinsics_.data(), p.Matrix(), normal_, offset_);
+      AddBlock(NewLaserCost(v, wl, false, &scales),
                {intrinsics_.data(), p.q.data(), p.t.data(), normal_.data(), &offset_}, nl);
     }
     if (soft) {
@@ -267,7 +280,7 @@ bool SoftChain(const JointOptions& o) {
 }
 
 JointResiduals EvaluateJoint(const std::vector<JointView>& views, const JointState& s,
-                             const JointOptions& o) {
+                             const JointOptions& o, const JointState* scales_at) {
   CheckInput(views, s, o);
   const bool soft = SoftChain(o);
   JointResiduals out;
@@ -293,12 +306,21 @@ JointResiduals EvaluateJoint(const std::vector<JointView>& views, const JointSta
     const Eigen::Vector3d nb = r.col(2);
     const double ob = -nb.dot(t);
     Eigen::VectorXd l(v.laser_pixels.rows());
+    Eigen::VectorXd scales;
+    if (scales_at != nullptr && !(o.chain && !soft)) {
+      scales = ScalesAt(v, scales_at->intrinsics.data(), scales_at->camera_from_board[i],
+                        scales_at->laser_plane.head<3>(),
+                        scales_at->laser_plane[3] / scales_at->laser_plane.head<3>().norm());
+    }
     for (Eigen::Index k = 0; k < v.laser_pixels.rows(); ++k) {
       double x, y, jd[4], res;
-      l[k] = LaserResidual(s.intrinsics.data(), nb.data(), ob, normal.data(), offset,
-                           v.laser_pixels(k, 0), v.laser_pixels(k, 1), &x, &y, jd, &res)
-                 ? res
-                 : kNaN;
+      const bool ok = LaserResidual(s.intrinsics.data(), nb.data(), ob, normal.data(), offset,
+                                    v.laser_pixels(k, 0), v.laser_pixels(k, 1), &x, &y, jd, &res);
+      if (ok && scales.size() > 0) {
+        res = scales[k] *
+              LaserLineDistance(s.intrinsics.data(), nb.data(), ob, normal.data(), offset, x, y);
+      }
+      l[k] = ok ? res : kNaN;
     }
     out.laser.push_back(l);
   }

@@ -91,8 +91,11 @@ struct JointResiduals {
 
 /// Whether `o` is chain mode with uncertain robot poses (JointOptions::pose_sigma_t).
 bool SoftChain(const JointOptions& o);
+/// `scales_at` (tests of the Jacobian): the laser residuals of views with their own board pose
+/// as the solver's cost computes them away from its start, LaserLineDistance times
+/// LaserScales at `scales_at` (which equals the mm distance at `scales_at` itself).
 JointResiduals EvaluateJoint(const std::vector<JointView>& views, const JointState& state,
-                             const JointOptions& options);
+                             const JointOptions& options, const JointState* scales_at = nullptr);
 
 /// The Jacobian of the weighted residuals (corners of every view, then laser pixels of every
 /// view, in order) with respect to the free unknowns in their tangent spaces, in the order

@@ -138,7 +138,8 @@ class LaserCost final : public ceres::CostFunction {
  public:
   static constexpr int kPose = kChain ? 14 : 7;
 
-  LaserCost(const JointView* view, double inv_sigma) : view_(view), w_(inv_sigma) {
+  LaserCost(const JointView* view, double inv_sigma, const Eigen::VectorXd* scales)
+      : view_(view), w_(inv_sigma), scales_(scales ? *scales : Eigen::VectorXd()) {
     set_num_residuals(static_cast<int>(view->laser_pixels.rows()));
     auto* sizes = mutable_parameter_block_sizes();
     sizes->push_back(kNumIntrinsics);
@@ -183,6 +184,10 @@ class LaserCost final : public ceres::CostFunction {
       const double u = view_->laser_pixels(i, 0), v = view_->laser_pixels(i, 1);
       double x, y, jd[4], res;
       if (!LaserResidual(in, nb, ob, unit, d, u, v, &x, &y, jd, &res)) return false;
+      if (scales_.size() > 0) {
+        LineRow(in, nb, ob, n, nn, d, x, y, jd, u, v, i, nbj, obj, residuals, jacobians);
+        continue;
+      }
       residuals[i] = res * w_;
       if (jacobians == nullptr) continue;
       const double ray[3] = {x, y, 1.0};
@@ -220,8 +225,61 @@ class LaserCost final : public ceres::CostFunction {
   }
 
  private:
+  // Pixel i's residual scales_[i] LaserLineDistance and its Jacobian row: with
+  // R = c s N, s = m . ray, m = unit - (d / ob) nb, N = |(m_x / fx, m_y / fy)|^-1,
+  //   dR/d(x, y) = c N (m_x, m_y), through the undistortion to the intrinsics (IntrinsicsRow),
+  //   plus directly dR/dfx = c s N^3 m_x^2 / fx^3 (and fy alike);
+  //   g = dR/dm = c (N ray - s N^3 (m_x / fx^2, m_y / fy^2, 0)),
+  //   dR/dnb = -(d / ob) g, dR/dob = (d / ob^2) g . nb, dR/dd = -(g . nb) / ob,
+  //   dR/dn = (g - (g . unit) unit) / |n|.
+  template <typename J>
+  void LineRow(const double* in, const double* nb, double ob, const double* n, double nn, double d,
+               double x, double y, const double* jd, double u, double v, Eigen::Index i,
+               const Vec3<J>& nbj, const J& obj, double* residuals, double** jacobians) const {
+    constexpr int kPoseBlocks = kChain ? 4 : 2;
+    const double c = scales_[i] * w_;
+    const double unit[3] = {n[0] / nn, n[1] / nn, n[2] / nn};
+    const double m[3] = {unit[0] - d / ob * nb[0], unit[1] - d / ob * nb[1],
+                         unit[2] - d / ob * nb[2]};
+    const double ray[3] = {x, y, 1.0};
+    const double sv = m[0] * x + m[1] * y + m[2];
+    const double ax = m[0] / in[kFx], ay = m[1] / in[kFy];
+    const double big_n = 1.0 / std::sqrt(ax * ax + ay * ay);
+    residuals[i] = c * sv * big_n;
+    if (jacobians == nullptr) return;
+    const double n3 = big_n * big_n * big_n;
+    if (jacobians[0] != nullptr) {
+      double* row = jacobians[0] + i * kNumIntrinsics;
+      IntrinsicsRow(in, u, v, x, y, jd, big_n * m[0], big_n * m[1], c, row);
+      row[kFx] += c * sv * n3 * ax * ax / in[kFx];
+      row[kFy] += c * sv * n3 * ay * ay / in[kFy];
+    }
+    const double g[3] = {c * (big_n * ray[0] - sv * n3 * ax / in[kFx]),
+                         c * (big_n * ray[1] - sv * n3 * ay / in[kFy]), c * big_n * ray[2]};
+    const double g_nb = g[0] * nb[0] + g[1] * nb[1] + g[2] * nb[2];
+    const double dnb[3] = {-d / ob * g[0], -d / ob * g[1], -d / ob * g[2]};
+    const double dob = d / (ob * ob) * g_nb;
+    int col = 0;
+    for (int blk = 0; blk < kPoseBlocks; ++blk) {
+      const int size = (blk % 2 == 0) ? 4 : 3;
+      double* jb = jacobians[1 + blk];
+      for (int e = 0; e < size; ++e, ++col) {
+        if (jb == nullptr) continue;
+        jb[i * size + e] = dnb[0] * nbj[0].v[col] + dnb[1] * nbj[1].v[col] +
+                           dnb[2] * nbj[2].v[col] + dob * obj.v[col];
+      }
+    }
+    if (jacobians[1 + kPoseBlocks] != nullptr) {
+      double* jn = jacobians[1 + kPoseBlocks] + 3 * i;
+      const double gu = g[0] * unit[0] + g[1] * unit[1] + g[2] * unit[2];
+      for (int e = 0; e < 3; ++e) jn[e] = (g[e] - gu * unit[e]) / nn;
+    }
+    if (jacobians[2 + kPoseBlocks] != nullptr) jacobians[2 + kPoseBlocks][i] = -g_nb / ob;
+  }
+
   const JointView* view_;
   double w_;
+  Eigen::VectorXd scales_;  // empty: the mm residual (LaserResidual)
 };
 
 }  // namespace
@@ -272,9 +330,32 @@ ceres::CostFunction* NewFreeCornerCost(const JointView* view, double inv_sigma) 
       new FreeCorners{view, inv_sigma}, n);
 }
 
-ceres::CostFunction* NewLaserCost(const JointView* view, double inv_sigma, bool chain) {
-  if (chain) return new LaserCost<true>(view, inv_sigma);
-  return new LaserCost<false>(view, inv_sigma);
+ceres::CostFunction* NewLaserCost(const JointView* view, double inv_sigma, bool chain,
+                                  const Eigen::VectorXd* scales) {
+  if (chain) return new LaserCost<true>(view, inv_sigma, scales);
+  return new LaserCost<false>(view, inv_sigma, scales);
+}
+
+double LaserLineDistance(const double* in, const double* nb, double ob, const double* unit,
+                         double d, double x, double y) {
+  double m[3];
+  for (int k = 0; k < 3; ++k) m[k] = unit[k] - d / ob * nb[k];
+  return (m[0] * x + m[1] * y + m[2]) / std::hypot(m[0] / in[kFx], m[1] / in[kFy]);
+}
+
+Eigen::VectorXd LaserScales(const double* in, const double* nb, double ob, const double* unit,
+                            double d, const RowMatX2& pixels) {
+  Eigen::VectorXd out = Eigen::VectorXd::Zero(pixels.rows());
+  double m[3];
+  for (int k = 0; k < 3; ++k) m[k] = unit[k] - d / ob * nb[k];
+  const double inv_n = std::hypot(m[0] / in[kFx], m[1] / in[kFy]);
+  for (Eigen::Index i = 0; i < pixels.rows(); ++i) {
+    double x, y, jd[4];
+    if (!UndistortNormalized(in, pixels(i, 0), pixels(i, 1), &x, &y, jd)) continue;
+    const double depth = -ob / (nb[0] * x + nb[1] * y + nb[2]);
+    if (depth > 0.0) out[i] = depth * inv_n;
+  }
+  return out;
 }
 
 ceres::CostFunction* NewPosePriorCost(const JointView* view, double w_r, double w_t) {

@@ -35,6 +35,23 @@ bool LaserResidual(const double* intrinsics, const double* nb, double ob, const 
                    double d, double u, double v, double* x, double* y, double* jd,
                    double* residual);
 
+/// The scale-free laser residual of one stripe pixel with its ray (x, y, 1) undistorted:
+/// the pixel's distance (px, in the undistorted image) from the line where the laser plane
+/// unit . X + d = 0 meets the board plane nb . X + ob = 0, seen from the camera,
+///   s N,  s = m . (x, y, 1),  m = unit - (d / ob) nb,  N = 1 / |(m_x / fx, m_y / fy)|.
+/// The distance (mm) LaserResidual gives is depth s, depth = -ob / (nb . ray): it shrinks
+/// with the scene, and a view whose board pose is free (no robot to fix the scale) lets a
+/// least-squares fit shrink the scene to shrink the stripe's noise (renders: fx 3 % low with
+/// 800 stripe pixels a view); this one does not.
+double LaserLineDistance(const double* intrinsics, const double* nb, double ob, const double* unit,
+                         double d, double x, double y);
+
+/// Per stripe pixel of `pixels`, depth / N (LaserLineDistance) at the given camera, board
+/// plane and laser plane: the factor that turns the scale-free residual into mm there (0 where
+/// the pixel cannot be undistorted or its ray misses the board plane).
+Eigen::VectorXd LaserScales(const double* intrinsics, const double* nb, double ob,
+                            const double* unit, double d, const RowMatX2& pixels);
+
 /// The robot pose error a view's own board pose implies (JointOptions::pose_sigma_t):
 /// E = hand_from_camera camera_from_board_chain inv(camera_from_board) inv(hand_from_camera),
 /// as (rotation vector, translation) in the hand frame.
@@ -52,7 +69,11 @@ ceres::CostFunction* NewFreeCornerCost(const JointView* view, double inv_sigma);
 /// The laser residuals of a view (analytic Jacobian) over the blocks intrinsics (9), the board
 /// pose's blocks (chain: hand_from_camera (4, 3) and base_from_board (4, 3); else
 /// camera_from_board (4, 3)), the laser plane's normal (3) and offset (1).
-ceres::CostFunction* NewLaserCost(const JointView* view, double inv_sigma, bool chain);
+/// `scales` (views with their own board pose): the residuals are LaserLineDistance times these
+/// fixed factors (LaserScales at the start, so that they read as mm there), not the mm
+/// distance; null: LaserResidual.
+ceres::CostFunction* NewLaserCost(const JointView* view, double inv_sigma, bool chain,
+                                  const Eigen::VectorXd* scales = nullptr);
 
 /// Uncertain robot poses: the pose error of a view, rotation * w_r and translation * w_t, over
 /// the blocks camera_from_board, hand_from_camera and base_from_board (4, 3 each).

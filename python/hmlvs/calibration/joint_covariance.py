@@ -57,6 +57,14 @@ def inverse_normal(jac: np.ndarray) -> tuple[np.ndarray, int, float]:
     return cov, rank, cond
 
 
+def white_part(jac: np.ndarray, cov: np.ndarray, share: np.ndarray) -> np.ndarray:
+    """cov J^T diag(share) J cov: the covariance of white noise whose variance is ``share``
+    times the weights' (per row), written as a sum of squares (B^T B, B = sqrt(share) J cov)
+    so that no variance comes out negative however the rows' weights differ."""
+    b = (jac @ cov) * np.sqrt(share)[:, None]
+    return b.T @ b
+
+
 def _perturbed(view: Any, k: int, h: float) -> Any:
     """``view`` with its robot pose moved by h along the k-th of (rx ry rz tx ty tz), in the
     hand frame (base_from_hand <- base_from_hand @ delta)."""
@@ -142,8 +150,7 @@ def chain_covariance(views: Sequence[Any], state: Any, opts: Any, jac: np.ndarra
     if part is None:
         return cov, None
     # white noise: the residuals' own part of the solve's sigmas
-    cov_white = cov @ (jac.T @ (jac * share[:, None])) @ cov
-    return cov_white + part[0], (part[1] * sig_t, math.degrees(part[1] * sig_r))
+    return white_part(jac, cov, share) + part[0], (part[1] * sig_t, math.degrees(part[1] * sig_r))
 
 
 #: the intrinsics that a view's own camera may differ in (the free ones of them are used)
@@ -210,8 +217,7 @@ def camera_mode_covariance(jac: np.ndarray, names: Sequence[str], cov: np.ndarra
         return cov, None
     spread = part[1] ** 2 * (root @ root.T)
     sd = {names[c]: float(math.sqrt(spread[k, k])) for k, c in enumerate(a)}
-    cov_white = cov @ (jac.T @ (jac * share[:, None])) @ cov
-    return cov_white + part[0], sd
+    return white_part(jac, cov, share) + part[0], sd
 
 
 def _own_deviation(jw: np.ndarray, names: Sequence[str], a: list[int], i: int,

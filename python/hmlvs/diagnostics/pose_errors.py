@@ -49,17 +49,23 @@ def pose_error_part(jac: np.ndarray, a_inv: np.ndarray, rows: Sequence[np.ndarra
         (after the fit) and its standard deviation
     Returns ``(s^2 A^-1 (sum_i G_i G_i^T) A^-1, s)``.
     """
-    gram = np.zeros_like(a_inv)
-    trace_m = 0.0
+    # A^-1 G_i per view: the part is a sum of their outer products, so that its diagonal
+    # stays non-negative however the rows' weights differ (a sum of squares, not a
+    # difference of large products)
+    moved = []
+    trace_m = trace_fit = 0.0
     for r, je in zip(rows, pose_jac):
         trace_m += float(np.sum(je ** 2))
         g = jac[r].T @ je
-        gram += g @ g.T
+        h = a_inv @ g
+        trace_fit += float(np.sum(g * h))
+        moved.append(h)
     # the pose errors' expected sum of squares after the fit: tr(P M), P = I - jac A^-1 jac^T,
     # M = blockdiag(J_e,i J_e,i^T)
-    pose = trace_m - float(np.trace(a_inv @ gram))
+    pose = trace_m - trace_fit
     excess = float(residuals @ residuals) - white_expect
     if pose <= 0 or excess <= EXCESS_SD * white_sd:
         return None
     scale2 = excess / pose
-    return scale2 * (a_inv @ gram @ a_inv), math.sqrt(scale2)
+    h_all = np.hstack(moved)
+    return scale2 * (h_all @ h_all.T), math.sqrt(scale2)
