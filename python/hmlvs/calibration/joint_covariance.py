@@ -170,7 +170,7 @@ def camera_mode_covariance(jac: np.ndarray, names: Sequence[str], cov: np.ndarra
     views' own focal lengths differ by 2.9 % RMS and their principal points by 6-7 px, 4-5
     times what their corners' noise explains (chi-square 269 on 13 and 530 on 26 degrees of
     freedom), and the two halves of the views disagreed by up to 8.3 standard deviations
-    (at most 2.8 with the differences counted).
+    (at most 3.3, on k1, with the differences counted).
     The cause can be focus, heat, a lens that is not locked, or a lens model the views fit
     differently; counted as white noise, it makes the shared camera look far surer than it is.
 
