@@ -203,17 +203,7 @@ class LaserCost final : public ceres::CostFunction {
       const double k_nb = ob * a / (nn * b * b);
       const double dnb[3] = {k_nb * ray[0], k_nb * ray[1], k_nb * ray[2]};
       const double dob = -a / (b * nn);
-      int col = 0;
-      for (int blk = 0; blk < kPoseBlocks; ++blk) {
-        const int size = (blk % 2 == 0) ? 4 : 3;
-        double* jb = jacobians[1 + blk];
-        for (int e = 0; e < size; ++e, ++col) {
-          if (jb == nullptr) continue;
-          jb[i * size + e] = (dnb[0] * nbj[0].v[col] + dnb[1] * nbj[1].v[col] +
-                              dnb[2] * nbj[2].v[col] + dob * obj.v[col]) *
-                             w_;
-        }
-      }
+      BoardPlaneRows(dnb, dob, w_, nbj, obj, i, jacobians);
       if (jacobians[1 + kPoseBlocks] != nullptr) {
         double* jn = jacobians[1 + kPoseBlocks] + 3 * i;
         const double f = -ob / b;
@@ -259,22 +249,33 @@ class LaserCost final : public ceres::CostFunction {
     const double g_nb = g[0] * nb[0] + g[1] * nb[1] + g[2] * nb[2];
     const double dnb[3] = {-d / ob * g[0], -d / ob * g[1], -d / ob * g[2]};
     const double dob = d / (ob * ob) * g_nb;
-    int col = 0;
-    for (int blk = 0; blk < kPoseBlocks; ++blk) {
-      const int size = (blk % 2 == 0) ? 4 : 3;
-      double* jb = jacobians[1 + blk];
-      for (int e = 0; e < size; ++e, ++col) {
-        if (jb == nullptr) continue;
-        jb[i * size + e] = dnb[0] * nbj[0].v[col] + dnb[1] * nbj[1].v[col] +
-                           dnb[2] * nbj[2].v[col] + dob * obj.v[col];
-      }
-    }
+    BoardPlaneRows(dnb, dob, 1.0, nbj, obj, i, jacobians);
     if (jacobians[1 + kPoseBlocks] != nullptr) {
       double* jn = jacobians[1 + kPoseBlocks] + 3 * i;
       const double gu = g[0] * unit[0] + g[1] * unit[1] + g[2] * unit[2];
       for (int e = 0; e < 3; ++e) jn[e] = (g[e] - gu * unit[e]) / nn;
     }
     if (jacobians[2 + kPoseBlocks] != nullptr) jacobians[2 + kPoseBlocks][i] = -g_nb / ob;
+  }
+
+  // Pixel i's rows of the board pose blocks, times w, from its residual's derivatives dnb,
+  // dob with respect to the board plane (nb, ob), whose own derivatives with respect to the
+  // blocks are the Jets nbj, obj.
+  template <typename J>
+  static void BoardPlaneRows(const double* dnb, double dob, double w, const Vec3<J>& nbj,
+                             const J& obj, Eigen::Index i, double** jacobians) {
+    constexpr int kPoseBlocks = kChain ? 4 : 2;
+    int col = 0;
+    for (int blk = 0; blk < kPoseBlocks; ++blk) {
+      const int size = (blk % 2 == 0) ? 4 : 3;
+      double* jb = jacobians[1 + blk];
+      for (int e = 0; e < size; ++e, ++col) {
+        if (jb == nullptr) continue;
+        jb[i * size + e] = (dnb[0] * nbj[0].v[col] + dnb[1] * nbj[1].v[col] +
+                            dnb[2] * nbj[2].v[col] + dob * obj.v[col]) *
+                           w;
+      }
+    }
   }
 
   const JointView* view_;
