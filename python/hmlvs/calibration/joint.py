@@ -413,7 +413,8 @@ def _warn_view_cameras(su: _Setup, spread: dict[str, float] | None,
     size = f"focal lengths about {100 * max(focal):.2g} % apart" if focal else "cameras apart"
     su.warnings.append(f"the views fit cameras of their own ({size} from view to view, more "
                        "than the corners' noise explains): is the focus locked (autofocus "
-                       "off) and the lens fixed, and did the camera warm up first? The "
+                       "off) and the lens fixed, and did the camera warm up first? (A lens "
+                       "that the 5-term distortion model does not fit shows the same.) The "
                        "differences are counted in the uncertainties")
 
 

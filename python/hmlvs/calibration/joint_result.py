@@ -164,8 +164,8 @@ class JointCalibration:
         if self.view_cameras_counted is not None:
             each = ", ".join(f"{k} {v:.2f}" for k, v in self.view_cameras_counted.items())
             lines.append(f"the views fit cameras of their own, differing by about {each} px "
-                         "RMS from view to view (focus, heat, a loose lens?), counted in the "
-                         "uncertainties")
+                         "RMS from view to view (focus, heat, a loose lens, a lens model that "
+                         "does not fit?), counted in the uncertainties")
         if self.mode == "chain":
             t = s.hand_from_camera[:3, 3]
             rv = rotation_to_vector(s.hand_from_camera[:3, :3])
