@@ -13,6 +13,7 @@ from hmlvs.calibration.joint import (
     consistent_numbering,
     fit_plane,
 )
+from hmlvs.diagnostics.pose_errors import pose_error_part
 from hmlvs.models.opencv import OpenCvSensor
 from hmlvs.sim.features import default_truth, project, transform
 from hmlvs.sim.features import synthetic_views as make_views
@@ -217,6 +218,20 @@ def test_camera_mode_does_not_shrink_the_scene_to_shrink_the_stripes_noise():
     n = len(dfx)
     assert abs(np.mean(dfx)) < 3 * np.sqrt(np.mean(np.square(sfx)) / n), (dfx, sfx)
     assert abs(np.mean(dd)) < 3 * np.sqrt(np.mean(np.square(sd)) / n), (dd, sd)
+
+
+def test_a_residual_that_cannot_be_evaluated_counts_no_view_errors():
+    """The moments need every residual: one NaN (a ray that misses its plane) must leave the
+    white-noise covariance as it is, not turn every variance into NaN."""
+    rng = np.random.default_rng(3)
+    jac = rng.normal(size=(40, 3))
+    a_inv = np.linalg.inv(jac.T @ jac)
+    rows = [np.arange(0, 20), np.arange(20, 40)]
+    effect = [rng.normal(size=(20, 6)) for _ in rows]
+    residuals = 10 * rng.normal(size=40)  # far more than white noise of unit variance
+    assert pose_error_part(jac, a_inv, rows, effect, residuals, 37.0, 8.6) is not None
+    residuals[3] = np.nan
+    assert pose_error_part(jac, a_inv, rows, effect, residuals, 37.0, 8.6) is None
 
 
 @pytest.mark.parametrize("seed", [1, 3])

@@ -189,7 +189,7 @@ def camera_mode_covariance(jac: np.ndarray, names: Sequence[str], cov: np.ndarra
     n_corner_rows : the number of corner rows (the stripe rows follow)
     """
     a = [names.index(n) for n in _VIEW_INTRINSICS if n in names]
-    if not a or len(rows) < 3:
+    if not a or len(rows) < 3 or not np.all(np.isfinite(residuals)):
         return cov, None
     jw = jac.copy()
     jw[n_corner_rows:] *= math.sqrt(stripe_corr)  # the solve's own weights

@@ -64,7 +64,9 @@ def pose_error_part(jac: np.ndarray, a_inv: np.ndarray, rows: Sequence[np.ndarra
     # M = blockdiag(J_e,i J_e,i^T)
     pose = trace_m - trace_fit
     excess = float(residuals @ residuals) - white_expect
-    if pose <= 0 or excess <= EXCESS_SD * white_sd:
+    # not finite: a residual that cannot be evaluated, nothing to estimate from
+    if not (math.isfinite(excess) and math.isfinite(pose)) or pose <= 0 \
+            or excess <= EXCESS_SD * white_sd:
         return None
     scale2 = excess / pose
     h_all = np.hstack(moved)
