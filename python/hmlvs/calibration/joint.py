@@ -35,7 +35,12 @@ from ..geometry.transforms import (
     invert_transform,
 )
 from ..models.opencv import DISTORTION_NAMES, OpenCvSensor
-from .joint_covariance import camera_mode_covariance, chain_covariance, inverse_normal
+from .joint_covariance import (
+    camera_mode_covariance,
+    chain_covariance,
+    inverse_normal,
+    weighted_residuals,
+)
 from .joint_result import JointCalibration
 from .joint_setup import (  # noqa: F401 (initial_intrinsics, on_board: re-exported)
     board_plane_points,
@@ -341,16 +346,15 @@ def _assemble(su: _Setup, board: BoardSpec, image_size: tuple[int, int], state: 
     jac = np.array(jac, float)
     jac[n_c:n_c + n_l] /= math.sqrt(stripe_corr)
     cov, rank, cond = inverse_normal(jac)
-    counted = None
+    counted = view_cameras = None
     if su.chain and not pose_sigma:
-        counted_cov, counted = chain_covariance(jv, state, opts, jac, cov, stripe_corr,
-                                                (su.cv_rms / math.sqrt(2), su.sigma_l0),
-                                                _own_poses(su, board, state, keep_c))
-        cov = counted_cov
-    view_cameras = None
+        cov, counted = chain_covariance(jv, state, opts, jac, cov, stripe_corr,
+                                        weighted_residuals(corners_r, laser_r, opts),
+                                        (su.cv_rms / math.sqrt(2), su.sigma_l0),
+                                        _own_poses(su, board, state, keep_c))
     if not su.chain:
-        cov, view_cameras = _camera_mode_cov(jac, list(names), cov, corners_r, laser_r, opts,
-                                             stripe_corr)
+        cov, view_cameras = camera_mode_covariance(
+            jac, list(names), cov, weighted_residuals(corners_r, laser_r, opts), stripe_corr)
         _warn_view_cameras(su, view_cameras, np.asarray(state.intrinsics, float))
     std = {n: float(math.sqrt(max(cov[k, k], 0.0))) for k, n in enumerate(names)}
     if rank < len(names):
@@ -387,21 +391,6 @@ def _assemble(su: _Setup, board: BoardSpec, image_size: tuple[int, int], state: 
                           "laser_pixels": su.laser_px[i][keep_l[i]],
                           "laser_residuals": np.asarray(laser_r[i])}
                    for i, v in enumerate(su.views)}, rejected=su.rejected)
-
-
-def _camera_mode_cov(jac: np.ndarray, names: list[str], cov: np.ndarray,
-                     corners_r: Sequence[np.ndarray], laser_r: Sequence[np.ndarray], opts: Any,
-                     stripe_corr: float) -> tuple[np.ndarray, dict[str, float] | None]:
-    """:func:`camera_mode_covariance` with each view's rows and the weighted residuals."""
-    n_c = [np.asarray(c).size for c in corners_r]
-    n_l = [len(x) for x in laser_r]
-    c0, l0 = np.cumsum([0] + n_c), sum(n_c) + np.cumsum([0] + n_l)
-    rows = [np.r_[np.arange(c0[i], c0[i + 1]), np.arange(l0[i], l0[i + 1])]
-            for i in range(len(n_c))]
-    residuals = np.r_[np.concatenate([np.asarray(c).ravel() for c in corners_r])
-                      / opts.corner_sigma,
-                      np.concatenate([np.asarray(x) for x in laser_r]) / opts.laser_sigma]
-    return camera_mode_covariance(jac, names, cov, rows, residuals, sum(n_c), stripe_corr)
 
 
 def _warn_view_cameras(su: _Setup, spread: dict[str, float] | None,

@@ -25,7 +25,7 @@ with ``C`` the weighted residuals' covariance under the model.
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from typing import Any, NamedTuple, Sequence
 
 import numpy as np
 
@@ -63,6 +63,50 @@ def white_part(jac: np.ndarray, cov: np.ndarray, share: np.ndarray) -> np.ndarra
     so that no variance comes out negative however the rows' weights differ."""
     b = (jac @ cov) * np.sqrt(share)[:, None]
     return b.T @ b
+
+
+class Residuals(NamedTuple):
+    """The solve's residuals as the covariance needs them: per view its rows of the Jacobian
+    (its corners x, y among every view's corners, then its stripe pixels among every view's
+    stripe pixels), all of them weighted as the solve weighted them, and the number of corner
+    rows (the stripe rows follow)."""
+
+    rows: list[np.ndarray]
+    weighted: np.ndarray
+    n_corner_rows: int
+
+
+def weighted_residuals(corners: Sequence[Any], laser: Sequence[Any], opts: Any) -> Residuals:
+    """:class:`Residuals` of the per-view corner (px) and stripe residuals
+    (``_core._evaluate_joint``'s), weighted by ``opts``' sigmas."""
+    n_c = [np.asarray(c).size for c in corners]
+    n_l = [len(x) for x in laser]
+    c0, l0 = np.cumsum([0] + n_c), sum(n_c) + np.cumsum([0] + n_l)
+    rows = [np.r_[np.arange(c0[i], c0[i + 1]), np.arange(l0[i], l0[i + 1])]
+            for i in range(len(n_c))]
+    weighted = np.r_[np.concatenate([np.asarray(c, float).ravel() for c in corners])
+                     / opts.corner_sigma,
+                     np.concatenate([np.asarray(x, float) for x in laser]) / opts.laser_sigma]
+    return Residuals(rows, weighted, sum(n_c))
+
+
+def _solve_weighted(jac: np.ndarray, res: Residuals, stripe_corr: float) -> np.ndarray:
+    """``jac`` (its stripe rows divided by sqrt(stripe_corr)) with the solve's own weights."""
+    jw = jac.copy()
+    jw[res.n_corner_rows:] *= math.sqrt(stripe_corr)
+    return jw
+
+
+def _view_error_part(jw: np.ndarray, res: Residuals, share: np.ndarray,
+                     effect: Sequence[np.ndarray]) -> tuple[np.ndarray, float] | None:
+    """:func:`pose_error_part` for the solve-weighted Jacobian ``jw`` and per view the weighted
+    derivative of its rows with respect to its own error (``effect``), with the white noise's
+    expected sum of squares after the fit, tr(P diag(share)), P = I - jw A^-1 jw^T, and its
+    chi-square spread."""
+    a_inv = inverse_normal(jw)[0]
+    expect = float(share.sum() - np.trace(a_inv @ (jw.T @ (jw * share[:, None]))))
+    return pose_error_part(jw, a_inv, res.rows, effect, res.weighted, expect,
+                           math.sqrt(2.0 * float(np.sum(share ** 2))))
 
 
 def _perturbed(view: Any, k: int, h: float) -> Any:
@@ -108,13 +152,14 @@ def pose_spread(views: Sequence[Any], state: Any, opts: Any,
 
 
 def chain_covariance(views: Sequence[Any], state: Any, opts: Any, jac: np.ndarray,
-                     cov: np.ndarray, stripe_corr: float, white: tuple[float, float],
-                     own_poses: Sequence[np.ndarray | None]
+                     cov: np.ndarray, stripe_corr: float, res: Residuals,
+                     white: tuple[float, float], own_poses: Sequence[np.ndarray | None]
                      ) -> tuple[np.ndarray, tuple[float, float] | None]:
     """The exact chain's covariance with the robot pose errors counted (module doc), and the
     pose errors' spread the residuals show (mm, degrees; None when they show none).
 
-    views, state, opts : the solve's (chain mode, poses exact)
+    views, state, opts : the solve's (chain mode, poses exact); res : its residuals
+        (:func:`weighted_residuals`)
     jac : the weighted Jacobian (corners of every view, then stripe pixels of every view),
         its stripe rows divided by sqrt(stripe_corr) (:func:`stripe_correlation`); cov :
         (J^T J)^-1 of it, the covariance of white noise alone
@@ -122,31 +167,18 @@ def chain_covariance(views: Sequence[Any], state: Any, opts: Any, jac: np.ndarra
         the solve's sigma (the residuals' RMS, which holds the pose errors' part too)
     own_poses : per view, camera_from_board from its own corners (None: laser-only)
     """
-    n_c = [2 * len(np.asarray(v.corner_pixels)) for v in views]
-    n_l = [len(np.asarray(v.laser_pixels)) for v in views]
-    c0, l0 = np.cumsum([0] + n_c), sum(n_c) + np.cumsum([0] + n_l)
-    share = np.r_[np.full(sum(n_c), min(white[0] / opts.corner_sigma, 1.0) ** 2),
-                  np.full(sum(n_l), min(white[1] / opts.laser_sigma, 1.0) ** 2)]
-    jw = jac.copy()
-    jw[sum(n_c):] *= math.sqrt(stripe_corr)  # the solve's own weights
-    wc, wl = 1.0 / opts.corner_sigma, 1.0 / opts.laser_sigma
+    n_rows = len(res.weighted)
+    share = np.where(np.arange(n_rows) < res.n_corner_rows,
+                     min(white[0] / opts.corner_sigma, 1.0) ** 2,
+                     min(white[1] / opts.laser_sigma, 1.0) ** 2)
     sig_r, sig_t = pose_spread(views, state, opts, own_poses)
     shape = np.r_[np.full(3, sig_r), np.full(3, sig_t)]
     anchor = next(v for v in views if len(np.asarray(v.corner_pixels)))
-    rows, pose_jac = [], []
-    for i, v in enumerate(views):
-        weight = np.r_[np.full(n_c[i], wc), np.full(n_l[i], wl)]
-        rows.append(np.r_[np.arange(c0[i], c0[i + 1]), np.arange(l0[i], l0[i + 1])])
-        pose_jac.append(pose_jacobian(v, state, opts, anchor) * weight[:, None] * shape)
-    c_r, l_r = _core._evaluate_joint(list(views), state, opts)
-    residuals = np.r_[np.concatenate([np.asarray(c).ravel() for c in c_r]) * wc,
-                      np.concatenate([np.asarray(x) for x in l_r]) * wl]
-    a_inv = inverse_normal(jw)[0]
-    # white noise's expected sum of squares, tr(P diag(share)), P = I - jw A^-1 jw^T, and
-    # its chi-square spread
-    expect = float(share.sum() - np.trace(a_inv @ (jw.T @ (jw * share[:, None]))))
-    part = pose_error_part(jw, a_inv, rows, pose_jac, residuals, expect,
-                           math.sqrt(2.0 * float(np.sum(share ** 2))))
+    weight = np.where(np.arange(n_rows) < res.n_corner_rows, 1.0 / opts.corner_sigma,
+                      1.0 / opts.laser_sigma)
+    pose_jac = [pose_jacobian(v, state, opts, anchor) * weight[r][:, None] * shape
+                for v, r in zip(views, res.rows)]
+    part = _view_error_part(_solve_weighted(jac, res, stripe_corr), res, share, pose_jac)
     if part is None:
         return cov, None
     # white noise: the residuals' own part of the solve's sigmas
@@ -158,8 +190,7 @@ _VIEW_INTRINSICS = ("fx", "fy", "cx", "cy")
 
 
 def camera_mode_covariance(jac: np.ndarray, names: Sequence[str], cov: np.ndarray,
-                           rows: Sequence[np.ndarray], residuals: np.ndarray,
-                           n_corner_rows: int, stripe_corr: float
+                           res: Residuals, stripe_corr: float
                            ) -> tuple[np.ndarray, dict[str, float] | None]:
     """Camera mode's covariance with the views' own cameras counted (the module doc's
     method, the views' differing intrinsics in place of robot pose errors), and the spread of
@@ -184,19 +215,18 @@ def camera_mode_covariance(jac: np.ndarray, names: Sequence[str], cov: np.ndarra
 
     jac : the weighted Jacobian (corners of every view, then stripe pixels of every view),
         its stripe rows divided by sqrt(stripe_corr); cov : (J^T J)^-1 of it
-    rows : per view (the i-th owns the columns ``view{i}_*``), its rows of ``jac``;
-        residuals : weighted as the solve did
-    n_corner_rows : the number of corner rows (the stripe rows follow)
+    res : the solve's residuals (:func:`weighted_residuals`; the i-th view owns the columns
+        ``view{i}_*``)
     """
+    rows, residuals = res.rows, res.weighted
     a = [names.index(n) for n in _VIEW_INTRINSICS if n in names]
     if not a or len(rows) < 3 or not np.all(np.isfinite(residuals)):
         return cov, None
-    jw = jac.copy()
-    jw[n_corner_rows:] *= math.sqrt(stripe_corr)  # the solve's own weights
+    jw = _solve_weighted(jac, res, stripe_corr)
     fits = [_own_deviation(jw, names, a, i, r, residuals) for i, r in enumerate(rows)]
     n_rows, n_fit = len(residuals), jw.shape[1] + len(a) * len(rows)
     dof = max(1.0 - n_fit / n_rows, 1e-3)
-    is_corner = np.arange(n_rows) < n_corner_rows
+    is_corner = np.arange(n_rows) < res.n_corner_rows
     left = np.concatenate([f[2] for f in fits])
     kinds = np.concatenate([is_corner[r] for r in rows])
     share = np.ones(n_rows)
@@ -209,10 +239,7 @@ def camera_mode_covariance(jac: np.ndarray, names: Sequence[str], cov: np.ndarra
     if lam.max() <= 0:
         return cov, None
     root = vec * np.sqrt(np.clip(lam, 0.0, None))
-    a_inv = inverse_normal(jw)[0]
-    expect = float(share.sum() - np.trace(a_inv @ (jw.T @ (jw * share[:, None]))))
-    part = pose_error_part(jw, a_inv, rows, [jw[r][:, a] @ root for r in rows], residuals,
-                           expect, math.sqrt(2.0 * float(np.sum(share ** 2))))
+    part = _view_error_part(jw, res, share, [jw[r][:, a] @ root for r in rows])
     if part is None:
         return cov, None
     spread = part[1] ** 2 * (root @ root.T)
