@@ -150,8 +150,23 @@ TEST(Profile, EmptyProfileAndStripesAlongRows) {
   EXPECT_TRUE((e.status.array() == static_cast<std::uint8_t>(PointStatus::kNoStripe)).all());
   EXPECT_TRUE((e.stripe_status.array() == static_cast<std::uint8_t>(StripeStatus::kNone)).all());
   const LaserSensor sensor = LaserSensor::Paper(test::Generic());
-  EXPECT_THROW(MeasureStripe(sensor, Stripe(), StripeDirection::kRows, BaseFromHand()),
-               std::invalid_argument);
+  // scan lines along image rows: pixel (centre, scan line), measured like any other
+  const StripeResult s = Stripe();
+  const FrameProfile r = MeasureStripe(sensor, s, StripeDirection::kRows, BaseFromHand());
+  int measured = 0;
+  for (Eigen::Index i = 0; i < s.status.size(); ++i) {
+    if (s.status[i] != kFound) {
+      EXPECT_TRUE(std::isnan(r.pixels(i, 0))) << i;
+      continue;
+    }
+    EXPECT_EQ(r.pixels(i, 0), s.centre[i]) << i;
+    EXPECT_EQ(r.pixels(i, 1), static_cast<double>(i)) << i;
+    double c[3];
+    if (!sensor.CameraPoint(s.centre[i], static_cast<double>(i), c)) continue;
+    ++measured;
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(r.camera_points(i, k), c[k]) << i;
+  }
+  EXPECT_GT(measured, 500);
   paper::Vector14d bad = test::Generic();
   bad[paper::kH] = -1.0;
   EXPECT_THROW(LaserSensor::Paper(bad), std::invalid_argument);

@@ -331,11 +331,6 @@ void CheckFrames(const ImageView<T>& on, const ImageView<T>& off, const FrameStr
         << o.smooth_along << " and " << o.blur_var;
     throw std::invalid_argument(msg.str());
   }
-  if (alone && o.stripe.direction == StripeDirection::kRows) {
-    throw std::invalid_argument(
-        "a laser-on image without a laser-off frame needs a roughly horizontal stripe "
-        "(direction='columns')");
-  }
 }
 
 // ExtractStripe(image, o) with centroid centres along image columns: the widths of its found
@@ -377,7 +372,8 @@ double FirstWidth(const Frames<T>& f, const StripeOptions& o) {
 
 // The laser-on frame of `f` alone: against its background (`f->off`), estimated at the
 // stripe's width as first measured (FirstWidth; kAloneFirstWidth when none was found); copied
-// to `background` if not null.
+// to `background` if not null, in the image's layout (a kRows stripe's frame is worked on
+// transposed, its scan lines as columns, so that the opening removes the stripe).
 template <typename T>
 FrameStripe AloneStripe(Frames<T>* f, const FrameStripeOptions& o, T* background) {
   FrameStripeOptions oa = o;
@@ -405,7 +401,18 @@ FrameStripe AloneStripe(Frames<T>* f, const FrameStripeOptions& o, T* background
   out.offset_fitted = false;
   out.albedo_offset = kNaN;
   DropJumps(&out.stripe);  // again on the refined centres
-  if (background != nullptr) std::copy(bg, bg + n, background);
+  if (background != nullptr) {
+    if (!f->transposed) {
+      std::copy(bg, bg + n, background);
+    } else {  // back to the image's layout: its rows are the working frame's columns
+      for (int r = 0; r < f->rows; ++r) {
+        for (int c = 0; c < f->cols; ++c) {
+          background[static_cast<size_t>(c) * f->rows + r] =
+              bg[static_cast<size_t>(r) * f->cols + c];
+        }
+      }
+    }
+  }
   return out;
 }
 

@@ -86,8 +86,9 @@ struct FrameStripe {
 /// given, and scan lines whose centre jumps from its neighbours' marked kMultiple (DropJumps:
 /// on Steger's centres before the refinement, and again on the refined ones); Steger's scale,
 /// unless given, from the same first width. `background`, if not null, receives the background
-/// used (rows x cols, contiguous). Throws std::invalid_argument for empty or mismatched
-/// frames, invalid options, or a laser-on frame alone with direction kRows.
+/// used (rows x cols, contiguous). With direction kRows (a roughly vertical stripe) the frames
+/// are worked on transposed, the opening included. Throws std::invalid_argument for empty or
+/// mismatched frames or invalid options.
 template <typename T>
 FrameStripe StripeFromFrames(const ImageView<T>& on, const ImageView<T>& off,
                              const FrameStripeOptions& options, T* background = nullptr);

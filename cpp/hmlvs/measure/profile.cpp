@@ -78,10 +78,7 @@ FrameProfile EmptyProfile(Eigen::Index scan_lines) {
 
 FrameProfile MeasureStripe(const LaserSensor& sensor, const StripeResult& stripe,
                            StripeDirection direction, const Eigen::Matrix4d& base_from_hand) {
-  if (direction != StripeDirection::kColumns) {
-    throw std::invalid_argument(
-        "Measurer measures a roughly horizontal stripe (scan lines are image columns)");
-  }
+  const bool rows = direction == StripeDirection::kRows;
   const Eigen::Index n = stripe.status.size();
   if (stripe.centre.size() != n) {
     throw std::invalid_argument("the stripe's centre and status differ in length");
@@ -92,7 +89,8 @@ FrameProfile MeasureStripe(const LaserSensor& sensor, const StripeResult& stripe
   const auto found = static_cast<std::uint8_t>(StripeStatus::kFound);
   for (Eigen::Index i = 0; i < n; ++i) {
     if (stripe.status[i] != found) continue;
-    const double u = static_cast<double>(i), v = stripe.centre[i];
+    const double line = static_cast<double>(i);
+    const double u = rows ? stripe.centre[i] : line, v = rows ? line : stripe.centre[i];
     out.pixels(i, 0) = u;
     out.pixels(i, 1) = v;
     double c[3];
@@ -116,7 +114,9 @@ FrameProfile MeasureFrames(const ImageView<T>& on, const ImageView<T>& off,
   FrameStripeOptions o = options;
   o.residual = false;  // a profile has none
   const FrameStripe r = StripeFromFrames(on, off, o);
-  if (r.no_pixel) return EmptyProfile(on.cols);
+  if (r.no_pixel) {
+    return EmptyProfile(options.stripe.direction == StripeDirection::kRows ? on.rows : on.cols);
+  }
   return MeasureStripe(sensor, r.stripe, options.stripe.direction, base_from_hand);
 }
 

@@ -73,16 +73,16 @@ struct FrameProfile {
 FrameProfile EmptyProfile(Eigen::Index scan_lines);
 
 /// The stripe (scan lines along `direction`) measured at robot pose base_from_hand (4x4, mm):
-/// every found centre, pixel (u, v) = (scan line, centre), has its camera point c
-/// (LaserSensor::CameraPoint) and its base point base_from_camera c, with base_from_camera =
-/// base_from_hand hand_from_camera, each product summed left to right. Throws
-/// std::invalid_argument for a stripe along image rows (the scan lines must be image columns).
+/// every found centre, pixel (u, v) = (scan line, centre) (kColumns) or (centre, scan line)
+/// (kRows), has its camera point c (LaserSensor::CameraPoint) and its base point
+/// base_from_camera c, with base_from_camera = base_from_hand hand_from_camera, each product
+/// summed left to right.
 FrameProfile MeasureStripe(const LaserSensor& sensor, const StripeResult& stripe,
                            StripeDirection direction, const Eigen::Matrix4d& base_from_hand);
 
 /// StripeFromFrames(on, off, options) without the residuals (a profile has none), then
 /// MeasureStripe; when an automatic threshold leaves no pixel of the frame (no stripe),
-/// EmptyProfile of the frame's columns.
+/// EmptyProfile of the frame's scan lines.
 template <typename T>
 FrameProfile MeasureFrames(const ImageView<T>& on, const ImageView<T>& off,
                            const FrameStripeOptions& options, const LaserSensor& sensor,

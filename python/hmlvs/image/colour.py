@@ -78,9 +78,14 @@ def colour_stripe(on: np.ndarray, channel: int | None = None,
     :func:`~hmlvs.image.stripe.extract_stripe` (method, threshold, widths, dominance,
     steger_sigma) override these defaults.
 
+    A ``direction`` of "rows" (a stripe running down the image) is found on the frame
+    transposed, its scan lines the image rows.
+
     Raises ``ValueError`` when the automatic threshold leaves no pixel (no stripe).
     """
-
+    if stripe_options.get("direction", "columns") == "rows":
+        rest = {k: v for k, v in stripe_options.items() if k != "direction"}
+        return replace(colour_stripe(transposed(on), channel, **rest), direction="rows")
     channel = laser_channel(on) if channel is None else channel
     feat = laser_feature(on, channel)
     first = extract_stripe(feat, method="centroid", noise=feature_noise(feat), dominance=1.5)
@@ -123,7 +128,8 @@ def board_gray(image: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(np.ascontiguousarray(image), code)
 
 
-def laser_channel(on: np.ndarray, off: np.ndarray | None = None) -> int | None:
+def laser_channel(on: np.ndarray, off: np.ndarray | None = None,
+                  direction: str = "columns") -> int | None:
     """The colour channel that shows the laser: None for a grayscale image; for colour
     (BGR / BGRA) the channel with the strongest laser-on minus laser-off difference (its
     99.9th-percentile excess), or without a laser-off frame the channel whose stripe stands
@@ -131,9 +137,12 @@ def laser_channel(on: np.ndarray, off: np.ndarray | None = None) -> int | None:
     median over the columns of their largest excess. (Not a percentile over the image: where
     a stripe's core saturates to white every channel reaches the top there, and the channel
     with the darkest background wins; measured on the Blaser frames, 7 of 55 laser-on
-    frames then gave green for a red laser, none with the median.)"""
+    frames then gave green for a red laser, none with the median.) A stripe that runs down
+    the image (``direction`` "rows") is judged on the frames transposed."""
     if not isinstance(on, np.ndarray) or on.ndim != 3 or on.shape[2] == 1:
         return None
+    if direction == "rows":
+        return laser_channel(transposed(on), transposed(off))
     if on.shape[2] not in (3, 4):
         raise ValueError(f"the laser-on image has {on.shape[2]} channels; expected 1 (gray), "
                          "3 (BGR) or 4 (BGRA)")
@@ -173,3 +182,11 @@ def drop_jumps(stripe: StripeResult, window: int = 41, jump: float = 1.0) -> Str
     status = _core._drop_jumps(np.asarray(stripe.centre, float),
                                np.asarray(stripe.status, np.uint8))
     return replace(stripe, status=np.asarray(status, np.uint8))
+
+
+def transposed(image: np.ndarray | None) -> np.ndarray | None:
+    """The image with its rows and columns swapped (channels kept), contiguous."""
+    if not isinstance(image, np.ndarray):
+        return image
+    return np.ascontiguousarray(np.swapaxes(image, 0, 1))
+

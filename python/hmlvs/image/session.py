@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -177,13 +177,14 @@ def read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
             raise PairRejected(f"the laser-on and laser-off images differ in "
                           f"{100 * diff_big.mean():.0f}% of the pixels, far more than a "
                           "stripe: they are not a pair taken at the same pose")
+
+    def extract(options: dict[str, Any]) -> tuple[StripeResult, Any, float | None]:
+        if by_colour:  # the laser's channel chosen the stripe's way
+            return colour_stripe(on, None, **options), board, None
+        return _stripe_and_background(on_g, off_g, normalize, options)
+
     try:
-        if by_colour:
-            stripe, offset = colour_stripe(on, channel, **stripe_options), None
-            off_g = board
-        else:
-            stripe, off_g, offset = _stripe_and_background(on_g, off_g, normalize,
-                                                           stripe_options)
+        stripe, off_g, offset = either_way(extract, stripe_options)
     except ValueError as e:  # the threshold leaves no pixel
         raise PairRejected(f"no laser stripe found in {on_name}: {e}") from None
     pair = Pair(str(on_name), str(off_name), joints, pose, on_g, off_g, stripe, size, offset,
@@ -198,6 +199,67 @@ def stripe_pending(pair: Pair) -> bool:
     return pair.offset is not None and bool(np.isnan(pair.offset))
 
 
+def either_way(extract: Callable[[dict[str, Any]], tuple[StripeResult, Any, Any]],
+               stripe_options: dict[str, Any]) -> tuple[StripeResult, Any, Any]:
+    """``extract(options)`` (a tuple led by the stripe) with the options' ``direction``, or
+    when none is given (or "auto") the way the stripe runs: along the image's columns when
+    their stripe runs across the image (its found centres rise less than 1 px per column);
+    else along its rows too, and the way that finds more scan lines wins (a tie: columns).
+    So a sensor whose stripe runs down the image (a laser plane turned, a camera on its side)
+    needs no option. Raises the first way's ``ValueError`` when every way raised one."""
+    given = stripe_options.get("direction")
+    if given is not None and given != "auto":
+        return extract(stripe_options)
+    best, error = None, None
+    for way in ("columns", "rows"):
+        try:
+            got = extract(dict(stripe_options, direction=way))
+        except ValueError as e:
+            error = error or e
+            continue
+        if best is None or got[0].found.sum() > best[0].found.sum():
+            best = got
+        if way == "columns" and _runs_across(got[0]):
+            break
+    if best is None:
+        raise error  # type: ignore[misc]
+    return best
+
+
+def _runs_across(stripe: StripeResult) -> bool:
+    """Whether a stripe found along the image's columns runs across the image: at least 20
+    centres found, rising less than 1 px per column on their least-squares line."""
+    found = stripe.found
+    if found.sum() < 20:
+        return False
+    return abs(float(np.polyfit(stripe.position[found].astype(float),
+                                stripe.centre[found], 1)[0])) < 1.0
+
+
+def stripe_direction(on: np.ndarray, off: np.ndarray | None = None, **stripe_options: Any
+                     ) -> str:
+    """Which way the stripe of a laser on/off pair runs (``off`` may be None): "columns"
+    (across the image, one centre per image column) or "rows" (down it), as
+    :func:`either_way` decides with :func:`stripe_from_pair`."""
+    options = dict(stripe_options, direction="auto")
+    return either_way(lambda o: (stripe_from_pair(on, off, **o), None, None), options)[0].direction
+
+
+def with_direction(stripe_options: dict[str, Any], on: np.ndarray, off: np.ndarray | None
+                   ) -> dict[str, Any]:
+    """``stripe_options`` with the stripe's ``direction``: as given, or when not given (or
+    "auto") the pair's own (:func:`stripe_direction`; "columns" when it has no stripe)."""
+    given = stripe_options.get("direction")
+    if given is not None and given != "auto":
+        return stripe_options
+    try:
+        way = stripe_direction(on, off, **{k: v for k, v in stripe_options.items()
+                                           if k != "direction"})
+    except ValueError:  # no stripe in this frame: the pipeline's own way
+        way = "columns"
+    return dict(stripe_options, direction=way)
+
+
 def check_stripe(pair: Pair, min_stripe: int) -> None:
     if pair.stripe.found.sum() < min_stripe:
         raise PairRejected(f"no laser stripe found in {pair.on_name}: only "
@@ -209,8 +271,9 @@ def restripe(pair: Pair, offset: float, normalize: bool, stripe_options: dict[st
               min_stripe: int) -> Pair:
     """The pair's stripe extracted again with the albedo offset ``offset``; raises PairRejected."""
     try:
-        stripe = _stripe_and_background(pair.on, pair.off, normalize,
-                                        dict(stripe_options, albedo_offset=offset))[0]
+        stripe = _stripe_and_background(
+            pair.on, pair.off, normalize,
+            dict(stripe_options, albedo_offset=offset, direction=pair.stripe.direction))[0]
     except ValueError as e:
         raise PairRejected(f"no laser stripe found in {pair.on_name}: {e}") from None
     pair = replace(pair, stripe=stripe)
@@ -265,6 +328,9 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
     opening at a stripe width of 16 px, which also sets Steger's scale), the peaks taken
     when 1.5 x brighter than any other (``dominance``, unless given) and centres that jump
     from their neighbours' dropped (MULTIPLE; before the refinement, and again after it).
+    Without a ``direction`` (or with "auto") the frame's own is taken
+    (:func:`either_way`): "columns" for a stripe that runs across the image, "rows" for one
+    that runs down it.
     Colour frames use ``channel``, by default the laser's (:func:`laser_channel`); a colour
     laser-on frame alone without a channel goes to :func:`~hmlvs.image.colour.colour_stripe`.
 
@@ -277,14 +343,16 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
     Raises ``ValueError`` naming the threshold when an automatic one leaves no pixel of the
     image above it (nothing to find, rather than a silent empty stripe).
     """
-    if off is None and channel is None and is_colour(on):
-        return colour_stripe(on, None, **stripe_options)
-    if channel is None:
-        channel = laser_channel(on, off)
-    on_g = as_gray(on, "the laser-on image", channel)
-    off_g = None if off is None else as_gray(off, "the laser-off image", channel)
-    return frames_stripe(on_g, off_g, frames_options(normalize=normalize, assess=assess,
-                                                     **stripe_options))[0]
+    def extract(options: dict[str, Any]) -> tuple[StripeResult, Any, Any]:
+        if off is None and channel is None and is_colour(on):
+            return colour_stripe(on, None, **options), None, None
+        ch = laser_channel(on, off, options["direction"]) if channel is None else channel
+        on_g = as_gray(on, "the laser-on image", ch)
+        off_g = None if off is None else as_gray(off, "the laser-off image", ch)
+        return frames_stripe(on_g, off_g, frames_options(normalize=normalize, assess=assess,
+                                                         **options))
+
+    return either_way(extract, stripe_options)[0]
 
 
 #: the options of :func:`extract_stripe` whose None is the pipeline's choice, not a value
@@ -408,7 +476,8 @@ def edge_shift(pair: Pair, normalize: bool, stripe_options: dict[str, Any]) -> n
         return k
     base = checked_blur_var(stripe_options.get("blur_var"))
     ref = _stripe_and_background(pair.on, pair.off, normalize,
-                                 dict(stripe_options, blur_var=base + _EDGE_REF))[0]
+                                 dict(stripe_options, blur_var=base + _EDGE_REF,
+                                      direction=pair.stripe.direction))[0]
     ok = _centred(pair.stripe) & _centred(ref)
     k[ok] = (ref.centre[ok] - pair.stripe.centre[ok]) / _EDGE_REF
     return k

@@ -23,7 +23,7 @@ from .. import _core
 from .._arrays import as_matrix, as_params
 from ..data.calibration_file import Calibration
 from ..image.colour import is_colour
-from ..image.session import frames_options, stripe_from_pair
+from ..image.session import frames_options, stripe_from_pair, with_direction
 from ..image.stripe import as_gray
 from ..models.opencv import OpenCvSensor
 from ..models.paper import PaperSensor
@@ -76,7 +76,9 @@ class Measurer:
         or a file's) or the path of a calibration file; a bench session's calibration (no
         hand-eye transform) is refused
     stripe_options : options of :func:`hmlvs.image.session.stripe_from_pair`; without
-        ``blur_var`` the camera blur the calibration's session fitted is used
+        ``blur_var`` the camera blur the calibration's session fitted is used; without
+        ``direction`` the first frame's (:func:`hmlvs.image.colour.stripe_direction`), kept
+        for the frames after it
     """
 
     def __init__(self, calibration: Any, **stripe_options: Any) -> None:
@@ -100,10 +102,11 @@ class Measurer:
             raise ValueError(f"stripe options {sorted(options)}: {e}") from None
         self._options = options
         # grey frames (or a colour frame's channel) go straight to the C++ pipeline with its
-        # options built once; colour frames first pick the laser's channel (stripe_from_pair)
-        fast = {k: v for k, v in options.items() if k != "channel"}
+        # options built once, its direction the first frame's unless given; colour frames
+        # first pick the laser's channel (stripe_from_pair)
         self._channel = options.get("channel")
-        self._core = frames_options(**fast)
+        self._core = None if options.get("direction") in (None, "auto") else \
+            frames_options(**{k: v for k, v in options.items() if k != "channel"})
         self._sensor = _laser_sensor(self._model)
 
     def points(self, frame: np.ndarray, base_from_hand: Any,
@@ -122,6 +125,10 @@ class Measurer:
         if pose.shape != (4, 4) or not np.isfinite(pose).all():
             raise ValueError(f"base_from_hand must be a finite 4 x 4 transform, got shape "
                              f"{pose.shape}")
+        if self._core is None:  # the stripe's direction from the first frame, then kept
+            self._options = with_direction(self._options, frame, off)
+            self._core = frames_options(**{k: v for k, v in self._options.items()
+                                           if k != "channel"})
         if self._channel is None and is_colour(frame):
             return Profile(*self._colour_profile(frame, off, pose))
         on_g = as_gray(frame, "the laser-on image", self._channel)
