@@ -189,4 +189,3 @@ def transposed(image: np.ndarray | None) -> np.ndarray | None:
     if not isinstance(image, np.ndarray):
         return image
     return np.ascontiguousarray(np.swapaxes(image, 0, 1))
-

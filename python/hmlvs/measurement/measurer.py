@@ -77,7 +77,7 @@ class Measurer:
         hand-eye transform) is refused
     stripe_options : options of :func:`hmlvs.image.session.stripe_from_pair`; without
         ``blur_var`` the camera blur the calibration's session fitted is used; without
-        ``direction`` the first frame's (:func:`hmlvs.image.colour.stripe_direction`), kept
+        ``direction`` the first frame's (:func:`hmlvs.image.session.stripe_direction`), kept
         for the frames after it
     """
 
