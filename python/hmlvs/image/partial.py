@@ -20,9 +20,11 @@ import numpy as np
 
 from ..data.views import ViewData
 from .accounts import ImageReport
-from .corner_base import Corners
+from .corner_base import Corners, away_from_light
 from .corners import BoardNotFoundError, find_corners
 from .grid import CornerGrid, detect_grid, number_grid_by_pose
+from .session import ESTIMATED_OFF
+from .stripe import StripeStatus
 
 
 @dataclass(frozen=True)
@@ -126,6 +128,33 @@ def number_partial_views(full: Sequence[ViewData], partial: Sequence[PartialView
     return out, reasons
 
 
+#: stripe statuses whose centre lies on the stripe's light (measured or checked)
+_ON_THE_STRIPE = (StripeStatus.FOUND, StripeStatus.SATURATED, StripeStatus.CLIPPED,
+                  StripeStatus.DOUBLE_PEAK, StripeStatus.ALBEDO_EDGE)
+
+
+def clear_of_stripe(corners: Corners, pair: Any) -> Corners:
+    """The corners of a laser-on frame alone (``pair``: its ``hmlvs.image.session.Pair``)
+    without those its stripe's light can have pulled (:func:`away_from_light`: within the
+    stripe's width plus 1.5 refinement half-windows of the stripe's centre line, which is
+    interpolated across the scan lines without a centre, where a corner under the stripe
+    leaves two peaks or none). A pair with a laser-off frame keeps them all: its corners
+    are found on that frame."""
+    if pair.off_name != ESTIMATED_OFF:
+        return corners
+    s = pair.stripe
+    pos, centre = np.asarray(s.position, float), np.asarray(s.centre, float)
+    # the centres of the stripe's own light: a MULTIPLE scan line's strongest peak may lie
+    # elsewhere (a square's corner)
+    ok = np.isin(np.asarray(s.status), _ON_THE_STRIPE) & np.isfinite(centre)
+    if ok.sum() < 2:
+        return corners
+    span = (pos >= pos[ok].min()) & (pos <= pos[ok].max())
+    line = np.stack([pos[span], np.interp(pos[span], pos[ok], centre[ok])], axis=1)
+    return away_from_light(corners, line if s.direction == "columns" else line[:, ::-1],
+                           np.where(ok, np.asarray(s.width, float), np.nan)[span])
+
+
 def partial_view(pid: str, pair: Any, board: Any, whole_error: Exception) -> PartialView:
     """The :class:`PartialView` of an image pair (``hmlvs.image.session.Pair``) in which
     no whole board was found (``whole_error`` says so): its corner grid, or the reason why
@@ -153,6 +182,12 @@ def add_partial_views(partial: list[tuple[int, PartialView, Any]], views: list[V
     keyed = list(zip([k for k, r in enumerate(reports) if r is not None and r.ok], full))
     for slot, p, pair in partial:
         corners, why = next(result)
+        if corners is not None:
+            corners = clear_of_stripe(corners, pair)
+            if len(corners) < min_corners:
+                corners, why = None, (f"partly visible board: only {len(corners)} corners "
+                                      f"numbered clear of the stripe; a view needs at least "
+                                      f"{min_corners}")
         if corners is None and p.grid is None and p.base_from_hand is not None:
             # no board in the image at all: a laser-only view (the stripe on the board's
             # plane, e.g. taken with the lights off), used through the robot poses

@@ -21,7 +21,7 @@ from ..geometry.board import BoardSpec, CharucoSpec
 from .accounts import ImageReport
 from .charuco import detect_charuco
 from .corners import BoardNotFoundError, detect_board, prefer_detected
-from .partial import PartialView, add_partial_views, partial_view
+from .partial import PartialView, add_partial_views, clear_of_stripe, partial_view
 from .reading import PairRead, PairReader, read_pairs, same_size, session_blur
 from .session import (
     Pair,
@@ -163,6 +163,7 @@ class _ModelFree:
             raise PairRejected(str(e)) from None
         except cv2.error as e:
             raise opencv_failure(e, "board", hint="") from None
+        found = clear_of_stripe(found, pair)
         if len(found) < MIN_CORNERS:
             raise PairRejected(f"only {len(found)} board corners found and numbered; a "
                                f"view needs at least {MIN_CORNERS}")
@@ -218,7 +219,14 @@ class _Gathered:
         self.board_images.clear()
         if not prefer:
             return
-        raw = {k: c.as_detected() for k, c in zip(ids, with_detected)}
+        # the detector's own positions of the corners each view kept (a laser-on frame
+        # alone has left out those its stripe can have pulled: clear_of_stripe)
+        raw = {}
+        for k, c in zip(ids, with_detected):
+            d = c.as_detected()
+            keep = np.isin(d.index, self.whole[k].index)
+            raw[k] = replace(d, pixels=d.pixels[keep], index=d.index[keep],
+                             anchor=d.anchor[keep])
         self.views = [replace(v, corner_pixels=np.asarray(raw[v.id].pixels, float),
                               corner_index=np.asarray(raw[v.id].index, int))
                       if v.id in raw else v for v in self.views]
