@@ -24,6 +24,7 @@ from .corners import BoardNotFoundError, detect_board, prefer_detected
 from .partial import PartialView, add_partial_views, clear_of_stripe, partial_view
 from .reading import PairRead, PairReader, read_pairs, same_size, session_blur
 from .session import (
+    ESTIMATED_OFF,
     Pair,
     PairRejected,
     checked_blur_var,
@@ -186,6 +187,7 @@ class _Gathered:
     partial: list[tuple[int, PartialView, Any]] = field(default_factory=list)
     whole: dict[str, Any] = field(default_factory=dict)  # the whole boards' Corners
     board_images: dict[str, np.ndarray] = field(default_factory=dict)  # and their images
+    alone: set[str] = field(default_factory=set)  # the views of laser-on frames alone
 
     def add(self, read: PairRead) -> None:
         """One pair as the session's pass read it (its stripe corrected for the blur)."""
@@ -200,6 +202,8 @@ class _Gathered:
             self.reports.append(None)
             return
         self.whole[read.id] = found
+        if pair.off_name == ESTIMATED_OFF:
+            self.alone.add(read.id)
         if read.image is not None:
             self.board_images[read.id] = read.image  # for prefer_detected, if it asks
         self.views.append(ViewData(read.id, np.asarray(found.pixels, float),
@@ -219,12 +223,13 @@ class _Gathered:
         self.board_images.clear()
         if not prefer:
             return
-        # the detector's own positions of the corners each view kept (a laser-on frame
-        # alone has left out those its stripe can have pulled: clear_of_stripe)
+        # the detector's own positions; on a laser-on frame alone only of the corners the
+        # view kept (clear_of_stripe left out those its stripe can have pulled)
         raw = {}
         for k, c in zip(ids, with_detected):
             d = c.as_detected()
-            keep = np.isin(d.index, self.whole[k].index)
+            keep = np.isin(d.index, self.whole[k].index) if k in self.alone else \
+                np.ones(len(d), bool)
             raw[k] = replace(d, pixels=d.pixels[keep], index=d.index[keep],
                              anchor=d.anchor[keep])
         self.views = [replace(v, corner_pixels=np.asarray(raw[v.id].pixels, float),
