@@ -31,6 +31,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from .corner_base import Corners
+from .partial import corner_image
 from .session import (
     Pair,
     PairRejected,
@@ -125,7 +126,7 @@ class PairReader:
             found = self.number(read.id, pair)
         except PairRejected as e:
             return read.rejected(str(e))
-        image = pair.board_image if isinstance(found, Corners) and \
+        image = corner_image(pair) if isinstance(found, Corners) and \
             self.keep_board is not None and self.keep_board(found) else None
         return self.measured(replace(read, found=found, image=image))
 

@@ -21,7 +21,13 @@ from ..geometry.board import BoardSpec, CharucoSpec
 from .accounts import ImageReport
 from .charuco import detect_charuco
 from .corners import BoardNotFoundError, detect_board, prefer_detected
-from .partial import PartialView, add_partial_views, clear_of_stripe, partial_view
+from .partial import (
+    PartialView,
+    add_partial_views,
+    clear_of_stripe,
+    corner_image,
+    partial_view,
+)
 from .reading import PairRead, PairReader, read_pairs, same_size, session_blur
 from .session import (
     ESTIMATED_OFF,
@@ -155,7 +161,7 @@ class _ModelFree:
         import cv2
 
         try:
-            found = detect_corners(pair.board_image, self.detector_board)
+            found = detect_corners(corner_image(pair), self.detector_board)
         except BoardNotFoundError as e:
             if self.board_spec.unambiguous:
                 raise PairRejected(str(e)) from None
