@@ -19,6 +19,7 @@ from .corner_base import (
     match_nearest,
     orientation,
     refine_subpix,
+    subpix_window,
     to_8bit,
 )
 from .grid_place import place_grid
@@ -221,7 +222,7 @@ def _whole_board(gray: np.ndarray, board: Any, fallback: bool) -> tuple[np.ndarr
             # a halved pixel i covers full pixels 2i and 2i + 1: its centre is 2i + 0.5
             px = found.reshape(-1, 2).astype(float) * 2.0 + 0.5
             spacing = corner_spacing(px)
-            win = int(np.clip(round(0.2 * spacing), 2, 9))
+            win = subpix_window(spacing)
             m = win + 2
             fits = (px[:, 0] >= m) & (px[:, 0] <= w - 1 - m) & (px[:, 1] >= m) & \
                 (px[:, 1] <= h - 1 - m)

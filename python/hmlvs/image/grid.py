@@ -15,6 +15,7 @@ from .corner_base import (
     Corners,
     corner_spacing,
     refine_subpix,
+    subpix_window,
     to_8bit,
 )
 from .grid_place import place_by_pose, place_grid, sample_image
@@ -147,7 +148,7 @@ def _grow(gray8: np.ndarray, gray: np.ndarray, grid: np.ndarray, board: Any, con
             new_ij = np.stack([np.full(n, row), np.arange(n, dtype=float)], axis=1)
             pred = cv2.perspectiveTransform(new_ij.reshape(-1, 1, 2), hmat).reshape(-1, 2)
             spacing = corner_spacing(g.reshape(-1, 2))
-            win = int(np.clip(round(0.2 * spacing), 2, 9))
+            win = subpix_window(spacing)
             if not ((pred >= win + 2).all() and (pred[:, 0] <= w - 3 - win).all()
                     and (pred[:, 1] <= h - 3 - win).all()):
                 blocked.add(side)

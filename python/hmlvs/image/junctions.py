@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import BoardNotFoundError
-from .corner_base import CornerOptions, Corners, corner_spacing, refine_subpix
+from .corner_base import CornerOptions, Corners, corner_spacing, refine_subpix, subpix_window
 from .grid_place import place_grid, sample_image
 from .saddle import saddle_refine
 
@@ -117,7 +117,7 @@ def _x_junctions(gray: np.ndarray, spacing: float, h_exp: np.ndarray, board: Any
     sad = ixy * ixy - ixx * iyy  # > 0 at a saddle: an X-junction
     k = 2 * int(max(2, 0.15 * spacing)) + 1
     peak = (sad == cv2.dilate(sad, np.ones((k, k), np.uint8))) & (sad > 0.05 * sad.max())
-    win = int(np.clip(round(0.2 * spacing), 2, 9))
+    win = subpix_window(spacing)
     m = win + 2
     v, u = np.nonzero(peak[m:h - m, m:w - m])
     if u.size < 4:
@@ -179,7 +179,7 @@ def refine_and_extend(gray: np.ndarray, px: np.ndarray, idx: np.ndarray, board: 
     h, w = gray.shape
     n_board = board.rows * board.cols
     bxy = board.board_coordinates()
-    win = int(np.clip(round(0.2 * spacing), 2, 9))
+    win = subpix_window(spacing)
     # findChessboardCornersSB's own sub-pixel positions are less accurate on sharp images
     # than cornerSubPix (about 0.1 px against 0.05 px RMS on rendered boards, and off by
     # more than a pixel next to the image border): refine them, and drop the corners too

@@ -179,8 +179,9 @@ def read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
                           "stripe: they are not a pair taken at the same pose")
 
     def extract(options: dict[str, Any]) -> tuple[StripeResult, Any, float | None]:
-        if by_colour:  # the laser's channel chosen the stripe's way
-            return colour_stripe(on, None, **options), board, None
+        if by_colour:  # the laser's channel judged the stripe's way (rows: transposed)
+            ch = channel if options["direction"] == "columns" else None
+            return colour_stripe(on, ch, **options), board, None
         return _stripe_and_background(on_g, off_g, normalize, options)
 
     try:
