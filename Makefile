@@ -101,9 +101,10 @@ deps-check: test-install
 	$(PY) -m deptry .
 
 # Style, the dependency check, the C++ tests, the Python suite, then the tests that use
-# simulated sessions or images once more under another BLAS kernel: a result that depends on
-# the CPU's last bits fails here, not on a user's machine. Last, the same wheel against the
-# declared lower bounds of the dependencies (make test-lowest).
+# simulated sessions or images, but for those marked slow, once more under another BLAS kernel:
+# a result that depends on the CPU's last bits fails here, not on a user's machine (the slow
+# ones are left out of that pass to keep the whole of make test under 10 minutes on 2 cores).
+# Last, the same wheel against the declared lower bounds of the dependencies (make test-lowest).
 # pytest runs one worker per core (pytest-xdist), each test file on one worker so that a file's
 # fixtures are built once.
 # The second pass reads the sessions of the tests' independent renderer (an oracle, not
@@ -116,7 +117,7 @@ test: test-install style deps-check
 	rm -rf $(RENDER_CACHE) && mkdir -p $(RENDER_CACHE)
 	HMLVS_TEST_RENDER_CACHE=$(abspath $(RENDER_CACHE)) $(PYTEST)
 	HMLVS_TEST_RENDER_CACHE=$(abspath $(RENDER_CACHE)) OPENBLAS_CORETYPE=Prescott \
-	  $(PYTEST) -m "scene and not one_kernel"
+	  $(PYTEST) -m "scene and not one_kernel and not slow"
 	rm -rf $(RENDER_CACHE)
 	$(MAKE) --no-print-directory test-lowest
 
@@ -135,7 +136,7 @@ test-lowest: test-install
 	  -r pyproject.toml --extra test
 	$(UV) pip install --quiet --python $(LOWEST)/bin/python --no-deps $(WHEEL_DIR)/hmlvs-*.whl
 	$(UV) pip list --python $(LOWEST)/bin/python | grep -iE '^(numpy|scipy|matplotlib|opencv-python-headless|typer|click|rich|pyyaml|pillow|pytest) '
-	$(LOWEST)/bin/python -m pytest -q -p no:cacheprovider -m smoke
+	$(LOWEST)/bin/python -m pytest -q -p no:cacheprovider -n auto --dist loadfile -m smoke
 
 # vision-calibration (the bench extra) is optional: without it the joint-calibration section
 # says so and still gives hmlvs' numbers.
