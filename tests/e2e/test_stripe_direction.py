@@ -23,6 +23,8 @@ from hmlvs.sim.general import example_sensor, general_session, render_general_se
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.scene  # rendered images
+
 BOARD = Checkerboard(rows=5, cols=7, square=15.0)
 SIZE = (640, 480)
 VIEWS = 8
@@ -118,3 +120,40 @@ def test_a_session_whose_stripe_runs_down_the_image_calibrates(rendered, alone, 
         assert both.sum() > 0.9 * taken.measured.sum() > SIZE[0] / 3
         d = turned.points[::-1][both] - taken.points[both]
         assert np.sqrt(np.mean(np.sum(d**2, axis=1))) < 0.06, i
+
+
+def _green_with_glare(on: np.ndarray, off: np.ndarray, row: int) -> np.ndarray:
+    """A BGR frame from a rendered pair turned a quarter turn: the board neutral, the laser
+    green (3 x the rendered stripe, so that it runs down the image), and a white band of glare
+    across the whole image at ``row`` (a Gaussian ridge, sigma 2 px, +70 grey levels), such as
+    the edge of a shiny sheet gives."""
+    on, off = np.rot90(on).astype(float), np.rot90(off).astype(float)
+    laser = np.clip(on - off, 0, None) * 3.0
+    v = np.arange(on.shape[0], dtype=float)[:, None]
+    glare = 70.0 * np.exp(-0.5 * ((v - row) / 2.0) ** 2) * np.ones_like(on)
+    img = np.stack([off + glare, off + glare + laser, off + glare], axis=2)
+    return np.ascontiguousarray(np.clip(np.round(img), 0, 255).astype(np.uint8))
+
+
+def test_a_colour_stripe_down_the_image_wins_over_glare_across_it(rendered):
+    """On a colour frame the way is judged by the centres in the laser's colour: a white
+    ridge of glare across the image is found along the columns, a flat line in hundreds of
+    scan lines, and counted by found centres alone the columns are taken at once (as they
+    were before colour was judged). The frame's grey twin (the same frame stored as three
+    equal channels) has no colour to judge by and keeps the count."""
+    from hmlvs.image.colour import laser_coloured
+    from hmlvs.image.direction import either_way
+    _s, r, _ = rendered
+    for i in (0, 3):
+        img = _green_with_glare(r.on[i], r.off[i], row=60 + 40 * i)
+        ways = {w: stripe_from_pair(img, None, direction=w) for w in ("columns", "rows")}
+        assert ways["columns"].found.sum() > 100 and ways["rows"].found.sum() > SIZE[0] / 3
+        by_count = either_way(lambda o, f=img: (stripe_from_pair(f, None, **o),), {})[0]
+        assert by_count.direction == "columns"  # the trap
+        assert laser_coloured(ways["columns"], img) < 20
+        assert laser_coloured(ways["rows"], img) > 0.9 * ways["rows"].found.sum()
+        assert stripe_from_pair(img, None).direction == "rows"
+        assert stripe_direction(img, None) == "rows"
+        grey = np.repeat(img[:, :, 1:2], 3, axis=2)
+        assert laser_coloured(ways["rows"], grey) is None
+        assert laser_coloured(ways["rows"], img[:, :, 1]) is None

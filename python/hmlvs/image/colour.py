@@ -189,3 +189,45 @@ def transposed(image: np.ndarray | None) -> np.ndarray | None:
     if not isinstance(image, np.ndarray):
         return image
     return np.ascontiguousarray(np.swapaxes(image, 0, 1))
+
+
+#: a found stripe centre has the laser's colour when, within LASER_HUE_HALF px across the
+#: stripe, one channel exceeds the next brightest by LASER_HUE_EXCESS of the full scale (on the
+#: laser-on frame less the laser-off one when there is one), that channel the one most centres
+#: show. Measured on real colour frames (8-bit): the found centres of true stripes exceed by
+#: 29-116 grey levels (medians per frame: a red stripe, the Blaser frames at 640 and 1280 px
+#: wide, a green one on a hand-held board), glare and board edges found as a stripe by
+#: -24 to 14 (0.08 x 255 = 20.4)
+LASER_HUE_EXCESS = 0.08
+LASER_HUE_HALF = 4
+
+
+def laser_coloured(stripe: StripeResult, on: np.ndarray, off: np.ndarray | None = None
+                   ) -> int | None:
+    """How many of ``stripe``'s found centres show the laser's colour (see
+    :data:`LASER_HUE_EXCESS`); None for a gray frame, or a colour one whose channels are all
+    equal (a gray camera stored as colour), where colour cannot tell."""
+    if not is_colour(on) or on.dtype not in (np.uint8, np.uint16):
+        return None
+    d = on[:, :, :3].astype(np.int32)
+    if isinstance(off, np.ndarray) and off.shape == on.shape:
+        d -= off[:, :, :3]
+    if (d[:, :, 0] == d[:, :, 1]).all() and (d[:, :, 1] == d[:, :, 2]).all():
+        return None
+    found = stripe.found
+    if not found.any():
+        return 0
+    line = stripe.position[found].astype(np.intp)
+    k = np.arange(-LASER_HUE_HALF, LASER_HUE_HALF + 1)
+    columns = stripe.direction != "rows"
+    across = np.clip(np.rint(stripe.centre[found]).astype(np.intp)[:, None] + k, 0,
+                     d.shape[0 if columns else 1] - 1)
+    px = d[across, line[:, None]] if columns else d[line[:, None], across]  # (n, 2 half + 1, 3)
+    ranked = np.sort(px, axis=2)
+    excess = ranked[:, :, 2] - ranked[:, :, 1]
+    best = excess.argmax(axis=1)
+    hue = px[np.arange(len(line)), best].argmax(axis=1)
+    bright = excess.max(axis=1) >= LASER_HUE_EXCESS * np.iinfo(on.dtype).max
+    if not bright.any():
+        return 0
+    return int((bright & (hue == np.bincount(hue[bright], minlength=3).argmax())).sum())

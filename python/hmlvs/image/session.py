@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -17,6 +17,7 @@ from .colour import (  # noqa: F401 (laser_channel, estimate_background re-expor
     is_colour,
     laser_channel,
 )
+from .direction import either_way
 from .stripe import (
     StripeOptions,
     StripeResult,
@@ -185,7 +186,7 @@ def read_pair(rec: Any, index: int, folder: Any, unit: str, robot: Any,
         return _stripe_and_background(on_g, off_g, normalize, options)
 
     try:
-        stripe, off_g, offset = either_way(extract, stripe_options)
+        stripe, off_g, offset = either_way(extract, stripe_options, on, off)
     except ValueError as e:  # the threshold leaves no pixel
         raise PairRejected(f"no laser stripe found in {on_name}: {e}") from None
     pair = Pair(str(on_name), str(off_name), joints, pose, on_g, off_g, stripe, size, offset,
@@ -200,50 +201,14 @@ def stripe_pending(pair: Pair) -> bool:
     return pair.offset is not None and bool(np.isnan(pair.offset))
 
 
-def either_way(extract: Callable[[dict[str, Any]], tuple[StripeResult, Any, Any]],
-               stripe_options: dict[str, Any]) -> tuple[StripeResult, Any, Any]:
-    """``extract(options)`` (a tuple led by the stripe) with the options' ``direction``, or
-    when none is given (or "auto") the way the stripe runs: along the image's columns when
-    their stripe runs across the image (its found centres rise less than 1 px per column);
-    else along its rows too, and the way that finds more scan lines wins (a tie: columns).
-    So a sensor whose stripe runs down the image (a laser plane turned, a camera on its side)
-    needs no option. Raises the first way's ``ValueError`` when every way raised one."""
-    given = stripe_options.get("direction")
-    if given is not None and given != "auto":
-        return extract(stripe_options)
-    best, error = None, None
-    for way in ("columns", "rows"):
-        try:
-            got = extract(dict(stripe_options, direction=way))
-        except ValueError as e:
-            error = error or e
-            continue
-        if best is None or got[0].found.sum() > best[0].found.sum():
-            best = got
-        if way == "columns" and _runs_across(got[0]):
-            break
-    if best is None:
-        raise error  # type: ignore[misc]
-    return best
-
-
-def _runs_across(stripe: StripeResult) -> bool:
-    """Whether a stripe found along the image's columns runs across the image: at least 20
-    centres found, rising less than 1 px per column on their least-squares line."""
-    found = stripe.found
-    if found.sum() < 20:
-        return False
-    return abs(float(np.polyfit(stripe.position[found].astype(float),
-                                stripe.centre[found], 1)[0])) < 1.0
-
-
 def stripe_direction(on: np.ndarray, off: np.ndarray | None = None, **stripe_options: Any
                      ) -> str:
     """Which way the stripe of a laser on/off pair runs (``off`` may be None): "columns"
     (across the image, one centre per image column) or "rows" (down it), as
     :func:`either_way` decides with :func:`stripe_from_pair`."""
     options = dict(stripe_options, direction="auto")
-    return either_way(lambda o: (stripe_from_pair(on, off, **o), None, None), options)[0].direction
+    return either_way(lambda o: (stripe_from_pair(on, off, **o), None, None), options, on,
+                      off)[0].direction
 
 
 def with_direction(stripe_options: dict[str, Any], on: np.ndarray, off: np.ndarray | None
@@ -353,7 +318,7 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
         return frames_stripe(on_g, off_g, frames_options(normalize=normalize, assess=assess,
                                                          **options))
 
-    return either_way(extract, stripe_options)[0]
+    return either_way(extract, stripe_options, on, off)[0]
 
 
 #: the options of :func:`extract_stripe` whose None is the pipeline's choice, not a value
