@@ -21,6 +21,8 @@ from hmlvs.sim.general import example_sensor, general_session, render_general_se
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.scene  # rendered images
+
 BOARD = Checkerboard(rows=5, cols=7, square=15.0)
 SIZE = (640, 480)
 
@@ -85,3 +87,33 @@ def test_a_grey_laser_on_session_numbers_its_corners_on_the_frames_themselves(tm
              for t in (s.corners[i], s.corners[i][::-1])]
         e = min(e, key=np.mean)
         assert len(e) >= 20 and e.max() < 0.1, (v.id, len(e), np.sort(e)[-3:])
+
+
+def test_a_stray_peak_far_from_the_stripe_sweeps_no_corner_away():
+    """The stripe's centre line is drawn through its own light only: a clipped or double
+    peak far from the stripe (the image's border, a shelf beside the board: on a real green
+    stripe down a hand-held board, clipped peaks at the left border) is not on it. Here a
+    few scan lines of a rendered laser-on frame alone are given such peaks at the image's
+    top border: the corners left out are the same as without them (before, a line drawn
+    through them left out corners up to the border)."""
+    from dataclasses import replace
+
+    from hmlvs.image.stripe import StripeStatus
+
+    s = general_session(example_sensor(SIZE), BOARD, views=2, seed=1, distance=(330.0, 480.0))
+    r = render_general_session(s)
+    corners = detect_board(r.on[0], BOARD)
+    stripe = stripe_from_pair(r.on[0], None)
+    plain = clear_of_stripe(corners, SimpleNamespace(off_name=ESTIMATED_OFF, stripe=stripe))
+    status, centre = stripe.status.copy(), stripe.centre.copy()
+    # 40 scan lines mid-stripe without a centre (as where it crosses dark squares), and in
+    # their middle four with a peak at the image's top border
+    mid = np.flatnonzero(stripe.found)[stripe.found.sum() // 2]
+    status[mid:mid + 40] = StripeStatus.MULTIPLE
+    for way, code in zip(range(mid + 18, mid + 22), (StripeStatus.CLIPPED,
+                                                     StripeStatus.DOUBLE_PEAK) * 2):
+        status[way], centre[way] = code, 3.0
+    stray = replace(stripe, status=status, centre=centre)
+    got = clear_of_stripe(corners, SimpleNamespace(off_name=ESTIMATED_OFF, stripe=stray))
+    assert len(plain) < len(corners)  # the stripe crosses the board here
+    assert np.array_equal(got.index, plain.index), (np.setdiff1d(plain.index, got.index))

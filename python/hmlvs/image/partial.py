@@ -149,10 +149,26 @@ def clear_of_stripe(corners: Corners, pair: Any) -> Corners:
     ok = np.isin(np.asarray(s.status), _ON_THE_STRIPE) & np.isfinite(centre)
     if ok.sum() < 2:
         return corners
+    ok[ok] = _on_the_line(centre[ok], np.asarray(s.width, float)[ok])
     span = (pos >= pos[ok].min()) & (pos <= pos[ok].max())
     line = np.stack([pos[span], np.interp(pos[span], pos[ok], centre[ok])], axis=1)
     return away_from_light(corners, line if s.direction == "columns" else line[:, ::-1],
                            np.where(ok, np.asarray(s.width, float), np.nan)[span])
+
+
+def _on_the_line(centre: np.ndarray, width: np.ndarray, window: int = 41) -> np.ndarray:
+    """Which of a stripe's centres (in scan-line order) lie on its line: within twice the
+    stripe's median FWHM plus 2 px of the running median of ``window`` of them. A clipped
+    or double peak far from the stripe (the image's border, a shelf beside the board) is not
+    the stripe, and a line drawn through it would sweep corners away (a green stripe down a
+    hand-held board: 6 corners a square or more from the stripe were left out)."""
+    from scipy.ndimage import median_filter
+
+    if len(centre) < 5:
+        return np.ones(len(centre), bool)
+    fwhm = float(np.nanmedian(width)) if np.isfinite(width).any() else 0.0
+    med = median_filter(centre, size=min(window, len(centre) | 1), mode="nearest")
+    return np.abs(centre - med) <= 2.0 * fwhm + 2.0
 
 
 def corner_image(pair: Any) -> np.ndarray:
