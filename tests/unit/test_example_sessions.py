@@ -56,3 +56,28 @@ def test_a_bad_pose_file_writes_nothing(tmp_path, capsys):
     assert etna.main([str(tmp_path / "calib"), str(tmp_path / "out")]) == 2
     assert "pose0004.txt" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_bench_checkout_becomes_a_session_without_poses(tmp_path, capsys):
+    """The hand-held-board example: every N_right.jpg frame in number order (10 after 2),
+    the board, and no pose at all (a bench session); a folder that is not empty is refused
+    and left as it was."""
+    import cv2
+
+    light = _example("light_stripe")
+    (tmp_path / "co" / "images").mkdir(parents=True)
+    for n in (10, 2, 1):
+        cv2.imwrite(str(tmp_path / "co" / "images" / f"{n}_right.jpg"),
+                    np.full((8, 10, 3), 90, np.uint8))
+    assert light.main([str(tmp_path / "co"), str(tmp_path / "out")]) == 0
+    doc = yaml.safe_load((tmp_path / "out" / "manifest.yaml").read_text())
+    assert [e["id"] for e in doc["poses"]] == ["1_right", "2_right", "10_right"]
+    assert all(set(e) == {"id", "on"} for e in doc["poses"])
+    assert doc["board"] == {"type": "checkerboard", "rows": 6, "cols": 8, "square": 40.0}
+    assert (tmp_path / "out" / "images" / "10_right.jpg").is_file()
+    keep = tmp_path / "full"
+    keep.mkdir()
+    (keep / "mine.txt").write_text("mine")
+    assert light.main([str(tmp_path / "co"), str(keep)]) == 2
+    assert "not empty" in capsys.readouterr().err
+    assert [p.name for p in keep.iterdir()] == ["mine.txt"]
