@@ -209,10 +209,8 @@ def laser_coloured(stripe: StripeResult, on: np.ndarray, off: np.ndarray | None 
     equal (a gray camera stored as colour), where colour cannot tell."""
     if not is_colour(on) or on.dtype not in (np.uint8, np.uint16):
         return None
-    d = on[:, :, :3].astype(np.int32)
-    if isinstance(off, np.ndarray) and off.shape == on.shape:
-        d -= off[:, :, :3]
-    if (d[:, :, 0] == d[:, :, 1]).all() and (d[:, :, 1] == d[:, :, 2]).all():
+    paired = isinstance(off, np.ndarray) and off.shape == on.shape
+    if _equal_channels(on) and (not paired or _equal_channels(off)):
         return None
     found = stripe.found
     if not found.any():
@@ -221,8 +219,13 @@ def laser_coloured(stripe: StripeResult, on: np.ndarray, off: np.ndarray | None 
     k = np.arange(-LASER_HUE_HALF, LASER_HUE_HALF + 1)
     columns = stripe.direction != "rows"
     across = np.clip(np.rint(stripe.centre[found]).astype(np.intp)[:, None] + k, 0,
-                     d.shape[0 if columns else 1] - 1)
-    px = d[across, line[:, None]] if columns else d[line[:, None], across]  # (n, 2 half + 1, 3)
+                     on.shape[0 if columns else 1] - 1)
+
+    def near(image: np.ndarray) -> np.ndarray:  # (n, 2 half + 1, 3) beside the centres
+        return (image[across, line[:, None], :3] if columns
+                else image[line[:, None], across, :3]).astype(np.int32)
+
+    px = near(on) - near(off) if paired else near(on)
     ranked = np.sort(px, axis=2)
     excess = ranked[:, :, 2] - ranked[:, :, 1]
     best = excess.argmax(axis=1)
@@ -231,3 +234,9 @@ def laser_coloured(stripe: StripeResult, on: np.ndarray, off: np.ndarray | None 
     if not bright.any():
         return 0
     return int((bright & (hue == np.bincount(hue[bright], minlength=3).argmax())).sum())
+
+
+def _equal_channels(image: np.ndarray) -> bool:
+    """Whether a colour image's first three channels are all equal (a gray camera's)."""
+    return bool(np.array_equal(image[:, :, 0], image[:, :, 1])
+                and np.array_equal(image[:, :, 1], image[:, :, 2]))
