@@ -9,7 +9,9 @@ import json
 from conftest import run_cli
 from hmlvs.data.calibration_file import load_calibration
 from hmlvs.image.scan import stripes_from_images
-from hmlvs.sim.general import general_session, render_general_session
+from hmlvs.measurement.measure import measure, measure_images, read_ply
+from hmlvs.measurement.measurer import Measurer
+from hmlvs.sim.general import general_session, render_general_session, render_general_view
 import numpy as np
 import pytest
 
@@ -34,12 +36,29 @@ def sessions(tmp_path_factory):
     return s, robot, bench
 
 
-def test_a_bench_session_calibrates_camera_and_laser_plane(sessions, tmp_path, capsys):
-    s, _, bench = sessions
-    code, out, err = run_cli(["calibrate", str(bench), "--out", str(tmp_path / "b.yaml")], capsys)
+@pytest.fixture(scope="module")
+def bench_calibration(sessions, tmp_path_factory):
+    """`hmlvs calibrate BENCH --out b.yaml`, once for the module: (its file, exit code,
+    stdout, stderr)."""
+    import contextlib
+    import io
+
+    from hmlvs.cli import main
+
+    out = tmp_path_factory.mktemp("bench_cal") / "b.yaml"
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr), \
+            pytest.raises(SystemExit) as e:
+        main(["calibrate", str(sessions[2]), "--out", str(out)])
+    return out, e.value.code, stdout.getvalue(), stderr.getvalue()
+
+
+def test_a_bench_session_calibrates_camera_and_laser_plane(sessions, bench_calibration):
+    s = sessions[0]
+    path, code, out, err = bench_calibration
     assert code in (0, None), err
     assert "camera mode" in out
-    cal = load_calibration(tmp_path / "b.yaml")
+    cal = load_calibration(path)
     t = s.sensor
     assert abs(cal.sensor.fx / t.camera_matrix[0, 0] - 1) < 2e-3
     normal = cal.sensor.laser_plane[:3]
@@ -47,14 +66,13 @@ def test_a_bench_session_calibrates_camera_and_laser_plane(sessions, tmp_path, c
     assert abs(cal.sensor.laser_plane[3] - t.laser_plane[3]) < 0.2
 
 
-def test_a_robot_session_holds_the_bench_camera_and_finds_the_hand_eye(sessions, tmp_path,
-                                                                      capsys):
-    s, robot, bench = sessions
-    run_cli(["calibrate", str(bench), "--out", str(tmp_path / "b.yaml")], capsys)
-    code, out, err = run_cli(["calibrate", str(robot), "--initial", str(tmp_path / "b.yaml"),
+def test_a_robot_session_holds_the_bench_camera_and_finds_the_hand_eye(
+        sessions, bench_calibration, tmp_path, capsys):
+    s, robot, _ = sessions
+    code, out, err = run_cli(["calibrate", str(robot), "--initial", str(bench_calibration[0]),
                            "--out", str(tmp_path / "r.yaml")], capsys)
     assert code in (0, None), err
-    b, r = (load_calibration(tmp_path / n).sensor for n in ("b.yaml", "r.yaml"))
+    b, r = (load_calibration(p).sensor for p in (bench_calibration[0], tmp_path / "r.yaml"))
     # held: the bench calibration's camera and plane, unchanged
     np.testing.assert_array_equal(r.intrinsics_vector(), b.intrinsics_vector())
     np.testing.assert_allclose(r.laser_plane, b.laser_plane, rtol=0, atol=1e-12)
@@ -94,13 +112,68 @@ def test_opencv_options_that_do_nothing_are_refused(sessions, tmp_path, capsys):
     assert not (tmp_path / "x.yaml").exists()
 
 
-def test_a_bench_calibration_does_not_measure_in_the_base_frame(sessions, tmp_path, capsys):
-    s, robot, bench = sessions
-    run_cli(["calibrate", str(bench), "--out", str(tmp_path / "b.yaml")], capsys)
-    code, _, err = run_cli(["measure", str(tmp_path / "b.yaml"), str(robot), "--out",
+def test_a_bench_calibration_does_not_measure_in_the_base_frame(sessions, bench_calibration,
+                                                                tmp_path, capsys):
+    _, robot, _ = sessions
+    code, _, err = run_cli(["measure", str(bench_calibration[0]), str(robot), "--out",
                          str(tmp_path / "c.ply")], capsys)
-    assert code == 2 and "bench session's (camera mode)" in err
+    assert code == 2 and "bench session's (camera mode)" in err and "--frame camera" in err
     assert not (tmp_path / "c.ply").exists()
+    with pytest.raises(ValueError, match="bench session's .* without a pose measures in the "
+                       "camera frame"):
+        Measurer(bench_calibration[0]).points(render_general_view(sessions[0], 0)[0],
+                                              sessions[0].base_from_hand[0])
+
+
+def _board_in_camera(s, i):
+    """The render's true board plane of view i in the camera frame: (normal, offset)."""
+    camera_from_board = np.linalg.inv(s.base_from_hand[i] @ s.sensor.hand_from_camera) \
+        @ s.sensor.base_from_board
+    n = camera_from_board[:3, 2]
+    return n, float(n @ camera_from_board[:3, 3])
+
+
+def test_a_bench_calibration_measures_in_the_camera_frame(sessions, bench_calibration, tmp_path,
+                                                          capsys):
+    """hmlvs measure --frame camera of the bench session itself (no poses): each view's profile
+    where the camera saw it, on the render's true board plane of that view; the same from
+    the library (measure_images, Measurer without a pose)."""
+    s, _, bench = sessions
+    cloud = tmp_path / "c.ply"
+    code, out, err = run_cli(["measure", str(bench_calibration[0]), str(bench), "--frame",
+                              "camera", "--out", str(cloud)], capsys)
+    assert code in (0, None), err
+    assert "measured in the camera frame" in out
+    assert b"comment hmlvs point cloud, camera frame, units mm" in cloud.read_bytes()[:200]
+    ply = read_ply(cloud)
+    xyz = np.column_stack([ply["x"], ply["y"], ply["z"]])
+    assert len(xyz) > 300 * len(s)
+    for i in range(len(s)):
+        n, d = _board_in_camera(s, i)
+        off = xyz[ply["pose_index"] == i] @ n - d
+        # the stripe's noise and the bench calibration's error, about 0.1 mm at 300 mm; a
+        # point mapped through any robot pose would lie metres away
+        assert np.sqrt(np.mean(off**2)) < 0.3, i
+    lib = measure_images(bench_calibration[0], bench, frame="camera")
+    assert lib.cloud.frame == "camera"
+    np.testing.assert_allclose(lib.cloud.valid_points(), xyz, rtol=0, atol=1e-9)
+    on, off = render_general_view(s, 2)
+    profile = Measurer(bench_calibration[0]).points(on, off=off)  # as the session was read
+    assert np.isnan(profile.points).all() and profile.measured.sum() > 300
+    n, d = _board_in_camera(s, 2)
+    assert np.sqrt(np.mean((profile.camera_points[profile.measured] @ n - d) ** 2)) < 0.3
+
+
+def test_frame_is_checked_before_anything_is_written(sessions, bench_calibration, tmp_path,
+                                                     capsys):
+    _, robot, bench = sessions
+    code, _, err = run_cli(["measure", str(bench_calibration[0]), str(bench), "--frame",
+                            "world", "--out", str(tmp_path / "c.ply")], capsys)
+    assert code == 2 and "--frame must be base or camera, got 'world'" in err
+    assert not (tmp_path / "c.ply").exists()
+    with pytest.raises(ValueError, match="frame='camera' measures without robot poses"):
+        measure(bench_calibration[0], [np.array([[320.0, 240.0]])], np.eye(4)[None],
+                frame="camera")
 
 
 def test_robot_poses_uncertain_from_the_command_line(sessions, tmp_path, capsys):

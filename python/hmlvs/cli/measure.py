@@ -8,7 +8,7 @@ from typing import Optional
 import typer
 
 from .common import app, bar, command, finish, inputs_of, is_manifest, load_robot, session_of
-from .options import JSON_OPTION, ROBOT_OPTION, out_option
+from .options import FRAME_OPTION, JSON_OPTION, ROBOT_OPTION, out_option
 
 
 @app.command()
@@ -22,8 +22,10 @@ def measure(
     accept_untrusted: bool = typer.Option(
         False, "--accept-untrusted", help="Measure even with a calibration whose verdict "
         "says not to trust it."),
+    frame: str = FRAME_OPTION,
 ) -> None:
-    """Measure 3D points in the robot base frame with a calibrated sensor.
+    """Measure 3D points in the robot base frame (or the camera frame) with a calibrated
+    sensor.
 
     A calibration marked not trustworthy (its verdict) is refused unless --accept-untrusted.
 
@@ -33,12 +35,16 @@ def measure(
 
     from ..data.calibration_file import Calibration
     from ..data.dataset import Dataset
+    from ..measurement.measure import checked_frame, measure_images_to
     from ..measurement.measure import measure as measure_points
-    from ..measurement.measure import measure_images_to
 
     with command(as_json) as caught:
         from ..guard import refuse_overwrite
 
+        try:
+            checked_frame(frame)
+        except ValueError:
+            raise ValueError(f"--frame must be base or camera, got {frame!r}") from None
         source = session_of(source)  # a manifest read and checked once
         refuse_overwrite([calibration, *inputs_of(source), robot], [("--out", out)])
         cal = Calibration.load(calibration)
@@ -53,14 +59,18 @@ def measure(
             # frame by frame into the cloud file: the memory of one frame, whatever the scan
             streamed = measure_images_to(cal, source, out, robot=load_robot(robot),
                                          image_size_of=f"the calibration {calibration}",
-                                         progress=bar("measuring frames", as_json))
+                                         progress=bar("measuring frames", as_json),
+                                         frame=frame)
             path, n_valid, n_invalid = streamed.path, streamed.points, streamed.invalid
             info = {**streamed.summary(), "blur_var_px2": cal.blur_var}
         else:
             ds = Dataset.load(source)
-            cloud = measure_points(cal, [ds.pixels[i:i + 1] for i in range(len(ds))], ds.poses)
+            cloud = measure_points(cal, [ds.pixels[i:i + 1] for i in range(len(ds))],
+                                   ds.poses if frame == "base" else None, frame=frame)
+            # the data set's reference points are in the robot base frame
             err = np.linalg.norm(cloud.points - ds.points, axis=1)[cloud.valid]
-            info = {"rms_mm": float(np.sqrt(np.mean(err**2))) if err.size else None}
+            info = {"rms_mm": float(np.sqrt(np.mean(err**2)))
+                    if err.size and frame == "base" else None}
             if cloud.num_valid == 0:
                 raise ValueError(f"none of the {len(cloud)} stripe pixels' rays meets the laser "
                                  f"plane of {calibration}: nothing to write (is this "
@@ -68,9 +78,10 @@ def measure(
             path = cloud.save(out)
             n_valid, n_invalid = cloud.num_valid, len(cloud) - cloud.num_valid
     if finish(caught, as_json, {"cloud": str(path), "points": n_valid, "invalid": n_invalid,
-                                **info}) is None:
+                                "frame": frame, **info}) is None:
         return
-    typer.echo(f"{n_valid} points measured ({n_invalid} stripe "
+    where = "in the robot base frame" if frame == "base" else "in the camera frame"
+    typer.echo(f"{n_valid} points measured {where} ({n_invalid} stripe "
                "pixels without a measurement: their rays miss the laser plane, meet it at a "
                "grazing angle or lie outside the image)")
     for pid, why in (info.get("rejected") or {}).items():

@@ -19,3 +19,9 @@ def out_option(default: str, help: str) -> Any:
     """The --out (-o) option of a command that writes one file or folder, ``default``
     unless given."""
     return typer.Option(Path(default), "--out", "-o", help=help)
+
+
+FRAME_OPTION = typer.Option(
+    "base", "--frame", help="base: the points in the robot base frame (needs each frame's "
+    "robot pose and a calibrated hand-eye); camera: each frame's profile in the camera frame, "
+    "without robot poses (what a bench calibration measures).")

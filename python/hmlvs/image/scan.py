@@ -29,7 +29,8 @@ def iter_stripes_from_images(source: Any, *, robot: Any = None,
                              joint_unit: str | None = None, channel: int | None = None,
                              normalize: bool = True, min_stripe: int = 20,
                              image_size: tuple[int, int] | None = None,
-                             image_size_of: str = "the calibration", **stripe_options: Any
+                             image_size_of: str = "the calibration", frame: str = "base",
+                             **stripe_options: Any
                              ) -> Iterator[tuple[ImageReport, Any, np.ndarray | None]]:
     """Laser on/off pairs + joint readings (a manifest or a list of records) -> stripes.
 
@@ -40,7 +41,9 @@ def iter_stripes_from_images(source: Any, *, robot: Any = None,
     instead of an image pair, and a ``pose`` instead of joint readings. Returns (ids, stripes,
     base_from_hand poses (n, 4, 4), reports). With ``image_size`` (width, height: that of
     ``image_size_of``, the calibration) images of another size are refused, a ValueError
-    naming both sizes: a calibration holds for one camera at one resolution.
+    naming both sizes: a calibration holds for one camera at one resolution. With
+    ``frame="camera"`` (points measured in the camera frame) a session without robot poses
+    (a bench session) is read too; each pair's pose is then None.
 
     One pair at a time, in the session's order: (its report, its stripe or None when it was
     rejected, its base_from_hand pose or None); the frames are read as the iteration asks, so
@@ -70,8 +73,12 @@ def iter_stripes_from_images(source: Any, *, robot: Any = None,
         raise ValueError(f"joint_unit must be 'rad' or 'deg', got {unit!r}")
     if not records:
         raise ValueError("the scan has no image pairs")
-    require_poses(records, "measuring in the robot's base frame needs the robot pose of "
-                   "every frame")
+    if frame not in ("base", "camera"):
+        raise ValueError(f"frame must be 'base' or 'camera', got {frame!r}")
+    if frame == "base":
+        require_poses(records, "measuring in the robot's base frame needs the robot pose of "
+                      "every frame (measure in the camera frame without them: hmlvs measure "
+                      "--frame camera)")
     robot = Robot.scorbot_er7() if robot is None else robot
     # option typos fail here
     extract_stripe(np.zeros((4, 4), np.uint8), **core_options(stripe_options))
@@ -132,15 +139,15 @@ def _iter_pairs(records: list[Any], folder: Any, source: Any, unit: str, robot: 
 def stripes_from_images(source: Any, **options: Any
                         ) -> tuple[list[str], list[Any], np.ndarray, list[ImageReport]]:
     """:func:`iter_stripes_from_images` (same arguments) collected: (ids, stripes,
-    base_from_hand poses (n, 4, 4), reports) of the pairs that gave a stripe, and every
-    pair's report."""
+    base_from_hand poses (n, 4, 4), NaN for a pair without one, reports) of the pairs that
+    gave a stripe, and every pair's report."""
     ids, stripes, poses, reports = [], [], [], []
     for report, item, pose in iter_stripes_from_images(source, **options):
         reports.append(report)
         if item is not None:
             ids.append(report.id)
             stripes.append(item)
-            poses.append(pose)
+            poses.append(np.full((4, 4), np.nan) if pose is None else pose)
     return ids, stripes, np.array(poses).reshape(-1, 4, 4), reports
 
 

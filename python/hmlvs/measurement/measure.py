@@ -21,15 +21,17 @@ from ..models.params import Parameters
 
 @dataclass(frozen=True)
 class PointCloud:
-    """Measured points in the robot base frame (mm).
+    """Measured points (mm) in the robot base frame, or in the camera frame.
 
     Attributes
     ----------
-    points : (n, 3) base-frame points; NaN rows where ``valid`` is False
+    points : (n, 3) points in ``frame``; NaN rows where ``valid`` is False
     valid : (n,) whether the stripe pixel's ray met the laser plane
     pixels : (n, 2) the stripe pixels measured
     pose_index : (n,) the pose (image) each point was measured at
     intensity : (n,) stripe intensity per point (0 when unknown)
+    frame : "base" (the robot base frame) or "camera" (the camera frame: each image's profile
+        where the sensor saw it, no robot pose applied)
     """
 
     points: np.ndarray
@@ -37,6 +39,7 @@ class PointCloud:
     pixels: np.ndarray
     pose_index: np.ndarray
     intensity: np.ndarray
+    frame: str = "base"
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
@@ -49,12 +52,15 @@ class PointCloud:
         return self.points[self.valid]
 
     def concat(self, other: "PointCloud") -> "PointCloud":
+        if other.frame != self.frame:
+            raise ValueError(f"cannot join a cloud in the {self.frame} frame and one in the "
+                             f"{other.frame} frame")
         offset = int(self.pose_index.max()) + 1 if len(self) else 0
         return PointCloud(np.vstack([self.points, other.points]),
                           np.concatenate([self.valid, other.valid]),
                           np.vstack([self.pixels, other.pixels]),
                           np.concatenate([self.pose_index, other.pose_index + offset]),
-                          np.concatenate([self.intensity, other.intensity]))
+                          np.concatenate([self.intensity, other.intensity]), self.frame)
 
     def save(self, path: str | os.PathLike, only_valid: bool = True) -> Path:
         """Write atomically as binary PLY (``.ply``) or CSV (``.csv``) by the suffix."""
@@ -75,6 +81,8 @@ class PointCloud:
         return Path(path)
 
 
+FRAMES = ("base", "camera")
+_FRAME_NAMES = {None: "robot base frame", "base": "robot base frame", "camera": "camera frame"}
 _PLY_RECORD = np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("intensity", "<f4"),
                         ("pose_index", "<i4")])
 
@@ -91,6 +99,7 @@ class CloudWriter:
         if self.kind not in ("ply", "csv"):
             raise ValueError(f"{self.path}: point clouds are written as .ply or .csv")
         self.count = 0
+        self.frame: str | None = None  # that of the clouds added
         self._body: Any = None
 
     def __enter__(self) -> "CloudWriter":
@@ -100,6 +109,10 @@ class CloudWriter:
         return self
 
     def add(self, cloud: "PointCloud", only_valid: bool = True) -> None:
+        if self.frame not in (None, cloud.frame):
+            raise ValueError(f"{self.path}: a cloud in the {cloud.frame} frame cannot join "
+                             f"points in the {self.frame} frame")
+        self.frame = cloud.frame
         keep = cloud.valid if only_valid else np.ones(len(cloud), bool)
         if self.kind == "ply":
             rec = np.empty(int(keep.sum()), dtype=_PLY_RECORD)
@@ -126,7 +139,8 @@ class CloudWriter:
             with atomic_write(self.path, "wb") as fh:
                 if self.kind == "ply":
                     fh.write(("ply\nformat binary_little_endian 1.0\n"
-                              "comment hmlvs point cloud, robot base frame, units mm\n"
+                              f"comment hmlvs point cloud, {_FRAME_NAMES[self.frame]}, "
+                              "units mm\n"
                               f"element vertex {self.count}\nproperty double x\n"
                               "property double y\nproperty double z\n"
                               "property float intensity\nproperty int pose_index\n"
@@ -166,9 +180,18 @@ def require_hand_eye(calibration: Any) -> None:
     method = getattr(calibration, "method", None) or ""
     if getattr(calibration, "mode", None) == "camera" or str(method).endswith("(camera)"):
         raise ValueError("this calibration is a bench session's (camera mode): it holds the "
-                         "camera and laser plane but no hand-eye transform; calibrate that "
-                         "with a robot session first (hmlvs calibrate ROBOT_SESSION --initial "
-                         "THIS_FILE)")
+                         "camera and laser plane but no hand-eye transform; measure in the "
+                         "camera frame (hmlvs measure --frame camera), or calibrate the "
+                         "hand-eye with a robot session first (hmlvs calibrate ROBOT_SESSION "
+                         "--initial THIS_FILE)")
+
+
+def checked_frame(frame: Any) -> str:
+    """``frame`` if it names a frame points are measured in ("base" or "camera")."""
+    if frame not in FRAMES:
+        raise ValueError(f"frame must be 'base' (the robot base frame) or 'camera' (the "
+                         f"camera frame, without robot poses), got {frame!r}")
+    return str(frame)
 
 
 def sensor_model(calibration: Any) -> SensorModel:
@@ -194,8 +217,10 @@ def sensor_model(calibration: Any) -> SensorModel:
 def measure(calibration: Calibration | Parameters | SensorModel,
             stripes: Sequence[Any] | np.ndarray, poses: np.ndarray | None = None, *,
             joints: np.ndarray | None = None, robot: Robot | None = None, degrees: bool = False,
-            on_invalid: str = "mask", stripe_options: dict[str, Any] | None = None) -> PointCloud:
-    """Stripe pixels seen at hand poses -> a point cloud in the robot base frame.
+            on_invalid: str = "mask", stripe_options: dict[str, Any] | None = None,
+            frame: str = "base") -> PointCloud:
+    """Stripe pixels seen at hand poses -> a point cloud in the robot base frame (or, with
+    ``frame="camera"`` and no poses, each stripe's profile in the camera frame).
 
     Parameters
     ----------
@@ -209,6 +234,9 @@ def measure(calibration: Calibration | Parameters | SensorModel,
     joints : (n_poses, dof) joint readings, with ``robot`` (default: the calibration's robot,
         else SCORBOT ER-VII); ``degrees`` for readings in degrees
     on_invalid : "mask" keeps rays that miss the laser plane as invalid points; "raise" raises
+    frame : "base" (needs the poses, and a calibration with its hand-eye transform) or
+        "camera": the points in the camera frame, without poses; what a bench session's
+        calibration (camera and laser plane, no hand-eye) measures
 
     Returns
     -------
@@ -216,17 +244,24 @@ def measure(calibration: Calibration | Parameters | SensorModel,
     """
     if isinstance(calibration, (str, os.PathLike)):
         calibration = Calibration.load(calibration)
-    require_hand_eye(calibration)
+    frame = checked_frame(frame)
+    if frame == "base":
+        require_hand_eye(calibration)
     model = sensor_model(calibration)
     stripes = list(stripes) if not isinstance(stripes, np.ndarray) or stripes.ndim != 2 \
         else [stripes]
-    if (poses is None) == (joints is None):
+    if frame == "camera":
+        if poses is not None or joints is not None:
+            raise ValueError("frame='camera' measures without robot poses: give no poses or "
+                             "joints (or frame='base')")
+    elif (poses is None) == (joints is None):
         raise ValueError("give either poses or joints (with a robot), not both or neither")
-    if poses is None:
+    elif poses is None:
         if robot is None:
             robot = getattr(calibration, "robot", None) or Robot.scorbot_er7()
         poses = robot.poses(joints, degrees=degrees)
-    poses = np.asarray(poses, dtype=float)
+    poses = np.full((len(stripes), 4, 4), np.nan) if frame == "camera" else \
+        np.asarray(poses, dtype=float)
     if poses.ndim == 2:
         poses = poses[None]
     if poses.shape[0] != len(stripes):
@@ -254,8 +289,11 @@ def measure(calibration: Calibration | Parameters | SensorModel,
     pidx = np.concatenate(pose_idx) if pose_idx else np.empty(0, np.int32)
     if pixels.shape[0] == 0:
         raise ValueError("no stripe pixels to measure")
-    pts, valid = model.points_in_base(pixels, poses[pidx], on_invalid=on_invalid)
-    return PointCloud(pts, valid, pixels, pidx, np.concatenate(inten))
+    if frame == "camera":
+        pts, valid = model.points_in_camera(pixels, on_invalid=on_invalid)
+    else:
+        pts, valid = model.points_in_base(pixels, poses[pidx], on_invalid=on_invalid)
+    return PointCloud(pts, valid, pixels, pidx, np.concatenate(inten), frame)
 
 
 def measure_source(calibration: Any, source: str | os.PathLike) -> tuple[PointCloud, dict]:
@@ -364,7 +402,7 @@ class StreamedMeasure:
 
 
 def measure_images_to(calibration: Any, source: Any, out: str | os.PathLike, *,
-                      robot: Robot | None = None, progress: Any = None,
+                      robot: Robot | None = None, progress: Any = None, frame: str = "base",
                       **options: Any) -> StreamedMeasure:
     """:func:`measure_images` written to the point cloud ``out`` (.ply or .csv) as the frames
     are read: one frame in memory at a time, whatever the scan's length; ``out`` appears
@@ -373,10 +411,13 @@ def measure_images_to(calibration: Any, source: Any, out: str | os.PathLike, *,
     from ..data.manifest import read_manifest
     from ..image.scan import iter_stripes_from_images
 
+    frame = checked_frame(frame)
     calibration, robot, options = _prepared(calibration, source, robot, options)
-    pairs = iter_stripes_from_images(source, robot=robot, **options)  # checks the session
+    if frame == "base":
+        require_hand_eye(calibration)
+    pairs = iter_stripes_from_images(source, robot=robot, frame=frame,
+                                     **options)  # checks the session
     total = len(source) if isinstance(source, (list, tuple)) else len(read_manifest(source)[0])
-    require_hand_eye(calibration)
     model = sensor_model(calibration)
     ids: list[str] = []
     rejected: list[RejectedPair] = []
@@ -387,7 +428,8 @@ def measure_images_to(calibration: Any, source: Any, out: str | os.PathLike, *,
             if item is None:
                 rejected.append(RejectedPair(str(report.id), str(report.reason)))
             else:
-                cloud = measure(model, [item], pose[None])
+                cloud = measure(model, [item], None if frame == "camera" else pose[None],
+                                frame=frame)
                 writer.add(dataclasses.replace(
                     cloud, pose_index=np.full(len(cloud), report.index, np.int32)))
                 ids.append(str(report.id))
@@ -406,9 +448,10 @@ def measure_images_to(calibration: Any, source: Any, out: str | os.PathLike, *,
 
 
 def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
-                   **options: Any) -> MeasureResult:
+                   frame: str = "base", **options: Any) -> MeasureResult:
     """Laser on/off image pairs + joint readings (an image manifest, see docs/file-formats.md,
-    or a list of records) -> a point cloud, one stripe profile per pair.
+    or a list of records) -> a point cloud, one stripe profile per pair: in the robot base
+    frame, or with ``frame="camera"`` in the camera frame (no robot poses needed).
 
     Pairs that fail (no stripe, bad image, mismatched pair) are skipped and named in the
     result's ``rejected``; ``options`` go to :func:`hmlvs.image.scan.stripes_from_images`.
@@ -421,13 +464,17 @@ def measure_images(calibration: Any, source: Any, *, robot: Robot | None = None,
     """
     from ..image.scan import stripes_from_images
 
+    frame = checked_frame(frame)
     calibration, robot, options = _prepared(calibration, source, robot, options)
-    ids, stripes, poses, reports = stripes_from_images(source, robot=robot, **options)
+    if frame == "base":
+        require_hand_eye(calibration)
+    ids, stripes, poses, reports = stripes_from_images(source, robot=robot, frame=frame,
+                                                       **options)
     rejected = tuple(RejectedPair(str(r.id), str(r.reason)) for r in reports if not r.ok)
     if not stripes:
         raise ValueError("no image pair gave a stripe: " +
                          "; ".join(f"{r.id}: {r.reason}" for r in rejected))
-    cloud = measure(calibration, stripes, poses)
+    cloud = measure(calibration, stripes, None if frame == "camera" else poses, frame=frame)
     # pose_index: the pair's index in the manifest, whatever pairs were skipped before it
     used = np.array([r.index for r in reports if r.ok], dtype=np.int32)
     cloud = dataclasses.replace(cloud, pose_index=used[cloud.pose_index])

@@ -46,7 +46,8 @@ class Profile:
     Attributes
     ----------
     pixels : (n, 2) the stripe centre (u, v) of each scan line, NaN where none
-    points : (n, 3) the point in the robot base frame (mm), NaN unless MEASURED
+    points : (n, 3) the point in the robot base frame (mm), NaN unless MEASURED (and all NaN
+        for a frame measured without a robot pose)
     camera_points : (n, 3) the same point in the camera frame (mm)
     status : (n,) :class:`PointStatus` codes
     stripe_status : (n,) the stripe extractor's :class:`hmlvs.image.StripeStatus` codes
@@ -74,7 +75,7 @@ class Measurer:
     ----------
     calibration : a :class:`hmlvs.Calibration` of either model (:func:`hmlvs.calibrate`'s,
         or a file's) or the path of a calibration file; a bench session's calibration (no
-        hand-eye transform) is refused
+        hand-eye transform) measures in the camera frame only (frames without a pose)
     stripe_options : options of :func:`hmlvs.image.session.stripe_from_pair`; without
         ``blur_var`` the camera blur the calibration's session fitted is used; without
         ``direction`` the first frame's (:func:`hmlvs.image.session.stripe_direction`), kept
@@ -84,7 +85,11 @@ class Measurer:
     def __init__(self, calibration: Any, **stripe_options: Any) -> None:
         if isinstance(calibration, (str, os.PathLike)):
             calibration = Calibration.load(calibration)
-        require_hand_eye(calibration)
+        try:
+            require_hand_eye(calibration)
+            self._bench_only: str | None = None
+        except ValueError as e:  # a bench calibration: camera-frame profiles only
+            self._bench_only = str(e)
         self._model = sensor_model(calibration)
         size = getattr(self._model, "image_size", None)
         if size is None:
@@ -109,10 +114,12 @@ class Measurer:
             frames_options(**{k: v for k, v in options.items() if k != "channel"})
         self._sensor = _laser_sensor(self._model)
 
-    def points(self, frame: np.ndarray, base_from_hand: Any,
+    def points(self, frame: np.ndarray, base_from_hand: Any = None,
                off: np.ndarray | None = None) -> Profile:
         """The stripe of ``frame`` (laser on; ``off``: the laser-off frame at the same pose,
-        if taken) measured at the robot pose ``base_from_hand`` (4 x 4, mm)."""
+        if taken) measured at the robot pose ``base_from_hand`` (4 x 4, mm). Without a pose
+        the profile's ``points`` are NaN and its ``camera_points`` the measurement (the
+        camera frame: a sensor on a bench, or a bench session's calibration)."""
 
         frame = _image(frame, "the frame")
         if self.image_size is not None and (frame.shape[1], frame.shape[0]) != self.image_size:
@@ -121,7 +128,11 @@ class Measurer:
                              f"{self.image_size[1]}")
         if off is not None and _image(off, "the laser-off frame").shape != frame.shape:
             raise ValueError("the laser-on and laser-off frames differ in size")
-        pose = as_matrix(base_from_hand, 4, "base_from_hand")
+        if base_from_hand is not None and self._bench_only:
+            raise ValueError(f"{self._bench_only}; Measurer.points(frame) without a pose "
+                             "measures in the camera frame")
+        pose = np.eye(4) if base_from_hand is None else \
+            as_matrix(base_from_hand, 4, "base_from_hand")
         if pose.shape != (4, 4) or not np.isfinite(pose).all():
             raise ValueError(f"base_from_hand must be a finite 4 x 4 transform, got shape "
                              f"{pose.shape}")
@@ -130,10 +141,15 @@ class Measurer:
             self._core = frames_options(**{k: v for k, v in self._options.items()
                                            if k != "channel"})
         if self._channel is None and is_colour(frame):
-            return Profile(*self._colour_profile(frame, off, pose))
-        on_g = as_gray(frame, "the laser-on image", self._channel)
-        off_g = None if off is None else as_gray(off, "the laser-off image", self._channel)
-        return Profile(*_core._measure_frames(on_g, off_g, self._core, self._sensor, pose))
+            arrays = self._colour_profile(frame, off, pose)
+        else:
+            on_g = as_gray(frame, "the laser-on image", self._channel)
+            off_g = None if off is None else as_gray(off, "the laser-off image", self._channel)
+            arrays = _core._measure_frames(on_g, off_g, self._core, self._sensor, pose)
+        pixels, points, camera_points, status, stripe_status = arrays
+        if base_from_hand is None:  # the camera frame only
+            points = np.full_like(camera_points, np.nan)
+        return Profile(pixels, points, camera_points, status, stripe_status)
 
     def _colour_profile(self, frame: np.ndarray, off: np.ndarray | None,
                         pose: np.ndarray) -> tuple[np.ndarray, ...]:
