@@ -10,6 +10,9 @@ Format ``hmlvs-images`` version 1, JSON (``manifest.json``) or YAML (``.yaml``/`
                                     # hmlvs.Robot.to_dict form (DH table)
     pose_format: {unit: m, quaternion_order: xyzw}   # how 'pose' entries are written
     pose_file: poses.csv            # optional: every pose from a file (see hmlvs.data.poses)
+    stripe_direction: auto          # optional: columns (the stripe runs across the image, one
+                                    # centre per column), rows (down it) or auto (judged per
+                                    # frame)
     board: {rows: 6, cols: 8, square: 30.0, origin: [700, 90, 0], ...}   # for calibration
     poses:
       - id: p000                    # unique: pairs the files with the readings explicitly
@@ -48,6 +51,9 @@ from .dataset import check_format
 from .poses import PoseFormat, pose_from_entry, read_poses
 
 FORMAT = "hmlvs-images"
+# how the stripe runs: judged per frame (auto), one centre per image column (across the
+# image) or one per image row (down it)
+STRIPE_DIRECTIONS = ("auto", "columns", "rows")
 VERSION = 1
 NAME = "manifest.json"
 
@@ -78,6 +84,8 @@ def _manifest_schema() -> Any:
                                                                 minimum=1), nullable=True),
                         "joint_unit": sc.text("an angle unit", choices=("rad", "deg")),
                         "pose_file": sc.text("a file name", nullable=True),
+                        "stripe_direction": sc.text("a stripe direction",
+                                                    choices=STRIPE_DIRECTIONS),
                         "poses": sc.Field("list", "a list of entries {id, on, off | stripe, "
                                           "joints | pose}")})
 

@@ -30,6 +30,7 @@ from .session import (
     PairRejected,
     checked_blur_var,
     core_options,
+    manifest_direction,
     manifest_robot,
     opencv_failure,
     read_session_manifest,
@@ -137,7 +138,8 @@ def paper_views(source: Any, *, robot: Any = None, board: Any = None, params: An
     the session's, and all corrected for the camera blur fitted to the session unless
     ``blur_var`` is given."""
     inputs = _session_inputs(source, robot, board, joint_unit, base_from_board)
-    options = _board_stripe_options(stripe_options)
+    options = _board_stripe_options(manifest_direction(
+        {"stripe_direction": inputs.direction}, stripe_options))
     fit_blur = stripe_options.get("blur_var") is None
     approx = inputs.approx if params is None else params
     reader = PairReader(inputs.folder, inputs.unit, inputs.robot, inputs.size, channel,
@@ -213,6 +215,7 @@ class _Inputs:
     board: Any
     robot: Any
     approx: Any
+    direction: str | None = None  # the manifest's stripe_direction
 
 
 def _session_inputs(source: Any, robot: Any, board: Any, joint_unit: str | None,
@@ -223,7 +226,7 @@ def _session_inputs(source: Any, robot: Any, board: Any, joint_unit: str | None,
     from ..geometry.robot import Robot
     from ..models.params import Parameters
 
-    folder = None
+    folder = direction = None
     unit = joint_unit
     size = None
     if isinstance(source, (list, tuple)):
@@ -233,6 +236,7 @@ def _session_inputs(source: Any, robot: Any, board: Any, joint_unit: str | None,
     else:
         records, doc, folder = read_session_manifest(source)
         unit = doc.get("joint_unit", "rad") if unit is None else unit
+        direction = doc.get("stripe_direction")
         if board is None and doc.get("board") is not None:
             from ..data.manifest import checkerboard_of
 
@@ -251,7 +255,8 @@ def _session_inputs(source: Any, robot: Any, board: Any, joint_unit: str | None,
                   "every view: calibrate a bench session with the opencv model (--model "
                   "opencv)")
     return _Inputs(records, folder, unit, size, Checkerboard() if board is None else board,
-                   Robot.scorbot_er7() if robot is None else robot, Parameters.nominal())
+                   Robot.scorbot_er7() if robot is None else robot, Parameters.nominal(),
+                   direction)
 
 
 def _board_stripe_options(stripe_options: dict[str, Any]) -> dict[str, Any]:

@@ -14,6 +14,7 @@ from .session import (
     PairRejected,
     checked_blur_var,
     core_options,
+    manifest_direction,
     manifest_robot,
     read_pair,
     read_session_manifest,
@@ -62,6 +63,7 @@ def iter_stripes_from_images(source: Any, *, robot: Any = None,
         records, doc, folder = read_session_manifest(source)
         unit = doc.get("joint_unit", "rad") if unit is None else unit
         robot = manifest_robot(doc, robot, source)
+        stripe_options = manifest_direction(doc, stripe_options)
         if isinstance(doc.get("image_size"), list) and len(doc["image_size"]) == 2:
             manifest_size = (int(doc["image_size"][0]), int(doc["image_size"][1]))
             if image_size is not None and tuple(image_size) != manifest_size:

@@ -88,6 +88,16 @@ def read_session_manifest(source: Any) -> tuple[list[dict[str, Any]], dict[str, 
     return read_manifest(source)
 
 
+def manifest_direction(doc: dict[str, Any], stripe_options: dict[str, Any]
+                       ) -> dict[str, Any]:
+    """``stripe_options`` with the manifest's ``stripe_direction`` ("columns" or "rows": the
+    sensor's stripe runs that way in every frame) unless the options give a direction."""
+    way = doc.get("stripe_direction")
+    if way in (None, "auto") or stripe_options.get("direction") not in (None, "auto"):
+        return stripe_options
+    return dict(stripe_options, direction=way)
+
+
 def record_id(rec: Any, index: int) -> str:
     return str(rec.get("id", f"p{index:03d}")) if isinstance(rec, dict) else f"p{index:03d}"
 

@@ -34,6 +34,7 @@ from .session import (
     Pair,
     PairRejected,
     checked_blur_var,
+    manifest_direction,
     manifest_robot,
     opencv_failure,
     read_session_manifest,
@@ -101,7 +102,7 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     records, doc, folder = read_session_manifest(source)
     board_spec, board_pose = board_of(doc, board, source)
     given = doc.get("image_size")  # the manifest's: every pair must have it
-    options = dict(stripe_options)
+    options = manifest_direction(doc, dict(stripe_options))
     fit_blur = options.get("blur_var") is None
     options["blur_var"] = checked_blur_var(options.get("blur_var"))
     numbering = _ModelFree(board_spec, board_spec if board_spec.unambiguous else Checkerboard(

@@ -169,8 +169,11 @@ def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = Non
     # and a first calibration, which detecting this image alone cannot repeat
     numbered = {v.id: _Numbered(np.asarray(v.corner_pixels), np.asarray(v.corner_index),
                                 v.stripe) for v in used}
-    entries, _, folder = read_manifest(source)
+    entries, doc, folder = read_manifest(source)
     from ..geometry.board import Checkerboard
+    from ..image.session import manifest_direction
+
+    stripe_options = manifest_direction(doc, stripe_options)  # for the views turned away
 
     detector_board = spec if spec.unambiguous else Checkerboard(rows=spec.rows, cols=spec.cols,
                                                                 square=spec.square)
