@@ -19,7 +19,8 @@ from dataclasses import replace
 from typing import Any
 
 from hmlvs import _core
-from hmlvs.image.session import DETECT_ALONG, checked_blur_var, smooth_along_of
+from hmlvs.image.frames import checked_blur_var, smooth_along_of
+from hmlvs.image.session import DETECT_ALONG
 from hmlvs.image.stripe import (
     Direction,
     StripeResult,

@@ -344,7 +344,7 @@ class Calibration:
             robot = robot_from_dict(d["robot"], f"{source}: robot")
         blur_var = d.get("stripe_blur_var_px2")
         if blur_var is not None:
-            from ..image.session import MAX_BLUR_VAR
+            from ..image.frames import MAX_BLUR_VAR
 
             if not 0.0 <= blur_var <= MAX_BLUR_VAR:
                 raise ValueError(f"{source}: stripe_blur_var_px2 must lie in [0, "

@@ -52,9 +52,14 @@ def laser_feature(on: np.ndarray, channel: int | None = None,
     if not is_colour(on) or on.dtype not in (np.uint8, np.uint16):
         raise ValueError("laser_feature needs an 8- or 16-bit colour (BGR/BGRA) image")
     laser = laser_channel(on) if channel is None else int(channel)
-    plane = np.ascontiguousarray(on[:, :, laser])
+    return plane_feature(np.ascontiguousarray(on[:, :, laser]), width)
+
+
+def plane_feature(plane: np.ndarray, width: float = BACKGROUND_WIDTH) -> np.ndarray:
+    """One 8- or 16-bit image plane (a grey frame, or a colour frame's laser channel) less its
+    background (:func:`estimate_background` at stripe FWHM ``width`` px), same dtype."""
     bg = estimate_background(plane, width)
-    return np.clip(plane.astype(np.float32) - bg, 0.0, None).astype(on.dtype)
+    return np.clip(plane.astype(np.float32) - bg, 0.0, None).astype(plane.dtype)
 
 
 def feature_noise(feature: np.ndarray) -> float:
@@ -86,12 +91,26 @@ def colour_stripe(on: np.ndarray, channel: int | None = None,
     if stripe_options.get("direction", "columns") == "rows":
         rest = {k: v for k, v in stripe_options.items() if k != "direction"}
         return replace(colour_stripe(transposed(on), channel, **rest), direction="rows")
+    if not is_colour(on) or on.dtype not in (np.uint8, np.uint16):
+        raise ValueError("colour_stripe needs an 8- or 16-bit colour (BGR/BGRA) image")
     channel = laser_channel(on) if channel is None else channel
-    feat = laser_feature(on, channel)
+    return feature_stripe(np.ascontiguousarray(on[:, :, channel]), **stripe_options)
+
+
+def feature_stripe(plane: np.ndarray, **stripe_options: Any) -> StripeResult:
+    """The stripe of one 8- or 16-bit image plane of a laser-on frame alone (a grey frame,
+    or a colour frame's laser channel) on its :func:`plane_feature`, as
+    :func:`colour_stripe` finds it (its options; ``direction`` "rows": transposed)."""
+    if stripe_options.get("direction", "columns") == "rows":
+        rest = {k: v for k, v in stripe_options.items() if k != "direction"}
+        return replace(feature_stripe(transposed(plane), **rest), direction="rows")
+    if plane.ndim != 2 or plane.dtype not in (np.uint8, np.uint16):
+        raise ValueError("feature_stripe needs an 8- or 16-bit image plane")
+    feat = plane_feature(plane)
     first = extract_stripe(feat, method="centroid", noise=feature_noise(feat), dominance=1.5)
     w = first.width[first.found]
     if w.size:
-        feat = laser_feature(on, channel, float(np.clip(np.median(w), *WIDTH_RANGE)))
+        feat = plane_feature(plane, float(np.clip(np.median(w), *WIDTH_RANGE)))
     known = {"method", "threshold", "min_width", "max_width", "noise", "steger_sigma",
              "dominance", "steger_sigma_along", "detect_sigma_along"}
     opts = {k: v for k, v in stripe_options.items() if k in known and v is not None}

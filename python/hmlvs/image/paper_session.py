@@ -15,6 +15,7 @@ from ..data.views import ViewData
 from .accounts import ImageReport
 from .corner_base import Corners
 from .corners import BoardNotFoundError, find_corners
+from .frames import checked_blur_var, smooth_along_of
 from .points import Mode, fit_division_distortion, view_corners, view_points
 from .reading import (
     PairRead,
@@ -28,14 +29,12 @@ from .session import (
     BOARD_SMOOTH_ALONG,
     Pair,
     PairRejected,
-    checked_blur_var,
     core_options,
     manifest_direction,
     manifest_robot,
     opencv_failure,
     read_session_manifest,
     require_poses,
-    smooth_along_of,
 )
 from .stripe import StripeResult, extract_stripe
 

@@ -10,9 +10,9 @@ from typing import Any, Iterator
 import numpy as np
 
 from .accounts import ImageReport
+from .frames import checked_blur_var
 from .session import (
     PairRejected,
-    checked_blur_var,
     core_options,
     manifest_direction,
     manifest_robot,

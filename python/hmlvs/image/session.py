@@ -18,13 +18,11 @@ from .colour import (  # noqa: F401 (laser_channel, estimate_background re-expor
     laser_channel,
 )
 from .direction import either_way
+from .frames import MAX_BLUR_VAR, alone_stripe, checked_blur_var, frames_options, frames_stripe
 from .stripe import (
-    StripeOptions,
     StripeResult,
     StripeStatus,
     as_gray,
-    finite_number,
-    real_number,
 )
 
 #: the laser-off name of a pair without a laser-off frame (shown in its report)
@@ -265,8 +263,10 @@ def _stripe_and_background(on_g: np.ndarray, off_g: np.ndarray | None, normalize
     when the stripe does not lie on two clearly different levels and 0 was used; None when
     none was fitted: given, no normalisation, or no laser-off frame)."""
     core = frames_options(normalize=normalize, **stripe_options)
-    stripe, background, fitted = frames_stripe(on_g, off_g, core, background=off_g is None)
-    return stripe, off_g if off_g is not None else background, fitted
+    if off_g is None:
+        return alone_stripe(on_g, core, stripe_options)
+    stripe, _, fitted = frames_stripe(on_g, off_g, core)
+    return stripe, off_g, fitted
 
 
 def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool = True,
@@ -303,7 +303,9 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
     the stripe's median FWHM, first measured on a sample of at most 160 columns against an
     opening at a stripe width of 16 px, which also sets Steger's scale), the peaks taken
     when 1.5 x brighter than any other (``dominance``, unless given) and centres that jump
-    from their neighbours' dropped (MULTIPLE; before the refinement, and again after it).
+    from their neighbours' dropped (MULTIPLE; before the refinement, and again after it);
+    with automatic options, on the laser feature instead where that finds twice the scan
+    lines (a dim stripe on a bright, fine board: :func:`alone_way`).
     Without a ``direction`` (or with "auto") the frame's own is taken
     (:func:`either_way`): "columns" for a stripe that runs across the image, "rows" for one
     that runs down it.
@@ -325,75 +327,9 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
         ch = laser_channel(on, off, options["direction"]) if channel is None else channel
         on_g = as_gray(on, "the laser-on image", ch)
         off_g = None if off is None else as_gray(off, "the laser-off image", ch)
-        return frames_stripe(on_g, off_g, frames_options(normalize=normalize, assess=assess,
-                                                         **options))
+        return _stripe_and_background(on_g, off_g, normalize, dict(options, assess=assess))
 
     return either_way(extract, stripe_options, on, off)[0]
-
-
-#: the options of :func:`extract_stripe` whose None is the pipeline's choice, not a value
-_CHOSEN = ("method", "threshold", "noise", "steger_sigma", "steger_sigma_along")
-
-
-def frames_options(*, normalize: bool = True, **stripe_options: Any) -> Any:
-    """The C++ options of :func:`stripe_from_pair` with ``stripe_options`` (checked: an
-    unknown option raises ``TypeError``, a wrong value ``ValueError`` naming it), built once
-    for many frames (:class:`hmlvs.Measurer`)."""
-    o = dict(stripe_options)
-    assess = o.pop("assess", True)
-    albedo_step = o.pop("albedo_step", None)
-    albedo_offset_ = o.pop("albedo_offset", None)
-    blur_var = checked_blur_var(o.pop("blur_var", None))
-    along = smooth_along_of(o.pop("smooth_along", None))
-    opts = StripeOptions(**{k: v for k, v in o.items() if not (k in _CHOSEN and v is None)
-                            and k != "channel"})
-    fo = _core._FrameStripeOptions()
-    fo.stripe = opts.to_core()
-    fo.method_given = o.get("method") is not None
-    fo.steger_sigma_given = o.get("steger_sigma") is not None
-    fo.steger_sigma_along_given = o.get("steger_sigma_along") is not None
-    fo.detect_sigma_along_given = "detect_sigma_along" in o
-    fo.dominance_given = "dominance" in o
-    fo.normalize = bool(normalize)
-    if albedo_offset_ is not None:
-        a = real_number(albedo_offset_, "offset")
-        if np.isnan(a):
-            raise ValueError("offset must be a number or inf, got nan")
-        fo.albedo_offset = a
-    fo.assess = bool(assess)
-    if albedo_step is not None:
-        fo.albedo_step = finite_number(albedo_step, "albedo_step")
-    fo.blur_var = blur_var
-    fo.smooth_along = along
-    return fo
-
-
-def frames_stripe(on_g: np.ndarray, off_g: np.ndarray | None, options: Any,
-                  background: bool = False
-                  ) -> tuple[StripeResult, np.ndarray | None, float | None]:
-    """:func:`stripe_from_pair` of grey frames with the C++ ``options`` of
-    :func:`frames_options`: the stripe, the background estimated for a laser-on frame alone
-    (with ``background``; else None) and the albedo offset fitted (see
-    :func:`_stripe_and_background`)."""
-    r, fitted, offset, no_pixel, image_max, refined, bg = _core._stripe_from_frames(
-        on_g, off_g, options, bool(background))
-    if no_pixel:
-        raise ValueError(f"the automatic threshold {r.threshold:.4g} leaves no pixel of the "
-                         f"difference image (its maximum is {int(image_max)}): no stripe")
-    o = options.stripe
-    direction = "columns" if o.direction == _core._StripeDirection.columns else "rows"
-    if not options.method_given:
-        method = "weighted" if refined else "steger"
-    else:
-        method = o.method.name
-    n = r.centre.shape[0]
-    stripe = StripeResult(
-        position=np.arange(n), centre=np.asarray(r.centre), intensity=np.asarray(r.intensity),
-        width=np.asarray(r.width), sigma=np.asarray(r.sigma),
-        status=np.asarray(r.status, dtype=np.uint8), num_peaks=np.asarray(r.num_peaks),
-        direction=direction, method=method, threshold=float(r.threshold),
-        noise=float(r.noise), residual=np.asarray(r.residual))
-    return stripe, bg, (float(offset) if fitted else None)
 
 
 #: Steger's default smoothing along the stripe, as a multiple of its scale across it, in
@@ -410,32 +346,6 @@ BOARD_SMOOTH_ALONG = 2.0
 DETECT_ALONG = float(_core._FrameStripeOptions.detect_along)
 
 
-def _in_range(value: Any, lo: float, hi: float) -> float | None:
-    """``value`` as a float when it is a number in [lo, hi], else None."""
-    if isinstance(value, bool):
-        return None
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        return None
-    return v if np.isfinite(v) and lo <= v <= hi else None
-
-
-def checked_blur_var(value: Any) -> float:
-    """The ``blur_var`` stripe option, checked (None: 0, no correction at albedo steps)."""
-    if value is None:
-        return 0.0
-    v = _in_range(value, 0.0, MAX_BLUR_VAR)
-    if v is None:
-        raise ValueError(f"blur_var must lie in [0, {MAX_BLUR_VAR:g}] px^2 (the variance of "
-                         f"the camera's blur, for the correction at albedo steps), got "
-                         f"{value!r}")
-    return v
-
-
-#: the largest blur variance (px^2) the correction at albedo steps takes or fits: a blur of
-#: 2 px (1 sigma); beyond it the first-order correction no longer holds
-MAX_BLUR_VAR = 4.0
 #: the blur variance (px^2) at which a pair's centre shift per unit variance is measured
 _EDGE_REF = 0.5
 
@@ -509,17 +419,6 @@ def _centred(stripe: StripeResult) -> np.ndarray:
         np.isfinite(stripe.centre)
 
 
-def smooth_along_of(value: Any) -> float:
-    """The ``smooth_along`` stripe option, checked (None: 1, the same scale as across)."""
-    if value is None:
-        return 1.0
-    v = _in_range(value, 1.0, 10.0)
-    if v is None:
-        raise ValueError(f"smooth_along must lie in [1, 10] (Steger's scale along the stripe "
-                         f"as a multiple of the scale across it), got {value!r}")
-    return v
-
-
 def manifest_robot(doc: dict[str, Any], robot: Any, source: Any) -> Any:
     """The arm of a manifest: ``robot`` when given; else the manifest's ``robot:``, a built-in
     arm's name or a mapping in the :meth:`hmlvs.Robot.to_dict` form; else None (the default,
@@ -566,7 +465,6 @@ def record_pose(rec: dict[str, Any], robot: Any, unit: str
 
 def _counts_text(counts: dict[str, int]) -> str:
     return ", ".join(f"{k.lower()} {v}" for k, v in counts.items() if v)
-
 
 
 def core_options(stripe_options: dict[str, Any]) -> dict[str, Any]:

@@ -21,6 +21,7 @@ from ..geometry.board import BoardSpec, CharucoSpec
 from .accounts import ImageReport
 from .charuco import detect_charuco
 from .corners import BoardNotFoundError, detect_board, prefer_detected
+from .frames import checked_blur_var
 from .partial import (
     PartialView,
     add_partial_views,
@@ -33,7 +34,6 @@ from .session import (
     ESTIMATED_OFF,
     Pair,
     PairRejected,
-    checked_blur_var,
     manifest_direction,
     manifest_robot,
     opencv_failure,

@@ -22,8 +22,9 @@ import numpy as np
 from .. import _core
 from .._arrays import as_matrix, as_params
 from ..data.calibration_file import Calibration
-from ..image.colour import is_colour
-from ..image.session import frames_options, stripe_from_pair, with_direction
+from ..image.colour import feature_stripe, is_colour
+from ..image.frames import alone_way, frames_options
+from ..image.session import stripe_from_pair, with_direction
 from ..image.stripe import as_gray
 from ..models.opencv import OpenCvSensor
 from ..models.paper import PaperSensor
@@ -113,6 +114,9 @@ class Measurer:
         self._core = None if options.get("direction") in (None, "auto") else \
             frames_options(**{k: v for k, v in options.items() if k != "channel"})
         self._sensor = _laser_sensor(self._model)
+        # a grey frame alone: the way its stripe is found (alone_way), the first such
+        # frame's, kept for the frames after it
+        self._alone_way: str | None = None
 
     def points(self, frame: np.ndarray, base_from_hand: Any = None,
                off: np.ndarray | None = None) -> Profile:
@@ -145,7 +149,15 @@ class Measurer:
         else:
             on_g = as_gray(frame, "the laser-on image", self._channel)
             off_g = None if off is None else as_gray(off, "the laser-off image", self._channel)
-            arrays = _core._measure_frames(on_g, off_g, self._core, self._sensor, pose)
+            if off_g is None and self._alone_way is None:  # the first frame alone decides
+                try:
+                    self._alone_way = alone_way(on_g, self._core, self._options)[1]
+                except ValueError:  # no stripe either way: the C++ pipeline's own
+                    self._alone_way = "frames"
+            if off_g is None and self._alone_way == "feature":
+                arrays = self._feature_profile(on_g, pose)
+            else:
+                arrays = _core._measure_frames(on_g, off_g, self._core, self._sensor, pose)
         pixels, points, camera_points, status, stripe_status = arrays
         if base_from_hand is None:  # the camera frame only
             points = np.full_like(camera_points, np.nan)
@@ -155,12 +167,26 @@ class Measurer:
                         pose: np.ndarray) -> tuple[np.ndarray, ...]:
         """A colour frame's profile arrays: its stripe from stripe_from_pair (which picks the
         laser's channel), measured in C++."""
+        return self._profile_of(lambda: stripe_from_pair(frame, off, **self._options),
+                                frame.shape, pose)
+
+    def _feature_profile(self, on_g: np.ndarray, pose: np.ndarray) -> tuple[np.ndarray, ...]:
+        """A grey frame alone's profile arrays when the first frame's stripe was found on
+        the laser feature (hmlvs.image.session.alone_way): its stripe found there."""
+        return self._profile_of(lambda: feature_stripe(on_g, **self._options), on_g.shape,
+                                pose)
+
+    def _profile_of(self, stripe_of: Any, shape: tuple[int, ...], pose: np.ndarray
+                    ) -> tuple[np.ndarray, ...]:
+        """The profile arrays of the stripe ``stripe_of()`` finds, measured in C++ (empty
+        when no pixel is above its threshold)."""
         try:
-            stripe = stripe_from_pair(frame, off, **self._options)
+            stripe = stripe_of()
         except ValueError as e:
             if "leaves no pixel" not in str(e):
                 raise
-            return _core._empty_profile(frame.shape[1])  # nothing above the threshold
+            return _core._empty_profile(shape[1 if self._options["direction"] == "columns"
+                                              else 0])
         direction = (_core._StripeDirection.columns if stripe.direction == "columns"
                      else _core._StripeDirection.rows)
         return _core._measure_stripe(self._sensor, stripe.centre, stripe.status, direction,
