@@ -47,8 +47,11 @@ def alone_way(on_g: np.ndarray, core: Any, stripe_options: dict[str, Any]
     except ValueError as e:  # its threshold leaves no pixel
         stripe, error = None, e
     automatic = all(stripe_options.get(k) is None for k in ("threshold", "method"))
+    # the feature finds a centre on at most every scan line: a stripe found on half of them
+    # or more is kept without looking (the same choice, at the cost of the normalised way)
+    enough = stripe is not None and stripe.found.sum() >= FEATURE_FALLBACK * len(stripe.found)
     feature = None
-    if automatic and on_g.dtype in (np.uint8, np.uint16):
+    if automatic and not enough and on_g.dtype in (np.uint8, np.uint16):
         try:
             feature = feature_stripe(on_g, **stripe_options)
         except ValueError:
