@@ -113,8 +113,9 @@ def _echo_views(reports: list) -> None:
     """One line per image pair of an opencv-model session, before the solve."""
     for r in reports:
         found = f"stripe in {r.stripe.get('FOUND', 0)} scan lines"
+        note = f" ({r.note})" if getattr(r, "note", "") else ""
         typer.echo(f"{r.id}: rejected: {r.reason}" if not r.ok else
-                   f"{r.id}: {r.corners} corners, {found}" if r.corners else
+                   f"{r.id}: {r.corners} corners, {found}{note}" if r.corners else
                    f"{r.id}: laser only (no board seen), {found}")
 
 

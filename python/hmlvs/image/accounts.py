@@ -26,6 +26,8 @@ class ImageReport:
     blur_var : the camera blur variance (px^2) the stripe was corrected with at albedo steps
         (:func:`~hmlvs.image.session.stripe_from_pair` ``blur_var``, fitted to the session
         unless given); None for a rejected pair
+    note : what the pipeline corrected in a pair it used (its board numbered again from the
+        robot chain, :mod:`hmlvs.image.whole_check`); "" otherwise
     view : the pair's view when it was used (:class:`hmlvs.data.views.ViewData`: numbered
         corners, the stripe with every scan line's status, robot pose and joints), from
         which the paper model's calibration points were derived
@@ -45,13 +47,15 @@ class ImageReport:
     rejected: dict[str, str] = field(default_factory=dict)
     blur_var: float | None = None
     view: Any = field(default=None, repr=False, compare=False)
+    note: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         """The account as plain JSON-ready values (without the view itself)."""
         return {"id": self.id, "index": self.index, "on": self.on, "off": self.off,
                 "ok": self.ok, "reason": self.reason, "stripe": dict(self.stripe),
                 "corners": self.corners, "points": self.points,
-                "rejected": dict(self.rejected), "blur_var": self.blur_var}
+                "rejected": dict(self.rejected), "blur_var": self.blur_var,
+                **({"note": self.note} if self.note else {})}
 
     def __str__(self) -> str:
         if not self.ok:

@@ -40,6 +40,7 @@ from .session import (
     read_session_manifest,
 )
 from .stripe import StripeStatus
+from .whole_check import renumbered_by_pose
 
 MIN_CORNERS = 6  # a view needs this many numbered corners (calibrate_joint's minimum)
 
@@ -129,6 +130,11 @@ def views_from_images(source: Any, *, robot: Any = None, board: Any = None,
     for read in reads:
         got.add(read)
     got.prefer_detected()
+    if not board_spec.unambiguous:  # a detection whole squares off, by the robot chain
+        got.views[:], moved = renumbered_by_pose(got.views, numbering.detector_board, got.size,
+                                                 board_pose)
+        got.reports[:] = [replace(r, note=moved[r.id]) if r is not None and r.id in moved else r
+                          for r in got.reports]
     if got.partial:
         add_partial_views(got.partial, got.views, got.reports, board_spec, got.size,
                           numbering.detector_board, board_pose, MIN_CORNERS)
