@@ -19,7 +19,10 @@ from hmlvs.sim.general import example_sensor, general_session, render_general_vi
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.scene  # rendered images
+# rendered images; on one BLAS kernel: the way chosen and the centres' accuracy sit far from
+# their bounds (scan-line ratios 0.06-0.36 or 1.07-1.12 against 0.5; medians 0.05-0.06 px against
+# 0.1), and the file passed under OPENBLAS_CORETYPE=Prescott when written (suite time)
+pytestmark = [pytest.mark.scene, pytest.mark.one_kernel]
 
 BOARD = Checkerboard(rows=6, cols=9, square=10.0)
 
