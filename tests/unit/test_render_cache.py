@@ -31,3 +31,25 @@ def test_a_cached_session_is_the_rendered_one(tmp_path, monkeypatch):
             np.testing.assert_array_equal(truth[k], fresh[k])
     with pytest.raises(AssertionError, match="rendered again"):
         R.render_session(tmp_path / "c", seed=4, views=1, held_out=1, speckle=0.0)
+
+
+def test_the_rays_kept_on_disk_are_the_computed_ones(tmp_path):
+    """hmlvs' renderer's camera rays, kept on disk for one make test (conftest): computed
+    once per camera, then read back bit for bit by another process's wrapper."""
+    from conftest import plain_pixel_rays, rays_kept_on_disk
+    from hmlvs.sim.general import example_sensor
+
+    calls = []
+
+    def compute(sensor, supersample=1):
+        calls.append(supersample)
+        return plain_pixel_rays()(sensor, supersample)
+
+    sensor = example_sensor((160, 120))
+    first = rays_kept_on_disk(compute, str(tmp_path))(sensor, 3)
+    again = rays_kept_on_disk(compute, str(tmp_path))(sensor, 3)  # a fresh process's
+    assert calls == [3] and len(list(tmp_path.glob("rays-*.npy"))) == 1
+    np.testing.assert_array_equal(again, first)
+    other = rays_kept_on_disk(compute, str(tmp_path))(sensor, 1)  # another camera's
+    assert calls == [3, 1] and other.shape == (120, 160, 3)
+    np.testing.assert_array_equal(other, plain_pixel_rays()(sensor, 1))
