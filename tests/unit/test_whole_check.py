@@ -53,3 +53,15 @@ def test_too_few_views_of_the_whole_board_leave_every_view_as_it_is():
     given = [views[0], views[1], *(_row_off(v, board.cols, slice(1, 6), -1) for v in views[2:])]
     got, moved = renumbered_by_pose(given, board, SIZE)
     assert moved == {} and got == given
+
+
+def test_a_renumbered_view_says_so_in_its_account_and_its_inspection_line():
+    from hmlvs.image.accounts import ImageReport
+    from hmlvs.report.inspect import ViewInspection
+
+    note = "numbered again from its robot pose as rows 1-5, columns 0-8, first corner r1c0"
+    rep = ImageReport("im6", 6, "im6.png", "none", True, corners=37, note=note)
+    assert rep.to_dict()["note"] == note
+    assert "note" not in replace(rep, note="").to_dict()
+    line = ViewInspection("im6", True, corners=37, note=note).line()
+    assert line.startswith(f"im6: used, 37 corners ({note}), stripe")

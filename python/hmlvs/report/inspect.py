@@ -48,6 +48,8 @@ class ViewInspection:
     corners : corners found and numbered (also for a rejected view, when its image was read)
     stripe : scan lines per stripe status name (empty when the stripe could not be extracted)
     image : the PNG written, or None (the images could not be read)
+    note : what the pipeline corrected in a view it used (its board numbered again from the
+        robot chain); "" otherwise
     """
 
     id: str
@@ -56,12 +58,14 @@ class ViewInspection:
     corners: int = 0
     stripe: dict[str, int] = field(default_factory=dict)
     image: Path | None = None
+    note: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         """The view's inspection as plain JSON-ready values."""
         return {"id": self.id, "used": self.used, "reason": self.reason,
                 "corners": self.corners, "stripe": dict(self.stripe),
-                "image": None if self.image is None else str(self.image)}
+                "image": None if self.image is None else str(self.image),
+                **({"note": self.note} if self.note else {})}
 
     def line(self) -> str:
         """The terminal line: ``v001: used, 63 corners, stripe FOUND 812, MULTIPLE 2``."""
@@ -69,7 +73,8 @@ class ViewInspection:
             else f"rejected ({self.reason})"
         stripe = ", ".join(f"{k} {v}" for k, v in self.stripe.items() if v) or "none"
         png = f" -> {self.image.name}" if self.image is not None else ""
-        return f"{self.id}: {state}, {self.corners} corners, stripe {stripe}{png}"
+        note = f" ({self.note})" if self.note else ""
+        return f"{self.id}: {state}, {self.corners} corners{note}, stripe {stripe}{png}"
 
 
 def draw_view(image: np.ndarray, corners: Any = None, stripe: StripeResult | None = None,
@@ -183,7 +188,8 @@ def inspect_session(source: Any, out_dir: str | os.PathLike, *, robot: Any = Non
     # all pictures or none (an interrupted or failed run leaves the folder as it was)
     with atomic_folder(out, last=()) as tmp:
         for entry, rep in zip(entries, reports):
-            view = ViewInspection(rep.id, rep.ok, rep.reason, rep.corners, dict(rep.stripe))
+            view = ViewInspection(rep.id, rep.ok, rep.reason, rep.corners, dict(rep.stripe),
+                                  note=rep.note)
             result.append(view)
             picture = _picture(entry, rep, view, folder, numbered, detector_board, normalize,
                                channel, stripe_options)
