@@ -28,21 +28,24 @@ from .stripe import StripeOptions, StripeResult, finite_number, real_number
 FEATURE_FALLBACK = 0.5
 
 
-def alone_stripe(on_g: np.ndarray, core: Any, stripe_options: dict[str, Any]
-                 ) -> tuple[StripeResult, np.ndarray, float | None]:
-    """The stripe of a grey laser-on frame alone, the background it was found against and
-    the albedo offset fitted (see :func:`alone_way`)."""
-    return alone_way(on_g, core, stripe_options)[0]
+def alone_stripe(on_g: np.ndarray, core: Any, stripe_options: dict[str, Any],
+                 background: bool = True
+                 ) -> tuple[StripeResult, np.ndarray | None, float | None]:
+    """The stripe of a grey laser-on frame alone, the background it was found against (with
+    ``background``; else None) and the albedo offset fitted (see :func:`alone_way`)."""
+    return alone_way(on_g, core, stripe_options, background)[0]
 
 
-def alone_way(on_g: np.ndarray, core: Any, stripe_options: dict[str, Any]
-              ) -> tuple[tuple[StripeResult, np.ndarray, float | None], str]:
+def alone_way(on_g: np.ndarray, core: Any, stripe_options: dict[str, Any],
+              background: bool = True
+              ) -> tuple[tuple[StripeResult, np.ndarray | None, float | None], str]:
     """:func:`alone_stripe` and the way it was found: "frames" (against the normalised
     estimated background, the C++ options ``core`` of ``stripe_options``) or "feature" (on
     the laser feature: see :data:`FEATURE_FALLBACK`, automatic options only). Raises
     ``ValueError`` when neither way finds a stripe."""
+    want = background
     try:
-        stripe, background, fitted = frames_stripe(on_g, None, core, background=True)
+        stripe, background, fitted = frames_stripe(on_g, None, core, background=want)
         error = None
     except ValueError as e:  # its threshold leaves no pixel
         stripe, error = None, e
@@ -60,7 +63,9 @@ def alone_way(on_g: np.ndarray, core: Any, stripe_options: dict[str, Any]
                                 stripe.found.sum() < FEATURE_FALLBACK * feature.found.sum()):
         width = float(np.median(feature.width[feature.found])) if feature.found.any() \
             else BACKGROUND_WIDTH
-        if feature.direction == "rows":
+        if not want:
+            bg = None
+        elif feature.direction == "rows":
             bg = transposed(estimate_background(transposed(on_g), width))
         else:
             bg = estimate_background(on_g, width)

@@ -3,7 +3,7 @@ the corners predicted for it."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -84,6 +84,32 @@ def place_grid(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any, expecte
     return idx
 
 
+def board_apart(px: np.ndarray, board: Any, camera_matrix: np.ndarray,
+                dist_coeffs: np.ndarray, base_from_camera: np.ndarray,
+                base_from_board: np.ndarray) -> Callable[[np.ndarray], float]:
+    """``apart(index)``: how far (RMS over the board's corners, mm) the board lies from
+    ``base_from_board`` when the corners ``px`` are numbered ``index``: their board pose
+    (``solvePnP`` with the camera) carried to the base by ``base_from_camera``; inf when no
+    pose fits them."""
+    from ..geometry.board import board_pose_from_corners
+
+    bxy = board.board_coordinates()
+    pts = np.c_[bxy, np.zeros(len(bxy))]
+    ref = pts @ base_from_board[:3, :3].T + base_from_board[:3, 3]
+    k = np.asarray(camera_matrix, float)
+    d = np.asarray(dist_coeffs, float)
+
+    def apart(index: np.ndarray) -> float:
+        cfb = board_pose_from_corners(pts[index], px, k, d)
+        if cfb is None:
+            return float("inf")
+        est = base_from_camera @ cfb
+        moved = pts @ est[:3, :3].T + est[:3, 3]
+        return float(np.sqrt(np.mean(np.sum((moved - ref) ** 2, axis=1))))
+
+    return apart
+
+
 def place_by_pose(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any,
                   camera_matrix: np.ndarray, dist_coeffs: np.ndarray,
                   base_from_camera: np.ndarray, base_from_board: np.ndarray,
@@ -101,22 +127,10 @@ def place_by_pose(px: np.ndarray, i: np.ndarray, j: np.ndarray, board: Any,
     why. A placement one square off moves the board by a square, far more than a robot's
     and a calibration's errors, so this holds where a pixel prediction from approximate
     parameters (off by a third of a square) does not."""
-    from ..geometry.board import board_pose_from_corners
-
-    bxy = board.board_coordinates()
-    pts = np.c_[bxy, np.zeros(len(bxy))]
-    ref = pts @ base_from_board[:3, :3].T + base_from_board[:3, 3]
-    k = np.asarray(camera_matrix, float)
-    d = np.asarray(dist_coeffs, float)
-    scored = []
-    for idx, desc in grid_placements(i, j, board, px):
-        cfb = board_pose_from_corners(pts[idx], px, k, d)
-        if cfb is None:
-            continue
-        est = base_from_camera @ cfb
-        moved = pts @ est[:3, :3].T + est[:3, 3]
-        scored.append((float(np.sqrt(np.mean(np.sum((moved - ref) ** 2, axis=1)))), desc,
-                       idx))
+    apart = board_apart(px, board, camera_matrix, dist_coeffs, base_from_camera,
+                        base_from_board)
+    scored = [(d, desc, idx) for idx, desc in grid_placements(i, j, board, px)
+              if np.isfinite(d := apart(idx))]
     if not scored:
         raise NumberingError(f"{what} cannot be placed on the {board.rows} x {board.cols} "
                              "board")

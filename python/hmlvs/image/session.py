@@ -256,15 +256,15 @@ def restripe(pair: Pair, offset: float, normalize: bool, stripe_options: dict[st
 
 
 def _stripe_and_background(on_g: np.ndarray, off_g: np.ndarray | None, normalize: bool,
-                           stripe_options: dict[str, Any]
-                           ) -> tuple[StripeResult, np.ndarray, float | None]:
+                           stripe_options: dict[str, Any], background: bool = True
+                           ) -> tuple[StripeResult, np.ndarray | None, float | None]:
     """The stripe of a pair, its laser-off frame (estimated when None: see
     :func:`stripe_from_pair`) and the albedo offset fitted to a given laser-off frame (NaN
     when the stripe does not lie on two clearly different levels and 0 was used; None when
     none was fitted: given, no normalisation, or no laser-off frame)."""
     core = frames_options(normalize=normalize, **stripe_options)
-    if off_g is None:
-        return alone_stripe(on_g, core, stripe_options)
+    if off_g is None:  # the background estimated only when asked for (``background``)
+        return alone_stripe(on_g, core, stripe_options, background)
     stripe, _, fitted = frames_stripe(on_g, off_g, core)
     return stripe, off_g, fitted
 
@@ -327,7 +327,8 @@ def stripe_from_pair(on: np.ndarray, off: np.ndarray | None, *, normalize: bool 
         ch = laser_channel(on, off, options["direction"]) if channel is None else channel
         on_g = as_gray(on, "the laser-on image", ch)
         off_g = None if off is None else as_gray(off, "the laser-off image", ch)
-        return _stripe_and_background(on_g, off_g, normalize, dict(options, assess=assess))
+        return _stripe_and_background(on_g, off_g, normalize, dict(options, assess=assess),
+                                      background=False)
 
     return either_way(extract, stripe_options, on, off)[0]
 

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..data.views import ViewData
-from .grid_place import grid_placements
+from .grid_place import board_apart, grid_placements
 
 #: how much nearer the chosen placement must put the board than the detected numbering
 #: (the partly visible boards' rule, :func:`hmlvs.image.grid_place.place_by_pose`)
@@ -40,7 +40,6 @@ def renumbered_by_pose(views: list[ViewData], board: Any, image_size: tuple[int,
     chain clearly places whole squares away renumbered, and per renumbered view what moved
     (see the module's documentation). Needs 3 views that show every row and column."""
     from ..calibration.joint import calibrate_joint
-    from ..geometry.board import board_pose_from_corners
 
     posed = [v for v in views if v.base_from_hand is not None]
     suspects = [v.id for v in posed if len(v.corner_index) and _short(v.corner_index, board)]
@@ -52,9 +51,6 @@ def renumbered_by_pose(views: list[ViewData], board: Any, image_size: tuple[int,
     except ValueError:
         return views, {}
     sensor = first.sensor
-    pts = np.c_[board.board_coordinates(), np.zeros(board.rows * board.cols)]
-    bfb = sensor.base_from_board
-    ref = pts @ bfb[:3, :3].T + bfb[:3, 3]
     out, moved = [], {}
     for v in views:
         if v.id not in suspects:
@@ -62,18 +58,8 @@ def renumbered_by_pose(views: list[ViewData], board: Any, image_size: tuple[int,
             continue
         idx = np.asarray(v.corner_index, int)
         px = np.asarray(v.corner_pixels, float)
-
-        def apart(index: np.ndarray, v: ViewData = v, px: np.ndarray = px) -> float:
-            """RMS distance (mm) of the board the view's corners, numbered ``index``, put in
-            the base from the first calibration's board; inf when no pose fits them."""
-            cfb = board_pose_from_corners(pts[index], px, sensor.camera_matrix,
-                                          sensor.dist_coeffs)
-            if cfb is None:
-                return np.inf
-            est = v.base_from_hand @ sensor.hand_from_camera @ cfb
-            return float(np.sqrt(np.mean(np.sum((pts @ est[:3, :3].T + est[:3, 3] - ref) ** 2,
-                                                axis=1))))
-
+        apart = board_apart(px, board, sensor.camera_matrix, sensor.dist_coeffs,
+                            v.base_from_hand @ sensor.hand_from_camera, sensor.base_from_board)
         now = apart(idx)
         scored = [(apart(new), desc, new)
                   for new, desc in grid_placements(*np.divmod(idx, board.cols), board, px)]

@@ -151,7 +151,8 @@ class Measurer:
             off_g = None if off is None else as_gray(off, "the laser-off image", self._channel)
             if off_g is None and self._alone_way is None:  # the first frame alone decides
                 try:
-                    self._alone_way = alone_way(on_g, self._core, self._options)[1]
+                    self._alone_way = alone_way(on_g, self._core, self._options,
+                                                background=False)[1]
                 except ValueError:  # no stripe either way: the C++ pipeline's own
                     self._alone_way = "frames"
             if off_g is None and self._alone_way == "feature":
