@@ -35,8 +35,8 @@ constexpr int N = kNumPointParams;
 // Intrinsics with distortion, a laser plane tilted off the paper's two degrees of freedom
 // (alpha != 0) and a generic hand-eye transform.
 Vector18d Truth() {
-  Vector9d in;
-  in << 1100, 1090, 512, 384, -0.165, 0.05, 0.0005, -0.0003, 0.01;
+  IntrinsicsVector in = IntrinsicsVector::Zero();
+  in.head<kNumClassicIntrinsics>() << 1100, 1090, 512, 384, -0.165, 0.05, 0.0005, -0.0003, 0.01;
   const double w[3] = {0.02, -0.03, 1.6};  // rotation vector (rad)
   const Eigen::Matrix4d hfc =
       geometry::Transform(geometry::Rodrigues(w), Eigen::Vector3d(60.0, 5.0, -45.0));
@@ -49,7 +49,8 @@ test::Scene MakeScene(const Vector18d& x, int m, unsigned seed) {
   test::Scene s = test::RandomPixelsAndPoses(m, seed, 1023.0, 300.0, 767.0);
   const Eigen::Matrix4d hfc = geometry::Transform(geometry::Rodrigues(x.data() + kRotationAt),
                                                   x.segment<3>(kTranslationAt));
-  const Vector9d in = x.head<kNumIntrinsics>();
+  IntrinsicsVector in = IntrinsicsVector::Zero();
+  in.head<kNumClassicIntrinsics>() = x.head<kNumClassicIntrinsics>();
   const Eigen::Vector4d plane = PlaneFromAngles(x[kPlaneAt], x[kPlaneAt + 1], x[kPlaneAt + 2]);
   s.points = LaserPointsInBase(in, plane, hfc, s.pixels, s.poses, /*throw_on_invalid=*/true).points;
   return s;

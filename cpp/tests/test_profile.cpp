@@ -109,8 +109,9 @@ void ExpectProfile(const FrameProfile& p, const StripeResult& s, const Eigen::Ve
 }
 
 TEST(Profile, GeneralModelGivesItsBatchFunctionsPoints) {
-  opencv::Vector9d in;
-  in << 1100, 1090, 512, 384, -0.165, 0.05, 0.0005, -0.0003, 0.01;
+  opencv::IntrinsicsVector in = opencv::IntrinsicsVector::Zero();
+  in.head<opencv::kNumClassicIntrinsics>() << 1100, 1090, 512, 384, -0.165, 0.05, 0.0005, -0.0003,
+      0.01;
   const double w[3] = {0.02, -0.03, 1.6};
   const Eigen::Matrix4d hfc =
       geometry::Transform(geometry::Rodrigues(w), Eigen::Vector3d(60.0, 5.0, -45.0));

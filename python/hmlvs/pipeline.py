@@ -21,7 +21,7 @@ from .diagnostics.verdict import Verdict
 from .geometry.board import BoardSpec, Checkerboard
 from .geometry.robot import Robot
 from .image.accounts import ImageReport
-from .models.opencv import DISTORTION_NAMES, OpenCvSensor
+from .models.opencv import CLASSIC_DISTORTION, OpenCvSensor
 
 #: what :func:`calibrate` takes: calibration points (paper model: a data set, or a
 #: simulation's fit and test points), an image session's folder or manifest, or views already
@@ -160,7 +160,7 @@ class SessionCalibration:
 
 
 def calibrate_session(source: str | os.PathLike, *, robot: Robot | None = None,
-                      distortion: Sequence[str] = DISTORTION_NAMES, holdout: float = 0.0,
+                      distortion: Sequence[str] = CLASSIC_DISTORTION, holdout: float = 0.0,
                       seed: int = 0, camera: OpenCvSensor | None = None,
                       require: float | None = None, robot_poses: str = "exact",
                       on_views: Callable[[list[ImageReport]], None] | None = None

@@ -11,7 +11,7 @@ from conftest import run_cli
 import hmlvs
 from hmlvs.calibration.options import LmOptions, PsoOptions
 from hmlvs.cli import app
-from hmlvs.models.opencv import DISTORTION_NAMES
+from hmlvs.models.opencv import CLASSIC_DISTORTION
 from hmlvs.models.params import DEFAULT_FIXED
 import numpy as np
 import pytest
@@ -28,7 +28,7 @@ def _option_default(command: str, name: str):
 def test_the_command_line_defaults_are_the_librarys():
     assert _option_default("calibrate", "iterations") == PsoOptions().iterations
     assert _option_default("calibrate", "loss_scale") == LmOptions().loss_scale
-    assert _option_default("calibrate", "distortion") == ",".join(DISTORTION_NAMES)
+    assert _option_default("calibrate", "distortion") == ",".join(CLASSIC_DISTORTION)
     import inspect
 
     from hmlvs.calibration.solvers import calibrate as calibrate_paper

@@ -22,8 +22,11 @@ import pytest
 
 
 def _intrinsics(t) -> np.ndarray:
+    """The C++ core's 16 intrinsics: fx, fy, cx, cy and OpenCV's 12 distortion terms."""
     k = t.camera_matrix
-    return np.r_[k[0, 0], k[1, 1], k[0, 2], k[1, 2], t.dist]
+    d = np.zeros(12)
+    d[: len(t.dist)] = t.dist
+    return np.r_[k[0, 0], k[1, 1], k[0, 2], k[1, 2], d]
 
 
 def test_projection_matches_opencv():
@@ -107,9 +110,8 @@ def test_joint_calibration_recovers_the_sensor_within_its_uncertainty(seed):
     errs = []
     for v, truth_pts in zip(views, laser_base):
         poses = np.repeat(v.base_from_hand[None], len(v.laser_pixels), axis=0).reshape(-1, 16)
-        pts = _core._general_laser_base(np.r_[s.fx, s.fy, s.cx, s.cy, s.dist_coeffs],
-                                        s.laser_plane, s.hand_from_camera, v.laser_pixels,
-                                        poses, False).points
+        pts = _core._general_laser_base(s.intrinsics_vector(), s.laser_plane,
+                                        s.hand_from_camera, v.laser_pixels, poses, False).points
         errs.append(np.linalg.norm(pts - truth_pts, axis=1))
     # 0.1 px stripe noise alone moves a point by ~0.05-0.1 mm along the laser plane.
     assert np.sqrt(np.mean(np.concatenate(errs) ** 2)) < 0.2
@@ -315,8 +317,10 @@ def test_bad_input_is_named(change, message):
 
 def test_bad_distortion_terms_are_named():
     views, board, _, _ = make_views(10, n_views=4)
-    with pytest.raises(ValueError, match="unknown distortion term 'k4'"):
-        calibrate_joint(views, board, (1024, 768), distortion=("k1", "k4"))
+    with pytest.raises(ValueError, match="unknown distortion term 'k7'"):
+        calibrate_joint(views, board, (1024, 768), distortion=("k1", "k7"))
+    with pytest.raises(ValueError, match="s1, s2, s3 and s4 go together"):
+        calibrate_joint(views, board, (1024, 768), distortion=("k1", "s1", "s2"))
     with pytest.raises(ValueError, match="p1 and p2 go together"):
         calibrate_joint(views, board, (1024, 768), distortion=("k1", "p1"))
 

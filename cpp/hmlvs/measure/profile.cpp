@@ -36,7 +36,7 @@ LaserSensor LaserSensor::Paper(const paper::Vector14d& q) {
   return s;
 }
 
-LaserSensor LaserSensor::OpenCv(const opencv::Vector9d& intrinsics,
+LaserSensor LaserSensor::OpenCv(const opencv::IntrinsicsVector& intrinsics,
                                 const Eigen::Vector4d& laser_plane,
                                 const Eigen::Matrix4d& hand_from_camera, int width, int height) {
   opencv::ValidateIntrinsics(intrinsics);

@@ -38,7 +38,8 @@ class LaserSensor {
   /// The general model (opencv::ValidateIntrinsics, opencv::UnitPlane): a pixel has a point
   /// when it lies in the width x height image (u in [-0.5, width - 0.5], v likewise) and
   /// opencv::LaserPoint maps it. hand_from_camera must be finite.
-  static LaserSensor OpenCv(const opencv::Vector9d& intrinsics, const Eigen::Vector4d& laser_plane,
+  static LaserSensor OpenCv(const opencv::IntrinsicsVector& intrinsics,
+                            const Eigen::Vector4d& laser_plane,
                             const Eigen::Matrix4d& hand_from_camera, int width, int height);
 
   /// Writes pixel (u, v)'s camera-frame point (mm) and returns true, or returns false when the
@@ -53,7 +54,7 @@ class LaserSensor {
   bool paper_ = false;
   paper::Vector14d q_ = paper::Vector14d::Zero();
   double tan_theta_ = 0.0, cos_theta_ = 1.0, sin_theta_ = 0.0;
-  opencv::Vector9d intrinsics_ = opencv::Vector9d::Zero();
+  opencv::IntrinsicsVector intrinsics_ = opencv::IntrinsicsVector::Zero();
   Eigen::Vector4d unit_plane_ = Eigen::Vector4d::Zero();
   double width_ = 0.0, height_ = 0.0;
   Eigen::Matrix4d hand_from_camera_ = Eigen::Matrix4d::Identity();

@@ -11,31 +11,42 @@ namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-// d(xd, yd)/d(x, y) of Distort at (x, y), row-major 2x2.
-void DistortionJacobian(const double* in, double x, double y, double* j) {
+// Distort and DistortionJacobian at once on doubles; without kWide the terms beyond the
+// five-term lens are taken as 0 (the same values, for fewer operations).
+template <bool kWide>
+void DistortWithJacobian(const double* in, double x, double y, double* xd, double* yd, double* j) {
   const double r2 = x * x + y * y;
-  const double radial = 1.0 + r2 * (in[kK1] + r2 * (in[kK2] + r2 * in[kK3]));
-  const double dradial = in[kK1] + r2 * (2.0 * in[kK2] + 3.0 * r2 * in[kK3]);  // d radial / d r2
-  j[0] = radial + 2.0 * x * x * dradial + 2.0 * in[kP1] * y + 6.0 * in[kP2] * x;
-  j[1] = 2.0 * x * y * dradial + 2.0 * in[kP1] * x + 2.0 * in[kP2] * y;
-  j[2] = 2.0 * x * y * dradial + 2.0 * in[kP1] * x + 2.0 * in[kP2] * y;
-  j[3] = radial + 2.0 * y * y * dradial + 6.0 * in[kP1] * y + 2.0 * in[kP2] * x;
+  const double num = 1.0 + r2 * (in[kK1] + r2 * (in[kK2] + r2 * in[kK3]));
+  const double dnum = in[kK1] + r2 * (2.0 * in[kK2] + 3.0 * r2 * in[kK3]);  // d num / d r2
+  double radial = num, dradial = dnum, sx = 0.0, sy = 0.0, dsx = 0.0, dsy = 0.0;
+  if constexpr (kWide) {
+    const double den = 1.0 + r2 * (in[kK4] + r2 * (in[kK5] + r2 * in[kK6]));
+    const double dden = in[kK4] + r2 * (2.0 * in[kK5] + 3.0 * r2 * in[kK6]);
+    radial = num / den;
+    dradial = (dnum * den - num * dden) / (den * den);  // d radial / d r2
+    sx = r2 * (in[kS1] + r2 * in[kS2]);
+    sy = r2 * (in[kS3] + r2 * in[kS4]);
+    dsx = in[kS1] + 2.0 * r2 * in[kS2];  // d sx / d r2
+    dsy = in[kS3] + 2.0 * r2 * in[kS4];
+  }
+  *xd = x * radial + 2.0 * in[kP1] * x * y + in[kP2] * (r2 + 2.0 * x * x) + sx;
+  *yd = y * radial + in[kP1] * (r2 + 2.0 * y * y) + 2.0 * in[kP2] * x * y + sy;
+  j[0] = radial + 2.0 * x * (x * dradial + dsx) + 2.0 * in[kP1] * y + 6.0 * in[kP2] * x;
+  j[1] = 2.0 * y * (x * dradial + dsx) + 2.0 * in[kP1] * x + 2.0 * in[kP2] * y;
+  j[2] = 2.0 * x * (y * dradial + dsy) + 2.0 * in[kP1] * x + 2.0 * in[kP2] * y;
+  j[3] = radial + 2.0 * y * (y * dradial + dsy) + 6.0 * in[kP1] * y + 2.0 * in[kP2] * x;
 }
 
-}  // namespace
-
-bool UndistortNormalized(const double* in, double u, double v, double* x, double* y,
-                         double* jacobian) {
+template <bool kWide>
+bool Undistort(const double* in, double u, double v, double* x, double* y, double* jacobian) {
   const double mx = (u - in[kCx]) / in[kFx];
   const double my = (v - in[kCy]) / in[kFy];
   double px = mx, py = my;
-  double j[4];
+  double j[4], xd, yd;
   bool converged = false;
   for (int iter = 0; iter < 50; ++iter) {
-    double xd, yd;
-    Distort(in, px, py, &xd, &yd);
+    DistortWithJacobian<kWide>(in, px, py, &xd, &yd, j);
     const double ex = xd - mx, ey = yd - my;
-    DistortionJacobian(in, px, py, j);
     const double det = j[0] * j[3] - j[1] * j[2];
     if (!(det > 1e-12)) return false;  // folded over: beyond the invertible region
     const double dx = (j[3] * ex - j[1] * ey) / det;
@@ -47,11 +58,9 @@ bool UndistortNormalized(const double* in, double u, double v, double* x, double
       break;
     }
   }
-  double xd, yd;
-  Distort(in, px, py, &xd, &yd);
+  DistortWithJacobian<kWide>(in, px, py, &xd, &yd, j);
   converged = converged || (std::abs(xd - mx) + std::abs(yd - my) < 1e-12);
   if (!converged || !std::isfinite(px) || !std::isfinite(py)) return false;
-  DistortionJacobian(in, px, py, j);
   if (!(j[0] * j[3] - j[1] * j[2] > 1e-12)) return false;
   *x = px;
   *y = py;
@@ -61,11 +70,21 @@ bool UndistortNormalized(const double* in, double u, double v, double* x, double
   return true;
 }
 
-void ValidateIntrinsics(const Vector9d& in) {
-  static const char* names[kNumIntrinsics] = {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"};
+}  // namespace
+
+bool UndistortNormalized(const double* in, double u, double v, double* x, double* y,
+                         double* jacobian) {
+  for (int k = kNumClassicIntrinsics; k < kNumIntrinsics; ++k) {
+    if (in[k] != 0.0) return Undistort<true>(in, u, v, x, y, jacobian);
+  }
+  return Undistort<false>(in, u, v, x, y, jacobian);
+}
+
+void ValidateIntrinsics(const IntrinsicsVector& in) {
   for (int i = 0; i < kNumIntrinsics; ++i) {
     if (!std::isfinite(in[i])) {
-      throw std::invalid_argument(std::string("intrinsic ") + names[i] + " is not finite");
+      throw std::invalid_argument(std::string("intrinsic ") + kIntrinsicNames[i] +
+                                  " is not finite");
     }
   }
   if (!(in[kFx] > 0.0) || !(in[kFy] > 0.0)) {
@@ -108,7 +127,7 @@ PixelsResult MapToPixels(Eigen::Index rows, PixelOf pixel_of) {
 
 }  // namespace
 
-PixelsResult ProjectCameraPoints(const Vector9d& in, Points3Ref points) {
+PixelsResult ProjectCameraPoints(const IntrinsicsVector& in, Points3Ref points) {
   ValidateIntrinsics(in);
   RequireFinite(points.data(), points.rows(), 3, "camera points");
   return MapToPixels(points.rows(), [&](Eigen::Index i, double* px) {
@@ -116,7 +135,7 @@ PixelsResult ProjectCameraPoints(const Vector9d& in, Points3Ref points) {
   });
 }
 
-PixelsResult UndistortPixels(const Vector9d& in, PixelsRef pixels) {
+PixelsResult UndistortPixels(const IntrinsicsVector& in, PixelsRef pixels) {
   ValidateIntrinsics(in);
   RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
   return MapToPixels(pixels.rows(), [&](Eigen::Index i, double* xy) {
@@ -124,8 +143,8 @@ PixelsResult UndistortPixels(const Vector9d& in, PixelsRef pixels) {
   });
 }
 
-bool LaserPoint(const Vector9d& in, const Eigen::Vector4d& plane, double u, double v, double* point,
-                const char** why) {
+bool LaserPoint(const IntrinsicsVector& in, const Eigen::Vector4d& plane, double u, double v,
+                double* point, const char** why) {
   double x, y;
   if (!UndistortNormalized(in.data(), u, v, &x, &y)) {
     *why = "lies beyond the region where the lens distortion can be inverted";
@@ -151,7 +170,7 @@ bool LaserPoint(const Vector9d& in, const Eigen::Vector4d& plane, double u, doub
 namespace {
 
 template <typename ToOutput>
-PointsResult MapLaserPixels(const Vector9d& in, const Eigen::Vector4d& laser_plane,
+PointsResult MapLaserPixels(const IntrinsicsVector& in, const Eigen::Vector4d& laser_plane,
                             PixelsRef pixels, bool throw_on_invalid, ToOutput to_output) {
   ValidateIntrinsics(in);
   RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
@@ -182,13 +201,13 @@ PointsResult MapLaserPixels(const Vector9d& in, const Eigen::Vector4d& laser_pla
 
 }  // namespace
 
-PointsResult LaserPointsInCamera(const Vector9d& in, const Eigen::Vector4d& laser_plane,
+PointsResult LaserPointsInCamera(const IntrinsicsVector& in, const Eigen::Vector4d& laser_plane,
                                  PixelsRef pixels, bool throw_on_invalid) {
   return MapLaserPixels(in, laser_plane, pixels, throw_on_invalid,
                         [](Eigen::Index, const Eigen::Vector3d& p) { return p; });
 }
 
-PointsResult LaserPointsInBase(const Vector9d& in, const Eigen::Vector4d& laser_plane,
+PointsResult LaserPointsInBase(const IntrinsicsVector& in, const Eigen::Vector4d& laser_plane,
                                const Eigen::Matrix4d& hand_from_camera, PixelsRef pixels,
                                PosesRef base_from_hand, bool throw_on_invalid) {
   RequireSameRows(pixels.rows(), "pixels", base_from_hand.rows(), "poses");

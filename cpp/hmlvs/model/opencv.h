@@ -1,10 +1,12 @@
 // The general sensor model (model "opencv", namespace hmlvs::opencv): OpenCV's pinhole camera
-// with Brown-Conrady distortion, a laser plane with three degrees of freedom and a hand-eye
-// transform with any rotation.
+// with its distortion (Brown-Conrady, the rational model's denominator and the thin prism), a
+// laser plane with three degrees of freedom and a hand-eye transform with any rotation.
 //
 // Units: mm and pixels; pixel centres at integer coordinates (u = column, v = row), as in
-// cv2.projectPoints. Intrinsics are 9 numbers [fx, fy, cx, cy, k1, k2, p1, p2, k3]. The laser
-// plane is n . X + d = 0 in the camera frame, with n a unit vector.
+// cv2.projectPoints. Intrinsics are 16 numbers [fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6,
+// s1, s2, s3, s4]: OpenCV's twelve distortion coefficients in its order (a lens of five terms
+// has the last seven 0). The laser plane is n . X + d = 0 in the camera frame, with n a unit
+// vector.
 //
 // As in paper.h, the single-point functions are templates on the scalar, so that one
 // formulation serves plain evaluation, calibration (ceres::Jet) and measurement.
@@ -24,20 +26,47 @@
 
 namespace hmlvs::opencv {
 
-constexpr int kNumIntrinsics = 9;
-enum Intrinsic : int { kFx = 0, kFy, kCx, kCy, kK1, kK2, kP1, kP2, kK3 };
+constexpr int kNumIntrinsics = 16;
+enum Intrinsic : int {
+  kFx = 0,
+  kFy,
+  kCx,
+  kCy,
+  kK1,
+  kK2,
+  kP1,
+  kP2,
+  kK3,
+  kK4,
+  kK5,
+  kK6,
+  kS1,
+  kS2,
+  kS3,
+  kS4
+};
+/// The intrinsics' names, in order (OpenCV's).
+inline constexpr const char* kIntrinsicNames[kNumIntrinsics] = {
+    "fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4"};
+/// The first kNumClassicIntrinsics are the camera matrix and the five-term Brown-Conrady lens.
+constexpr int kNumClassicIntrinsics = 9;
 
-using Vector9d = Eigen::Matrix<double, kNumIntrinsics, 1>;
+using IntrinsicsVector = Eigen::Matrix<double, kNumIntrinsics, 1>;
 
-/// Brown-Conrady distortion of a normalised image point (x, y) = (X/Z, Y/Z), as OpenCV:
-///   r2 = x^2 + y^2, radial = 1 + k1 r2 + k2 r2^2 + k3 r2^3,
-///   xd = x radial + 2 p1 x y + p2 (r2 + 2 x^2),  yd = y radial + p1 (r2 + 2 y^2) + 2 p2 x y.
+/// OpenCV's distortion of a normalised image point (x, y) = (X/Z, Y/Z) (cv2.projectPoints
+/// with 12 coefficients): r2 = x^2 + y^2,
+///   radial = (1 + k1 r2 + k2 r2^2 + k3 r2^3) / (1 + k4 r2 + k5 r2^2 + k6 r2^3),
+///   xd = x radial + 2 p1 x y + p2 (r2 + 2 x^2) + s1 r2 + s2 r2^2,
+///   yd = y radial + p1 (r2 + 2 y^2) + 2 p2 x y + s3 r2 + s4 r2^2.
 template <typename T, typename S>
 void Distort(const T* in, const S& x, const S& y, T* xd, T* yd) {
   const S r2 = x * x + y * y;
-  const T radial = T(1.0) + r2 * (in[kK1] + r2 * (in[kK2] + r2 * in[kK3]));
-  *xd = x * radial + T(2.0) * in[kP1] * x * y + in[kP2] * (r2 + T(2.0) * x * x);
-  *yd = y * radial + in[kP1] * (r2 + T(2.0) * y * y) + T(2.0) * in[kP2] * x * y;
+  const T radial = (T(1.0) + r2 * (in[kK1] + r2 * (in[kK2] + r2 * in[kK3]))) /
+                   (T(1.0) + r2 * (in[kK4] + r2 * (in[kK5] + r2 * in[kK6])));
+  *xd = x * radial + T(2.0) * in[kP1] * x * y + in[kP2] * (r2 + T(2.0) * x * x) +
+        r2 * (in[kS1] + r2 * in[kS2]);
+  *yd = y * radial + in[kP1] * (r2 + T(2.0) * y * y) + T(2.0) * in[kP2] * x * y +
+        r2 * (in[kS3] + r2 * in[kS4]);
 }
 
 /// A camera-frame point to its pixel (cv2.projectPoints). Returns false for a point that is not
@@ -129,17 +158,17 @@ void CameraFromBoard(const T* hand_from_camera_q, const T* hand_from_camera_t,
 }
 
 // ---------------------------------------------------------------------------------------------
-// Batch evaluation on plain doubles (intrinsics as a 9-vector; see the top of the file).
+// Batch evaluation on plain doubles (intrinsics as a 16-vector; see the top of the file).
 
 /// Throws std::invalid_argument unless the intrinsics are finite with fx, fy > 0.
-void ValidateIntrinsics(const Vector9d& intrinsics);
+void ValidateIntrinsics(const IntrinsicsVector& intrinsics);
 
 /// Camera-frame points -> pixels (cv2.projectPoints). Points with Z <= 0 are invalid (NaN).
-PixelsResult ProjectCameraPoints(const Vector9d& intrinsics, Points3Ref camera_points);
+PixelsResult ProjectCameraPoints(const IntrinsicsVector& intrinsics, Points3Ref camera_points);
 
 /// Pixels -> undistorted normalised image points (x, y) (cv2.undistortPoints without R/P, but
 /// solved to convergence). Pixels where the inversion fails are invalid (NaN).
-PixelsResult UndistortPixels(const Vector9d& intrinsics, PixelsRef pixels);
+PixelsResult UndistortPixels(const IntrinsicsVector& intrinsics, PixelsRef pixels);
 
 /// The laser plane (a, b, c, d) scaled to a unit normal. Throws std::invalid_argument unless
 /// its normal is finite and non-zero and d finite.
@@ -149,18 +178,20 @@ Eigen::Vector4d UnitPlane(const Eigen::Vector4d& laser_plane);
 /// false, with the reason in `why`, when the pixel's undistortion fails or its ray meets the
 /// plane behind the camera, not at all or at a grazing angle (sine below kMinRaySine). The
 /// step of LaserPointsInCamera for one pixel.
-bool LaserPoint(const Vector9d& intrinsics, const Eigen::Vector4d& unit_plane, double u, double v,
-                double* point, const char** why);
+bool LaserPoint(const IntrinsicsVector& intrinsics, const Eigen::Vector4d& unit_plane, double u,
+                double v, double* point, const char** why);
 
 /// Stripe pixels -> camera-frame points on the laser plane (a, b, c, d). A pixel whose ray
 /// meets the plane behind the camera (or not at all), or whose undistortion fails, is invalid;
 /// with `throw_on_invalid` the first one raises std::invalid_argument naming it.
-PointsResult LaserPointsInCamera(const Vector9d& intrinsics, const Eigen::Vector4d& laser_plane,
-                                 PixelsRef pixels, bool throw_on_invalid);
+PointsResult LaserPointsInCamera(const IntrinsicsVector& intrinsics,
+                                 const Eigen::Vector4d& laser_plane, PixelsRef pixels,
+                                 bool throw_on_invalid);
 
 /// Stripe pixels seen at base_from_hand poses -> base-frame points:
 ///   bP = base_from_hand hand_from_camera cP.
-PointsResult LaserPointsInBase(const Vector9d& intrinsics, const Eigen::Vector4d& laser_plane,
+PointsResult LaserPointsInBase(const IntrinsicsVector& intrinsics,
+                               const Eigen::Vector4d& laser_plane,
                                const Eigen::Matrix4d& hand_from_camera, PixelsRef pixels,
                                PosesRef base_from_hand, bool throw_on_invalid);
 

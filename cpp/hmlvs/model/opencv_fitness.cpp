@@ -1,6 +1,7 @@
 #include "hmlvs/model/opencv_fitness.h"
 
 #include <cmath>
+#include <stdexcept>
 
 #include "hmlvs/geometry/geometry.h"
 
@@ -18,12 +19,17 @@ Eigen::Vector4d PlaneFromAngles(double alpha, double beta, double h) {
                          std::cos(alpha) * std::sin(beta), -h);
 }
 
-Vector18d PointParams(const Vector9d& intrinsics, const Eigen::Vector4d& laser_plane,
+Vector18d PointParams(const IntrinsicsVector& intrinsics, const Eigen::Vector4d& laser_plane,
                       const Eigen::Matrix4d& hand_from_camera) {
+  if (!intrinsics.tail<kNumIntrinsics - kNumClassicIntrinsics>().isZero(0.0)) {
+    throw std::invalid_argument(
+        "the point objective's lens has five distortion terms (k1, k2, p1, p2, k3); k4 to s4 "
+        "must be 0");
+  }
   Eigen::Vector4d p = laser_plane / laser_plane.head<3>().norm();
   if (p[3] > 0.0) p = -p;  // n . X = h with h = -d >= 0
   Vector18d x;
-  x.head<kNumIntrinsics>() = intrinsics;
+  x.head<kNumClassicIntrinsics>() = intrinsics.head<kNumClassicIntrinsics>();
   x[kPlaneAt] = std::asin(p[0]);
   x[kPlaneAt + 1] = std::atan2(p[2], p[1]);
   x[kPlaneAt + 2] = -p[3];

@@ -1,11 +1,11 @@
 // The general model's calibration objective from reference points (the paper's protocol,
 // section 4, with the general model): F(x) = 1/2 sum_i ||P_i - bP_i(x)||^2 over 18 parameters
 //   x = [fx, fy, cx, cy, k1, k2, p1, p2, k3, alpha, beta, h, rx, ry, rz, tx, ty, tz]:
-// the intrinsics (opencv.h); the laser plane n . X = h (camera frame, mm) with
-// n = (sin alpha, cos alpha cos beta, cos alpha sin beta), three degrees of freedom that hold
-// the paper's two (its plane y + z tan(theta) = H is alpha = 0, beta = theta,
-// h = H cos(theta)); hand_from_camera as a rotation vector (rad) and a translation (mm).
-// Global searches (solvers/search.h) take it as they take the paper model's FitnessData.
+// the camera matrix and the five-term lens of opencv.h (its other distortion terms 0); the laser
+// plane n . X = h (camera frame, mm) with n = (sin alpha, cos alpha cos beta, cos alpha sin beta),
+// three degrees of freedom that hold the paper's two (its plane y + z tan(theta) = H is alpha = 0,
+// beta = theta, h = H cos(theta)); hand_from_camera as a rotation vector (rad) and a translation
+// (mm). Global searches (solvers/search.h) take it as they take the paper model's FitnessData.
 #pragma once
 
 #include <Eigen/Core>
@@ -33,8 +33,9 @@ const std::array<std::string, kNumPointParams>& PointParamNames();
 Eigen::Vector4d PlaneFromAngles(double alpha, double beta, double h);
 
 /// The 18 parameters of intrinsics, a laser plane (a, b, c, d) (any scale) and hand_from_camera.
-/// The plane's normal is taken on the side where h >= 0.
-Vector18d PointParams(const Vector9d& intrinsics, const Eigen::Vector4d& laser_plane,
+/// The plane's normal is taken on the side where h >= 0. Throws std::invalid_argument when a
+/// distortion term beyond the five-term lens is not 0.
+Vector18d PointParams(const IntrinsicsVector& intrinsics, const Eigen::Vector4d& laser_plane,
                       const Eigen::Matrix4d& hand_from_camera);
 
 /// The general model as a model trait (as paper::Model, paper.h): its 18 parameters and its
@@ -51,8 +52,9 @@ struct Model {
   static bool Residual(const T* x, double u, double v, const double* h, T* e) {
     using std::cos;
     using std::sin;
-    T xn, yn;
-    if (!UndistortPoint(x, u, v, &xn, &yn)) return false;
+    T in[kNumIntrinsics], xn, yn;
+    for (int k = 0; k < kNumIntrinsics; ++k) in[k] = k < kNumClassicIntrinsics ? x[k] : T(0.0);
+    if (!UndistortPoint(in, u, v, &xn, &yn)) return false;
     const T alpha = x[kPlaneAt], beta = x[kPlaneAt + 1];
     const T normal[3] = {sin(alpha), cos(alpha) * cos(beta), cos(alpha) * sin(beta)};
     T cp[3];

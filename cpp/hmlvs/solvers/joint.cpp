@@ -187,12 +187,10 @@ class JointProblem {
     for (int k = 0; k < kNumIntrinsics; ++k) {
       if (o.fixed[k]) fixed.push_back(k);
     }
-    static const char* names[kNumIntrinsics] = {"fx", "fy", "cx", "cy", "k1",
-                                                "k2", "p1", "p2", "k3"};
     if (HoldEntries(problem_.get(), intrinsics_.data(), kNumIntrinsics, fixed)) {
       free_.push_back(intrinsics_.data());
       for (int k = 0; k < kNumIntrinsics; ++k) {
-        if (!o.fixed[k]) names_.push_back(names[k]);
+        if (!o.fixed[k]) names_.push_back(kIntrinsicNames[k]);
       }
     }
     if (o.chain) {
@@ -228,7 +226,7 @@ class JointProblem {
   }
 
   JointOptions options_;
-  Vector9d intrinsics_;
+  IntrinsicsVector intrinsics_;
   Eigen::Vector3d normal_;
   double offset_ = 0.0;
   PoseBlocks hand_eye_, board_;

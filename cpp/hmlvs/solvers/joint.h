@@ -36,13 +36,20 @@ struct JointView {
 
 /// Everything the joint solve estimates.
 struct JointState {
-  opencv::Vector9d intrinsics = opencv::Vector9d::Zero();
+  opencv::IntrinsicsVector intrinsics = opencv::IntrinsicsVector::Zero();
   Eigen::Vector4d laser_plane = Eigen::Vector4d(0, 1, 0, -100);    ///< (a, b, c, d), unit normal
   Eigen::Matrix4d hand_from_camera = Eigen::Matrix4d::Identity();  ///< chain mode
   Eigen::Matrix4d base_from_board = Eigen::Matrix4d::Identity();   ///< chain mode
   /// camera mode, and chain mode with uncertain robot poses: per view
   std::vector<Eigen::Matrix4d> camera_from_board;
 };
+
+/// Every intrinsic free but the distortion terms beyond the five-term lens.
+constexpr std::array<bool, opencv::kNumIntrinsics> ClassicLens() {
+  std::array<bool, opencv::kNumIntrinsics> held{};
+  for (int k = opencv::kNumClassicIntrinsics; k < opencv::kNumIntrinsics; ++k) held[k] = true;
+  return held;
+}
 
 struct JointOptions {
   bool chain = true;              ///< robot chain (true) or free per-view board poses
@@ -57,9 +64,11 @@ struct JointOptions {
   /// (rotation vector / pose_sigma_r, translation / pose_sigma_t, in the hand frame).
   double pose_sigma_t = 0.0;
   double pose_sigma_r = 0.0;
-  std::array<bool, opencv::kNumIntrinsics> fixed{};  ///< intrinsics held at their initial values
-  double corner_sigma = 0.1;                         ///< pixels
-  double laser_sigma = 0.05;                         ///< mm
+  /// intrinsics held at their initial values: by default the distortion terms beyond the
+  /// five-term lens (k4 to s4)
+  std::array<bool, opencv::kNumIntrinsics> fixed = ClassicLens();
+  double corner_sigma = 0.1;  ///< pixels
+  double laser_sigma = 0.05;  ///< mm
   LossKind loss = LossKind::kNone;
   double loss_scale = 3.0;  ///< in units of sigma
   int max_iterations = 100;

@@ -107,17 +107,28 @@ void IntrinsicsRow(const double* in, double u, double v, double x, double y, con
   // g = (dr/dx, dr/dy) Jd^-1, so that dr/din = -g (d distort/d in - d m/d in)
   const double g0 = (drdx * jd[3] - drdy * jd[2]) / det;
   const double g1 = (-drdx * jd[1] + drdy * jd[0]) / det;
-  const double r2 = x * x + y * y;
+  const double r2 = x * x + y * y, r4 = r2 * r2, r6 = r4 * r2;
   const double mx = (u - in[kCx]) / in[kFx], my = (v - in[kCy]) / in[kFy];
   row[kFx] = -g0 * (mx / in[kFx]) * w;  // -(g . (0 - dm/dfx)), dm_x/dfx = -mx/fx
   row[kFy] = -g1 * (my / in[kFy]) * w;
   row[kCx] = -g0 / in[kFx] * w;  // dm_x/dcx = -1/fx
   row[kCy] = -g1 / in[kFy] * w;
-  row[kK1] = -(g0 * x + g1 * y) * r2 * w;
-  row[kK2] = -(g0 * x + g1 * y) * r2 * r2 * w;
-  row[kK3] = -(g0 * x + g1 * y) * r2 * r2 * r2 * w;
+  // radial = num / den: d/dk1..k3 = r^2n / den, d/dk4..k6 = -radial r^2n / den (times x, y)
+  const double den = 1.0 + r2 * (in[kK4] + r2 * (in[kK5] + r2 * in[kK6]));
+  const double radial = (1.0 + r2 * (in[kK1] + r2 * (in[kK2] + r2 * in[kK3]))) / den;
+  const double gr = -(g0 * x + g1 * y) * w / den;
+  row[kK1] = gr * r2;
+  row[kK2] = gr * r4;
+  row[kK3] = gr * r6;
+  row[kK4] = -gr * radial * r2;
+  row[kK5] = -gr * radial * r4;
+  row[kK6] = -gr * radial * r6;
   row[kP1] = -(g0 * 2.0 * x * y + g1 * (r2 + 2.0 * y * y)) * w;
   row[kP2] = -(g0 * (r2 + 2.0 * x * x) + g1 * 2.0 * x * y) * w;
+  row[kS1] = -g0 * r2 * w;
+  row[kS2] = -g0 * r4 * w;
+  row[kS3] = -g1 * r2 * w;
+  row[kS4] = -g1 * r4 * w;
 }
 
 // The laser residuals of one view with an analytic Jacobian (the autodiff version of
@@ -321,13 +332,13 @@ Vector6d PoseError(const PoseBlocks& camera_from_board, const PoseBlocks& hand_f
 
 ceres::CostFunction* NewChainCornerCost(const JointView* view, double inv_sigma) {
   const int n = 2 * static_cast<int>(view->corner_pixels.rows());
-  return new ceres::AutoDiffCostFunction<ChainCorners, ceres::DYNAMIC, 9, 4, 3, 4, 3>(
+  return new ceres::AutoDiffCostFunction<ChainCorners, ceres::DYNAMIC, kNumIntrinsics, 4, 3, 4, 3>(
       new ChainCorners{view, inv_sigma}, n);
 }
 
 ceres::CostFunction* NewFreeCornerCost(const JointView* view, double inv_sigma) {
   const int n = 2 * static_cast<int>(view->corner_pixels.rows());
-  return new ceres::AutoDiffCostFunction<FreeCorners, ceres::DYNAMIC, 9, 4, 3>(
+  return new ceres::AutoDiffCostFunction<FreeCorners, ceres::DYNAMIC, kNumIntrinsics, 4, 3>(
       new FreeCorners{view, inv_sigma}, n);
 }
 

@@ -58,15 +58,15 @@ Eigen::VectorXd LaserScales(const double* intrinsics, const double* nb, double o
 Vector6d PoseError(const PoseBlocks& camera_from_board, const PoseBlocks& hand_from_camera,
                    const PoseBlocks& base_from_board, const Eigen::Matrix4d& base_from_hand);
 
-/// Chain mode: the corner residuals of a view over the blocks intrinsics (9),
+/// Chain mode: the corner residuals of a view over the blocks intrinsics (16),
 /// hand_from_camera (4, 3) and base_from_board (4, 3).
 ceres::CostFunction* NewChainCornerCost(const JointView* view, double inv_sigma);
 
-/// A view with its own board pose: the corner residuals over the blocks intrinsics (9) and
+/// A view with its own board pose: the corner residuals over the blocks intrinsics (16) and
 /// camera_from_board (4, 3).
 ceres::CostFunction* NewFreeCornerCost(const JointView* view, double inv_sigma);
 
-/// The laser residuals of a view (analytic Jacobian) over the blocks intrinsics (9), the board
+/// The laser residuals of a view (analytic Jacobian) over the blocks intrinsics (16), the board
 /// pose's blocks (chain: hand_from_camera (4, 3) and base_from_board (4, 3); else
 /// camera_from_board (4, 3)), the laser plane's normal (3) and offset (1).
 /// `scales` (views with their own board pose): the residuals are LaserLineDistance times these

@@ -34,7 +34,7 @@ from ..geometry.board import BoardSpec, board_pose_from_corners
 from ..geometry.transforms import (
     invert_transform,
 )
-from ..models.opencv import DISTORTION_NAMES, OpenCvSensor
+from ..models.opencv import CLASSIC_DISTORTION, DISTORTION_NAMES, OpenCvSensor
 from .joint_covariance import (
     camera_mode_covariance,
     chain_covariance,
@@ -63,7 +63,7 @@ from .joint_solve import (
 
 
 def calibrate_joint(views: Sequence[ViewData], board: Any, image_size: tuple[int, int], *,
-                    distortion: Iterable[str] = DISTORTION_NAMES,
+                    distortion: Iterable[str] = CLASSIC_DISTORTION,
                     base_from_board: np.ndarray | None = None,
                     use_robot: bool = True, robust: bool = True,
                     max_iterations: int = 100,

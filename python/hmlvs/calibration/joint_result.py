@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from ..geometry.transforms import rotation_to_vector
-from ..models.opencv import OpenCvSensor
+from ..models.opencv import DISTORTION_NAMES, OpenCvSensor
 
 
 @dataclass
@@ -147,7 +147,8 @@ class JointCalibration:
             f"camera: fx {s.fx:.2f} +- {std.get('fx', nan):.2g}, fy {s.fy:.2f} +- "
             f"{std.get('fy', nan):.2g}, cx {s.cx:.2f} +- {std.get('cx', nan):.2g}, "
             f"cy {s.cy:.2f} +- {std.get('cy', nan):.2g} px; distortion k1 {d[0]:.5f}, "
-            f"k2 {d[1]:.5f}, p1 {d[2]:.6f}, p2 {d[3]:.6f}, k3 {d[4]:.5f}",
+            f"k2 {d[1]:.5f}, p1 {d[2]:.6f}, p2 {d[3]:.6f}, k3 {d[4]:.5f}"
+            + "".join(f", {n} {v:.5g}" for n, v in zip(DISTORTION_NAMES[5:], d[5:])),
             f"laser plane: normal ({s.laser_plane[0]:.5f}, {s.laser_plane[1]:.5f}, "
             f"{s.laser_plane[2]:.5f}), {-s.laser_plane[3]:.3f} +- "
             f"{std.get('plane_d', nan):.2g} mm from the camera centre",

@@ -20,7 +20,7 @@ from ..geometry.transforms import (
     rotation_angle,
     rotation_from_vector,
 )
-from ..models.opencv import DISTORTION_NAMES, OpenCvSensor
+from ..models.opencv import CLASSIC_DISTORTION, DISTORTION_NAMES, OpenCvSensor
 
 
 def _cv_flags(distortion: Sequence[str]) -> int:
@@ -35,6 +35,14 @@ def _cv_flags(distortion: Sequence[str]) -> int:
         flags |= cv2.CALIB_FIX_K1
     if "p1" not in distortion and "p2" not in distortion:
         flags |= cv2.CALIB_ZERO_TANGENT_DIST
+    if {"k4", "k5", "k6"} & set(distortion):
+        flags |= cv2.CALIB_RATIONAL_MODEL
+        for name, fix in (("k4", cv2.CALIB_FIX_K4), ("k5", cv2.CALIB_FIX_K5),
+                          ("k6", cv2.CALIB_FIX_K6)):
+            if name not in distortion:
+                flags |= fix
+    if "s1" in distortion:
+        flags |= cv2.CALIB_THIN_PRISM_MODEL
     return flags
 
 
@@ -46,21 +54,27 @@ def check_distortion(distortion: Iterable[str]) -> tuple[str, ...]:
                          f"{', '.join(DISTORTION_NAMES)}")
     if ("p1" in terms) != ("p2" in terms):
         raise ValueError("the tangential terms p1 and p2 go together: give both or neither")
+    prism = [t for t in ("s1", "s2", "s3", "s4") if t in terms]
+    if prism and len(prism) < 4:
+        raise ValueError("the thin prism's terms s1, s2, s3 and s4 go together (as in OpenCV): "
+                         "give all four or none")
     return terms
 
 
 def initial_intrinsics(views: Sequence[ViewData], board: BoardSpec, image_size: tuple[int, int],
-                       distortion: Sequence[str] = DISTORTION_NAMES
+                       distortion: Sequence[str] = CLASSIC_DISTORTION
                        ) -> tuple[np.ndarray, list[np.ndarray], float]:
-    """Zhang's method (``cv2.calibrateCamera``): the 9 intrinsics, each view's camera_from_board
-    and the RMS reprojection error (px)."""
+    """Zhang's method (``cv2.calibrateCamera``, with the rational and thin-prism models when
+    ``distortion`` names their terms): the 16 intrinsics of the C++ core, each view's
+    camera_from_board and the RMS reprojection error (px)."""
 
     obj = [board.points(v.corner_index).astype(np.float32) for v in views]
     img = [np.asarray(v.corner_pixels, np.float32).reshape(-1, 1, 2) for v in views]
     rms, k, dist, rvecs, tvecs = calibrate_camera(obj, img, tuple(int(s) for s in image_size),
                                                      None, None, flags=_cv_flags(distortion))
-    d = np.zeros(5)
-    d[: min(5, dist.size)] = dist.ravel()[:5]
+    d = np.zeros(len(DISTORTION_NAMES))
+    n = min(d.size, dist.size)
+    d[:n] = dist.ravel()[:n]
     intr = np.array([k[0, 0], k[1, 1], k[0, 2], k[1, 2], *d])
     poses = [make_transform(rotation_from_vector(r), t) for r, t in zip(rvecs, tvecs)]
     return intr, poses, float(rms)

@@ -9,7 +9,7 @@ from typing import Any, Optional
 import typer
 
 from ..calibration.options import LmOptions, PsoOptions
-from ..models.opencv import DISTORTION_NAMES
+from ..models.opencv import CLASSIC_DISTORTION
 from .common import (
     GLOSSARY_URL,
     app,
@@ -175,8 +175,9 @@ def calibrate(
     robot: Optional[Path] = ROBOT_OPTION,
     model: str = _MODEL_OPTION,
     distortion: str = typer.Option(
-        ",".join(DISTORTION_NAMES), help="opencv model: the distortion terms to estimate (the "
-        "others stay 0), e.g. k1,k2."),
+        ",".join(CLASSIC_DISTORTION), help="opencv model: the distortion terms to estimate "
+        "(the others stay 0), among OpenCV's k1,k2,p1,p2,k3,k4,k5,k6,s1,s2,s3,s4: e.g. k1,k2, "
+        "or k1,k2,p1,p2,k3,k4,k5,k6 (the rational model) for a wide lens."),
     initial: Optional[Path] = _INITIAL_OPTION,
     bounds: Optional[Path] = _BOUNDS_OPTION,
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, no per-image "

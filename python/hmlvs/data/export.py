@@ -127,7 +127,7 @@ def _opencv_text(s: OpenCvSensor) -> str:
             f"image_width: {int(s.image_size[0])}\n"
             f"image_height: {int(s.image_size[1])}\n")
     text += _opencv_matrix("camera_matrix", s.camera_matrix)
-    text += _opencv_matrix("distortion_coefficients", s.dist_coeffs.reshape(1, 5))
+    text += _opencv_matrix("distortion_coefficients", s.dist_coeffs.reshape(1, -1))
     text += _opencv_matrix("laser_plane", s.laser_plane.reshape(1, 4))
     text += _opencv_matrix("hand_from_camera", s.hand_from_camera)
     if s.base_from_board is not None:
@@ -135,7 +135,15 @@ def _opencv_text(s: OpenCvSensor) -> str:
     return text
 
 
+#: ROS camera_info's distortion models by number of coefficients (image_geometry's)
+_ROS_MODELS = {5: "plumb_bob", 8: "rational_polynomial"}
+
+
 def _ros_text(s: OpenCvSensor, camera_name: str) -> str:
+    n = s.dist_coeffs.size
+    if n not in _ROS_MODELS:
+        raise ValueError("ROS camera_info has no distortion model for the thin prism (s1 to s4 "
+                         "are not all 0): export as opencv or json instead")
     k = s.camera_matrix
     proj = np.hstack([k, np.zeros((3, 1))])
     doc = {
@@ -143,8 +151,8 @@ def _ros_text(s: OpenCvSensor, camera_name: str) -> str:
         "image_height": int(s.image_size[1]),
         "camera_name": camera_name,
         "camera_matrix": {"rows": 3, "cols": 3, "data": k.ravel().tolist()},
-        "distortion_model": "plumb_bob",
-        "distortion_coefficients": {"rows": 1, "cols": 5, "data": s.dist_coeffs.tolist()},
+        "distortion_model": _ROS_MODELS[n],
+        "distortion_coefficients": {"rows": 1, "cols": n, "data": s.dist_coeffs.tolist()},
         "rectification_matrix": {"rows": 3, "cols": 3, "data": np.eye(3).ravel().tolist()},
         "projection_matrix": {"rows": 3, "cols": 4, "data": proj.ravel().tolist()},
     }

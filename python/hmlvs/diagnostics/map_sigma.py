@@ -28,6 +28,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..geometry.transforms import rotation_from_vector, rotation_to_vector
+from ..models.opencv import INTRINSIC_NAMES
 
 #: stripe pixels sampled over the footprint (enough for a stable 95th percentile)
 SAMPLES = 600
@@ -85,9 +86,6 @@ def _householder_tangent(n: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(x) * h[:, :2]
 
 
-_INTRINSICS = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
-
-
 def _perturbed(sensor: Any, names: Sequence[str], delta: np.ndarray) -> Any:
     """The sensor moved by ``delta`` along the solve's unknowns ``names`` (tangent
     coordinates: rotations as rotation vectors applied on the left, i.e. in the hand frame;
@@ -102,8 +100,8 @@ def _perturbed(sensor: Any, names: Sequence[str], delta: np.ndarray) -> Any:
     for name, d in zip(names, delta):
         if d == 0.0:
             continue
-        if name in _INTRINSICS:
-            intr[_INTRINSICS.index(name)] += d
+        if name in INTRINSIC_NAMES:
+            intr[INTRINSIC_NAMES.index(name)] += d
         elif name.startswith("hand_r"):
             rot["xyz".index(name[-1])] += d
         elif name.startswith("hand_t"):
@@ -137,7 +135,7 @@ def of_joint(result: Any) -> PointModel:
 
     chain = result.mode == "chain"
     names = list(result.names)
-    keep = [k for k, n in enumerate(names) if n in _INTRINSICS or n.startswith("plane_")
+    keep = [k for k, n in enumerate(names) if n in INTRINSIC_NAMES or n.startswith("plane_")
             or (chain and n.startswith("hand_"))]
     sub = [names[k] for k in keep]
     sensor = result.sensor

@@ -1,11 +1,12 @@
-"""The general sensor model (``model="opencv"``): OpenCV pinhole intrinsics with Brown-Conrady
+"""The general sensor model (``model="opencv"``): OpenCV pinhole intrinsics with its
 distortion, a laser plane with 3 degrees of freedom, a hand-eye transform with any rotation
 and, optionally, the board's pose in the robot base.
 
 Conventions are OpenCV's (``cv2.projectPoints``): pixel centres at integers, distortion
-coefficients ``(k1, k2, p1, p2, k3)``. Lengths in mm. The laser plane is ``a x + b y + c z + d = 0``
-in the camera frame with ``(a, b, c)`` a unit normal pointing away from the camera's centre
-(``d < 0``: the camera centre is on the negative side).
+coefficients ``(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2, s3, s4]]])``: Brown-Conrady, the
+rational model's denominator (wide lenses) and the thin prism. Lengths in mm. The laser plane
+is ``a x + b y + c z + d = 0`` in the camera frame with ``(a, b, c)`` a unit normal pointing
+away from the camera's centre (``d < 0``: the camera centre is on the negative side).
 """
 
 from __future__ import annotations
@@ -20,8 +21,32 @@ from .. import _core
 from .._arrays import as_matrix, as_poses, check_transform, same_rows
 from .base import OnInvalid, check_on_invalid
 
-DISTORTION_NAMES: tuple[str, ...] = ("k1", "k2", "p1", "p2", "k3")
+#: OpenCV's distortion coefficients, in its order (the C++ core's, after fx, fy, cx, cy)
+DISTORTION_NAMES: tuple[str, ...] = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2",
+                                     "s3", "s4")
+#: the five-term Brown-Conrady lens: the terms a calibration estimates unless told otherwise
+CLASSIC_DISTORTION: tuple[str, ...] = DISTORTION_NAMES[:5]
 INTRINSIC_NAMES: tuple[str, ...] = ("fx", "fy", "cx", "cy", *DISTORTION_NAMES)
+#: the numbers of distortion coefficients OpenCV takes (without the tilted sensor's two)
+_DIST_LENGTHS = (4, 5, 8, 12)
+
+
+def stored_distortion(coefficients: Any) -> np.ndarray:
+    """Distortion coefficients as a sensor holds them: the shortest of OpenCV's lengths 5, 8
+    and 12 that keeps every non-zero term (so that a five-term lens stays five numbers in
+    files and in every OpenCV call). Raises ``ValueError`` for another count or a value that
+    is not finite."""
+    given = np.array(coefficients, dtype=float).ravel()
+    if given.size not in (0, *_DIST_LENGTHS):
+        raise ValueError("dist_coeffs must hold 4, 5, 8 or 12 numbers (OpenCV's k1, k2, p1, "
+                         "p2[, k3[, k4, k5, k6[, s1, s2, s3, s4]]]), got "
+                         f"{given.size}")
+    full = np.zeros(len(DISTORTION_NAMES))
+    full[: given.size] = given
+    full = _array(full, full.shape, "dist_coeffs")
+    used = np.flatnonzero(full)
+    n = next(k for k in _DIST_LENGTHS[1:] if used.size == 0 or used[-1] < k)
+    return full[:n]
 
 
 def _array(x: Any, shape: tuple[int, ...], name: str) -> np.ndarray:
@@ -63,7 +88,8 @@ class OpenCvSensor:
     """A calibrated general sensor.
 
     camera_matrix : 3x3 ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` (pixels)
-    dist_coeffs : ``(k1, k2, p1, p2, k3)``
+    dist_coeffs : OpenCV's ``(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2, s3, s4]]])``, held as
+        5, 8 or 12 numbers (:func:`stored_distortion`)
     image_size : ``(width, height)`` in pixels
     laser_plane : ``(a, b, c, d)``, camera frame, unit normal, ``d`` in mm (see module doc)
     hand_from_camera : 4x4 transform (mm)
@@ -84,13 +110,7 @@ class OpenCvSensor:
                 and k[2, 2] == 1):
             raise ValueError("camera_matrix must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with "
                              f"fx, fy > 0, got {k.tolist()}")
-        dist = np.zeros(5)
-        given = np.array(self.dist_coeffs, dtype=float).ravel()
-        if given.size not in (0, 4, 5):
-            raise ValueError("dist_coeffs must hold 4 or 5 numbers (k1, k2, p1, p2[, k3]), got "
-                             f"{given.size}")
-        dist[: given.size] = given
-        dist = _array(dist, (5,), "dist_coeffs")
+        dist = stored_distortion(self.dist_coeffs)
         w, h = _image_size(self.image_size)
         plane = _array(self.laser_plane, (4,), "laser_plane")
         norm = float(np.linalg.norm(plane[:3]))
@@ -130,8 +150,12 @@ class OpenCvSensor:
         return float(self.camera_matrix[1, 2])
 
     def intrinsics_vector(self) -> np.ndarray:
-        """[fx, fy, cx, cy, k1, k2, p1, p2, k3], the C++ core's order."""
-        return np.r_[self.fx, self.fy, self.cx, self.cy, self.dist_coeffs]
+        """[fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4], the C++ core's
+        order (the terms the sensor does not hold are 0)."""
+        v = np.zeros(4 + len(DISTORTION_NAMES))
+        v[:4] = (self.fx, self.fy, self.cx, self.cy)
+        v[4: 4 + self.dist_coeffs.size] = self.dist_coeffs
+        return v
 
     def project(self, camera_points: Any) -> tuple[np.ndarray, np.ndarray]:
         """Camera-frame points -> pixels (``cv2.projectPoints``); ``valid`` is False (NaN
@@ -190,7 +214,8 @@ class OpenCvSensor:
         return self.hand_from_camera.copy()
 
     def intrinsics(self) -> dict[str, float]:
-        """fx, fy, cx, cy, k1, k2, p1, p2, k3 by name."""
+        """fx, fy, cx, cy and the distortion terms the sensor holds (k1, k2, p1, p2, k3, and
+        k4 ... s4 when not all 0) by name."""
         values = (self.fx, self.fy, self.cx, self.cy, *self.dist_coeffs.tolist())
         return dict(zip(INTRINSIC_NAMES, (float(v) for v in values)))
 

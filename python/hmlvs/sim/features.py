@@ -59,7 +59,7 @@ def project(truth: Truth, camera_points: np.ndarray) -> np.ndarray:
 def synthetic_views(seed: int, n_views: int = 20, corner_noise: float = 0.1,
                laser_noise: float = 0.1, truth: Truth | None = None,
                board: BoardSpec | None = None, flip_every: int = 0,
-               stripe_samples: int = 400
+               stripe_samples: int = 400, spread: float = 20.0
                ) -> tuple[list[ViewData], BoardSpec, Truth, list[np.ndarray]]:
     """Views of the board from varied poses; returns views, board, truth, and each view's
     exact stripe points in the base frame (for map-error checks).
@@ -67,7 +67,10 @@ def synthetic_views(seed: int, n_views: int = 20, corner_noise: float = 0.1,
     stripe_samples : points sampled along the stripe across the board's width; those on the
         board (all of them in most views, at least 15 %) become the view's stripe pixels, so
         the default 400 gives ~200-400 a view and 800 about twice as many. The stripe noise
-        draws from the same generator, so another value also changes the later views."""
+        draws from the same generator, so another value also changes the later views.
+    spread : the standard deviation (mm) of the board centre's offset across the optical axis;
+        a larger one puts boards towards the image's edges and corners (views whose corners
+        leave the image are drawn again)."""
     truth = truth or default_truth()
     board = board or BoardSpec(6, 9, 25.0)
     rng = np.random.default_rng(seed)
@@ -78,7 +81,7 @@ def synthetic_views(seed: int, n_views: int = 20, corner_noise: float = 0.1,
         # the board's centre near the optical axis, 400-500 mm away
         cb = transform(rng.uniform(-0.4, 0.4, 3), [0, 0, 0])
         cb[:3, 3] = cb[:3, :3] @ np.array([-size[0] / 2, -size[1] / 2, 0]) + \
-            np.array([rng.normal(0, 20), rng.normal(0, 20), 450 + rng.uniform(-50, 50)])
+            np.array([rng.normal(0, spread), rng.normal(0, spread), 450 + rng.uniform(-50, 50)])
         bfh = truth.base_from_board @ np.linalg.inv(cb) @ np.linalg.inv(truth.hand_from_camera)
         corners = project(truth, pts @ cb[:3, :3].T + cb[:3, 3])
         # The stripe: board points (x, y, 0) on the laser plane, x across the board.
