@@ -30,6 +30,7 @@ from .checks import (
     camera_from_board_of,
     coverage_checks,
     laser_check,
+    lens_check,
     make_check,
     unknowns_check,
     variety_check,
@@ -274,5 +275,6 @@ def joint_checks(result: Any, views: Sequence[Any], board: Any) -> list[Check]:
     rots = [cb[:3, :3] for cb in (camera_from_board_of(result, v) for v in used)
             if cb is not None]
     checks.append(variety_check(rots))
+    checks += lens_check(result, used, board)
     checks.append(unknowns_check(result.rank, result.num_unknowns))
     return checks
