@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <random>
 #include <utility>
 #include <vector>
@@ -13,6 +14,7 @@
 #include "hmlvs/geometry/hand_eye.h"
 #include "hmlvs/model/opencv.h"
 #include "hmlvs/solvers/joint.h"
+#include "hmlvs/solvers/joint_costs.h"
 
 namespace hmlvs::opencv {
 namespace {
@@ -276,6 +278,52 @@ TEST(GeneralModel, JointSolveFitsAWideLensOfTwelveTerms) {
   }
   EXPECT_LT(worst, 0.01);
   EXPECT_LT((r.state.laser_plane - s.truth.laser_plane).cwiseAbs().maxCoeff(), 1e-4);
+}
+
+// The corner costs of a five-term lens (classic_lens: k4 to s4 held at 0 and not read) against
+// those of the whole lens: the same residuals and derivatives, bit for bit, but for the held
+// terms' columns, which are 0.
+TEST(GeneralModel, CornerCostsOfAFiveTermLensMatchTheFullAutodiff) {
+  const Scene s = MakeScene(2);
+  const JointView& v = s.views[0];
+  const PoseBlocks hc(s.truth.hand_from_camera), bb(s.truth.base_from_board);
+  const PoseBlocks cb(s.truth.hand_from_camera.inverse() * v.base_from_hand.inverse() *
+                      s.truth.base_from_board);
+  const int n = 2 * static_cast<int>(v.corner_pixels.rows());
+  for (bool chain : {true, false}) {
+    std::unique_ptr<ceres::CostFunction> held(chain ? NewChainCornerCost(&v, 10.0, true)
+                                                    : NewFreeCornerCost(&v, 10.0, true));
+    std::unique_ptr<ceres::CostFunction> full(chain ? NewChainCornerCost(&v, 10.0, false)
+                                                    : NewFreeCornerCost(&v, 10.0, false));
+    std::vector<const double*> blocks = {s.truth.intrinsics.data(), hc.q.data(), hc.t.data(),
+                                         bb.q.data(), bb.t.data()};
+    if (!chain) blocks = {s.truth.intrinsics.data(), cb.q.data(), cb.t.data()};
+    const std::vector<int> sizes =
+        chain ? std::vector<int>{16, 4, 3, 4, 3} : std::vector<int>{16, 4, 3};
+    std::vector<std::vector<double>> ja, jb;
+    std::vector<double*> pa, pb;
+    for (int size : sizes) {
+      ja.emplace_back(static_cast<std::size_t>(n * size));
+      jb.emplace_back(static_cast<std::size_t>(n * size));
+    }
+    for (std::size_t b = 0; b < sizes.size(); ++b) {
+      pa.push_back(ja[b].data());
+      pb.push_back(jb[b].data());
+    }
+    std::vector<double> ra(static_cast<std::size_t>(n)), rb(static_cast<std::size_t>(n));
+    ASSERT_TRUE(held->Evaluate(blocks.data(), ra.data(), pa.data()));
+    ASSERT_TRUE(full->Evaluate(blocks.data(), rb.data(), pb.data()));
+    EXPECT_EQ(ra, rb);
+    for (std::size_t b = 0; b < sizes.size(); ++b) {
+      for (int i = 0; i < n; ++i) {
+        for (int k = 0; k < sizes[b]; ++k) {
+          const double want =
+              (b == 0 && k >= kNumClassicIntrinsics) ? 0.0 : jb[b][i * sizes[b] + k];
+          ASSERT_EQ(ja[b][i * sizes[b] + k], want) << "block " << b << " row " << i << " col " << k;
+        }
+      }
+    }
+  }
 }
 
 TEST(GeneralModel, CameraModeJacobianMatchesCentralDifferences) {

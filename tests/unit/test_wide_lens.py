@@ -113,3 +113,18 @@ def test_a_five_term_lens_passes_the_lens_check():
         (check,) = lens_check(calibrate_joint(views, board, (1024, 768)), views, board)
         # the rational terms only fit the corners' noise: measured 0.99-1.0 of the RMS
         assert check.ok and check.value > 0.95, check
+
+
+def test_a_wide_lens_held_from_an_earlier_calibration_is_used_whole():
+    """A robot session started from a bench calibration of a wide lens (`--initial`): the
+    held camera's rational terms are used (not dropped with the five-term lens's shortcut),
+    so the corners fit to their noise through the chain."""
+    t = default_truth()
+    truth = Truth(K, RATIONAL, t.hand_from_camera, t.base_from_board, t.plane)
+    views, board, _, laser_base = synthetic_views(0, n_views=12, truth=truth,
+                                                  board=BoardSpec(7, 11, 25.0), spread=200)
+    held = OpenCvSensor(K, RATIONAL, (1024, 768), t.plane, np.eye(4))
+    r = calibrate_joint(views, board, (1024, 768), camera=held)
+    assert r.corner_rms_px < 0.16, r.corner_rms_px  # 0.1 px a coordinate: 0.141 px RMS
+    np.testing.assert_allclose(r.sensor.dist_coeffs, RATIONAL)
+    assert np.abs(r.sensor.hand_from_camera[:3, 3] - t.hand_from_camera[:3, 3]).max() < 0.5

@@ -58,25 +58,29 @@ using IntrinsicsVector = Eigen::Matrix<double, kNumIntrinsics, 1>;
 ///   radial = (1 + k1 r2 + k2 r2^2 + k3 r2^3) / (1 + k4 r2 + k5 r2^2 + k6 r2^3),
 ///   xd = x radial + 2 p1 x y + p2 (r2 + 2 x^2) + s1 r2 + s2 r2^2,
 ///   yd = y radial + p1 (r2 + 2 y^2) + 2 p2 x y + s3 r2 + s4 r2^2.
-template <typename T, typename S>
+/// Without kWide the terms beyond the five-term lens (k4 to s4) are taken as 0 unread: the
+/// same values for a lens without them, for fewer operations (on Jets above all).
+template <bool kWide = true, typename T, typename S>
 void Distort(const T* in, const S& x, const S& y, T* xd, T* yd) {
   const S r2 = x * x + y * y;
-  const T radial = (T(1.0) + r2 * (in[kK1] + r2 * (in[kK2] + r2 * in[kK3]))) /
-                   (T(1.0) + r2 * (in[kK4] + r2 * (in[kK5] + r2 * in[kK6])));
-  *xd = x * radial + T(2.0) * in[kP1] * x * y + in[kP2] * (r2 + T(2.0) * x * x) +
-        r2 * (in[kS1] + r2 * in[kS2]);
-  *yd = y * radial + in[kP1] * (r2 + T(2.0) * y * y) + T(2.0) * in[kP2] * x * y +
-        r2 * (in[kS3] + r2 * in[kS4]);
+  T radial = T(1.0) + r2 * (in[kK1] + r2 * (in[kK2] + r2 * in[kK3]));
+  if constexpr (kWide) radial /= T(1.0) + r2 * (in[kK4] + r2 * (in[kK5] + r2 * in[kK6]));
+  *xd = x * radial + T(2.0) * in[kP1] * x * y + in[kP2] * (r2 + T(2.0) * x * x);
+  *yd = y * radial + in[kP1] * (r2 + T(2.0) * y * y) + T(2.0) * in[kP2] * x * y;
+  if constexpr (kWide) {
+    *xd += r2 * (in[kS1] + r2 * in[kS2]);
+    *yd += r2 * (in[kS3] + r2 * in[kS4]);
+  }
 }
 
 /// A camera-frame point to its pixel (cv2.projectPoints). Returns false for a point that is not
 /// in front of the camera (Z <= 0); the pixel is then meaningless.
-template <typename T>
+template <bool kWide = true, typename T>
 bool ProjectPoint(const T* in, const T* camera_point, T* pixel) {
   const T x = camera_point[0] / camera_point[2];
   const T y = camera_point[1] / camera_point[2];
   T xd, yd;
-  Distort(in, x, y, &xd, &yd);
+  Distort<kWide>(in, x, y, &xd, &yd);
   pixel[0] = in[kFx] * xd + in[kCx];
   pixel[1] = in[kFy] * yd + in[kCy];
   return camera_point[2] > T(0.0);

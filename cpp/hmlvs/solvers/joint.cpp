@@ -34,6 +34,15 @@ Eigen::VectorXd ScalesAt(const JointView& v, const double* intrinsics,
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
+// Whether every intrinsic beyond the five-term lens is held at 0 (the corner costs then leave
+// them out).
+bool ClassicLensHeld(const JointOptions& o, const IntrinsicsVector& intrinsics) {
+  for (int k = kNumClassicIntrinsics; k < kNumIntrinsics; ++k) {
+    if (!o.fixed[k] || intrinsics[k] != 0.0) return false;
+  }
+  return true;
+}
+
 void CheckInput(const std::vector<JointView>& views, const JointState& s, const JointOptions& o) {
   if (!(o.pose_sigma_t >= 0.0 && o.pose_sigma_r >= 0.0) ||
       ((o.pose_sigma_t > 0.0) != (o.pose_sigma_r > 0.0))) {
@@ -147,13 +156,13 @@ class JointProblem {
     const bool soft = SoftChain(o);
     if (o.chain && !soft) {
       if (nc > 0) {  // none in a laser-only view
-        AddBlock(NewChainCornerCost(v, wc),
+        AddBlock(NewChainCornerCost(v, wc, ClassicLensHeld(o, intrinsics_)),
                  {intrinsics_.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
                   board_.t.data()},
                  nc);
       }
       if (o.laser && nl > 0) {
-        AddBlock(NewLaserCost(v, wl, true),
+        AddBlock(NewLaserCost(v, wl, true, ClassicLensHeld(o, intrinsics_)),
                  {intrinsics_.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
                   board_.t.data(), normal_.data(), &offset_},
                  nl);
@@ -163,12 +172,13 @@ class JointProblem {
     // The view's own board pose: camera mode, or uncertain robot poses (tied to the chain).
     PoseBlocks& p = views_pose_[i];
     if (nc > 0) {  // none in a laser-only view
-      AddBlock(NewFreeCornerCost(v, wc), {intrinsics_.data(), p.q.data(), p.t.data()}, nc);
+      AddBlock(NewFreeCornerCost(v, wc, ClassicLensHeld(o, intrinsics_)),
+               {intrinsics_.data(), p.q.data(), p.t.data()}, nc);
     }
     if (o.laser && nl > 0) {
       // The scale-free residual (LaserLineDistance): nothing else fixes this board's scale.
       const Eigen::VectorXd scales = ScalesAt(*v, intrinsics_.data(), p.Matrix(), normal_, offset_);
-      AddBlock(NewLaserCost(v, wl, false, &scales),
+      AddBlock(NewLaserCost(v, wl, false, ClassicLensHeld(o, intrinsics_), &scales),
                {intrinsics_.data(), p.q.data(), p.t.data(), normal_.data(), &offset_}, nl);
     }
     if (soft) {

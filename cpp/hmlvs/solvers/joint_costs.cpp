@@ -17,21 +17,23 @@ using geometry::Vec3;
 
 namespace {
 
-// CornerResiduals (joint_costs.h) on any scalar.
-template <typename T>
+// CornerResiduals (joint_costs.h) on any scalar; without kWide the lens terms beyond the
+// five-term one are taken as 0 (Distort).
+template <bool kWide, typename T>
 bool Corners(const T* in, const Mat3<T>& r, const Vec3<T>& t, const JointView& view,
              double inv_sigma, T* residuals) {
   bool ok = true;
   for (Eigen::Index i = 0; i < view.corner_points.rows(); ++i) {
     const Vec3<T> p = r * view.corner_points.row(i).transpose().cast<T>() + t;
     T px[2];
-    ok = ProjectPoint(in, p.data(), px) && ok;
+    ok = ProjectPoint<kWide>(in, p.data(), px) && ok;
     residuals[2 * i] = (px[0] - view.corner_pixels(i, 0)) * inv_sigma;
     residuals[2 * i + 1] = (px[1] - view.corner_pixels(i, 1)) * inv_sigma;
   }
   return ok;
 }
 
+template <bool kWide>
 struct ChainCorners {
   const JointView* view;
   double inv_sigma;
@@ -42,7 +44,7 @@ struct ChainCorners {
     Vec3<T> t;
     CameraFromBoard(q_hc, t_hc, view->base_from_hand.topLeftCorner<3, 3>().eval(),
                     view->base_from_hand.topRightCorner<3, 1>().eval(), q_bb, t_bb, &r, &t);
-    return Corners(in, r, t, *view, inv_sigma, residuals);
+    return Corners<kWide>(in, r, t, *view, inv_sigma, residuals);
   }
 };
 
@@ -86,6 +88,7 @@ struct PosePrior {
   }
 };
 
+template <bool kWide>
 struct FreeCorners {
   const JointView* view;
   double inv_sigma;
@@ -94,15 +97,16 @@ struct FreeCorners {
     Mat3<T> r;
     Vec3<T> t;
     QuaternionPose(q_cb, t_cb, &r, &t);
-    return Corners(in, r, t, *view, inv_sigma, residuals);
+    return Corners<kWide>(in, r, t, *view, inv_sigma, residuals);
   }
 };
 
 // One stripe pixel's row of d(residual)/d(intrinsics), times w, from the residual's derivatives
 // drdx, drdy with respect to the undistorted point (x, y) and the distortion's Jacobian jd
-// there (row-major 2x2), through the implicit function theorem (LaserCost).
+// there (row-major 2x2), through the implicit function theorem (LaserCost). `classic`: the
+// terms k4 to s4 are held at 0 and their entries are 0.
 void IntrinsicsRow(const double* in, double u, double v, double x, double y, const double* jd,
-                   double drdx, double drdy, double w, double* row) {
+                   double drdx, double drdy, double w, bool classic, double* row) {
   const double det = jd[0] * jd[3] - jd[1] * jd[2];
   // g = (dr/dx, dr/dy) Jd^-1, so that dr/din = -g (d distort/d in - d m/d in)
   const double g0 = (drdx * jd[3] - drdy * jd[2]) / det;
@@ -113,22 +117,27 @@ void IntrinsicsRow(const double* in, double u, double v, double x, double y, con
   row[kFy] = -g1 * (my / in[kFy]) * w;
   row[kCx] = -g0 / in[kFx] * w;  // dm_x/dcx = -1/fx
   row[kCy] = -g1 / in[kFy] * w;
+  // classic: k4 to s4 held at 0, their rows 0 (the five-term lens's rows alone)
   // radial = num / den: d/dk1..k3 = r^2n / den, d/dk4..k6 = -radial r^2n / den (times x, y)
-  const double den = 1.0 + r2 * (in[kK4] + r2 * (in[kK5] + r2 * in[kK6]));
-  const double radial = (1.0 + r2 * (in[kK1] + r2 * (in[kK2] + r2 * in[kK3]))) / den;
+  const double den = classic ? 1.0 : 1.0 + r2 * (in[kK4] + r2 * (in[kK5] + r2 * in[kK6]));
   const double gr = -(g0 * x + g1 * y) * w / den;
   row[kK1] = gr * r2;
   row[kK2] = gr * r4;
   row[kK3] = gr * r6;
-  row[kK4] = -gr * radial * r2;
-  row[kK5] = -gr * radial * r4;
-  row[kK6] = -gr * radial * r6;
+  if (classic) {
+    for (int k = kK4; k <= kS4; ++k) row[k] = 0.0;
+  } else {
+    const double radial = (1.0 + r2 * (in[kK1] + r2 * (in[kK2] + r2 * in[kK3]))) / den;
+    row[kK4] = -gr * radial * r2;
+    row[kK5] = -gr * radial * r4;
+    row[kK6] = -gr * radial * r6;
+    row[kS1] = -g0 * r2 * w;
+    row[kS2] = -g0 * r4 * w;
+    row[kS3] = -g1 * r2 * w;
+    row[kS4] = -g1 * r4 * w;
+  }
   row[kP1] = -(g0 * 2.0 * x * y + g1 * (r2 + 2.0 * y * y)) * w;
   row[kP2] = -(g0 * (r2 + 2.0 * x * x) + g1 * 2.0 * x * y) * w;
-  row[kS1] = -g0 * r2 * w;
-  row[kS2] = -g0 * r4 * w;
-  row[kS3] = -g1 * r2 * w;
-  row[kS4] = -g1 * r4 * w;
 }
 
 // The laser residuals of one view with an analytic Jacobian (the autodiff version of
@@ -149,8 +158,12 @@ class LaserCost final : public ceres::CostFunction {
  public:
   static constexpr int kPose = kChain ? 14 : 7;
 
-  LaserCost(const JointView* view, double inv_sigma, const Eigen::VectorXd* scales)
-      : view_(view), w_(inv_sigma), scales_(scales ? *scales : Eigen::VectorXd()) {
+  LaserCost(const JointView* view, double inv_sigma, const Eigen::VectorXd* scales,
+            bool classic_lens)
+      : view_(view),
+        w_(inv_sigma),
+        scales_(scales ? *scales : Eigen::VectorXd()),
+        classic_(classic_lens) {
     set_num_residuals(static_cast<int>(view->laser_pixels.rows()));
     auto* sizes = mutable_parameter_block_sizes();
     sizes->push_back(kNumIntrinsics);
@@ -208,7 +221,8 @@ class LaserCost final : public ceres::CostFunction {
       const double drdx = -ob / nn * (n[0] * b - a * nb[0]) / (b * b);
       const double drdy = -ob / nn * (n[1] * b - a * nb[1]) / (b * b);
       if (jacobians[0] != nullptr) {
-        IntrinsicsRow(in, u, v, x, y, jd, drdx, drdy, w_, jacobians[0] + i * kNumIntrinsics);
+        IntrinsicsRow(in, u, v, x, y, jd, drdx, drdy, w_, classic_,
+                      jacobians[0] + i * kNumIntrinsics);
       }
       // dr/d(nb, ob)
       const double k_nb = ob * a / (nn * b * b);
@@ -251,7 +265,7 @@ class LaserCost final : public ceres::CostFunction {
     const double n3 = big_n * big_n * big_n;
     if (jacobians[0] != nullptr) {
       double* row = jacobians[0] + i * kNumIntrinsics;
-      IntrinsicsRow(in, u, v, x, y, jd, big_n * m[0], big_n * m[1], c, row);
+      IntrinsicsRow(in, u, v, x, y, jd, big_n * m[0], big_n * m[1], c, classic_, row);
       row[kFx] += c * sv * n3 * ax * ax / in[kFx];
       row[kFy] += c * sv * n3 * ay * ay / in[kFy];
     }
@@ -292,6 +306,7 @@ class LaserCost final : public ceres::CostFunction {
   const JointView* view_;
   double w_;
   Eigen::VectorXd scales_;  // empty: the mm residual (LaserResidual)
+  bool classic_;            // k4 to s4 held at 0 (IntrinsicsRow)
 };
 
 }  // namespace
@@ -309,7 +324,7 @@ Eigen::Matrix4d PoseBlocks::Matrix() const {
 
 bool CornerResiduals(const double* intrinsics, const Eigen::Matrix3d& r, const Eigen::Vector3d& t,
                      const JointView& view, double inv_sigma, double* residuals) {
-  return Corners(intrinsics, r, t, view, inv_sigma, residuals);
+  return Corners<true>(intrinsics, r, t, view, inv_sigma, residuals);
 }
 
 bool LaserResidual(const double* in, const double* nb, double ob, const double* unit, double d,
@@ -330,22 +345,31 @@ Vector6d PoseError(const PoseBlocks& camera_from_board, const PoseBlocks& hand_f
   return e;
 }
 
-ceres::CostFunction* NewChainCornerCost(const JointView* view, double inv_sigma) {
+ceres::CostFunction* NewChainCornerCost(const JointView* view, double inv_sigma,
+                                        bool classic_lens) {
   const int n = 2 * static_cast<int>(view->corner_pixels.rows());
-  return new ceres::AutoDiffCostFunction<ChainCorners, ceres::DYNAMIC, kNumIntrinsics, 4, 3, 4, 3>(
-      new ChainCorners{view, inv_sigma}, n);
+  if (classic_lens) {
+    return new ceres::AutoDiffCostFunction<ChainCorners<false>, ceres::DYNAMIC, kNumIntrinsics, 4,
+                                           3, 4, 3>(new ChainCorners<false>{view, inv_sigma}, n);
+  }
+  return new ceres::AutoDiffCostFunction<ChainCorners<true>, ceres::DYNAMIC, kNumIntrinsics, 4, 3,
+                                         4, 3>(new ChainCorners<true>{view, inv_sigma}, n);
 }
 
-ceres::CostFunction* NewFreeCornerCost(const JointView* view, double inv_sigma) {
+ceres::CostFunction* NewFreeCornerCost(const JointView* view, double inv_sigma, bool classic_lens) {
   const int n = 2 * static_cast<int>(view->corner_pixels.rows());
-  return new ceres::AutoDiffCostFunction<FreeCorners, ceres::DYNAMIC, kNumIntrinsics, 4, 3>(
-      new FreeCorners{view, inv_sigma}, n);
+  if (classic_lens) {
+    return new ceres::AutoDiffCostFunction<FreeCorners<false>, ceres::DYNAMIC, kNumIntrinsics, 4,
+                                           3>(new FreeCorners<false>{view, inv_sigma}, n);
+  }
+  return new ceres::AutoDiffCostFunction<FreeCorners<true>, ceres::DYNAMIC, kNumIntrinsics, 4, 3>(
+      new FreeCorners<true>{view, inv_sigma}, n);
 }
 
 ceres::CostFunction* NewLaserCost(const JointView* view, double inv_sigma, bool chain,
-                                  const Eigen::VectorXd* scales) {
-  if (chain) return new LaserCost<true>(view, inv_sigma, scales);
-  return new LaserCost<false>(view, inv_sigma, scales);
+                                  bool classic_lens, const Eigen::VectorXd* scales) {
+  if (chain) return new LaserCost<true>(view, inv_sigma, scales, classic_lens);
+  return new LaserCost<false>(view, inv_sigma, scales, classic_lens);
 }
 
 double LaserLineDistance(const double* in, const double* nb, double ob, const double* unit,

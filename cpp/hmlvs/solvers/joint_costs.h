@@ -60,20 +60,23 @@ Vector6d PoseError(const PoseBlocks& camera_from_board, const PoseBlocks& hand_f
 
 /// Chain mode: the corner residuals of a view over the blocks intrinsics (16),
 /// hand_from_camera (4, 3) and base_from_board (4, 3).
-ceres::CostFunction* NewChainCornerCost(const JointView* view, double inv_sigma);
+/// `classic_lens`: the intrinsics beyond the five-term lens (k4 to s4) are held at 0, so they are
+/// not read (their Jacobian columns are 0: fewer operations on the Jets).
+ceres::CostFunction* NewChainCornerCost(const JointView* view, double inv_sigma, bool classic_lens);
 
 /// A view with its own board pose: the corner residuals over the blocks intrinsics (16) and
 /// camera_from_board (4, 3).
-ceres::CostFunction* NewFreeCornerCost(const JointView* view, double inv_sigma);
+/// `classic_lens`: as NewChainCornerCost.
+ceres::CostFunction* NewFreeCornerCost(const JointView* view, double inv_sigma, bool classic_lens);
 
 /// The laser residuals of a view (analytic Jacobian) over the blocks intrinsics (16), the board
 /// pose's blocks (chain: hand_from_camera (4, 3) and base_from_board (4, 3); else
 /// camera_from_board (4, 3)), the laser plane's normal (3) and offset (1).
 /// `scales` (views with their own board pose): the residuals are LaserLineDistance times these
 /// fixed factors (LaserScales at the start, so that they read as mm there), not the mm
-/// distance; null: LaserResidual.
+/// distance; null: LaserResidual. `classic_lens`: as NewChainCornerCost.
 ceres::CostFunction* NewLaserCost(const JointView* view, double inv_sigma, bool chain,
-                                  const Eigen::VectorXd* scales = nullptr);
+                                  bool classic_lens, const Eigen::VectorXd* scales = nullptr);
 
 /// Uncertain robot poses: the pose error of a view, rotation * w_r and translation * w_t, over
 /// the blocks camera_from_board, hand_from_camera and base_from_board (4, 3 each).
