@@ -16,7 +16,8 @@ import pytest
 import yaml
 
 K = np.array([[350.0, 0, 512], [0, 352, 384], [0, 0, 1.0]])
-#: a wide lens of the rational model (its pixels bend by up to ~60 px at the image's edge)
+#: a wide lens of the rational model, a strong barrel: a point seen at the image's left or right
+#: edge lies 355-362 px further out through a pinhole
 RATIONAL = np.array([1.2, 0.3, 0.0005, -0.0003, 0.0, 1.6, 0.6, 0.0])
 #: the same with the thin prism's four terms
 PRISM = np.r_[RATIONAL, 0.002, -0.001, 0.0015, 0.0008]
