@@ -175,11 +175,13 @@ def calibrate_session(source: str | os.PathLike, *, robot: Robot | None = None,
     calibrated. ``robot_poses``: "exact" or "uncertain"
     (:func:`~hmlvs.calibration.joint.calibrate_joint`). :func:`calibrate` with
     ``model="opencv"`` gives the same calibration (without the hold-out)."""
+    from .calibration.joint_setup import check_distortion
     from .calibration.joint_solve import robot_poses_uncertain
     from .data.views import split_views
     from .image.views import views_from_images
 
     robot_poses_uncertain(robot_poses)  # checked before the images are read
+    check_distortion(distortion)
 
     views, board, size, board_pose, reports = views_from_images(source, robot=robot)
     if on_views is not None:

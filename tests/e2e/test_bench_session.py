@@ -209,3 +209,17 @@ def test_a_bench_session_has_no_robot_poses_to_doubt(sessions, tmp_path, capsys)
                          str(tmp_path / "x.yaml")], capsys)
     assert code == 2 and "views without a robot pose" in err
     assert not (tmp_path / "x.yaml").exists()
+
+
+@pytest.mark.parametrize("terms, message", [
+    ("k1,k9", "unknown distortion term 'k9'"),
+    ("k1,k2,s1", "s1, s2, s3 and s4 go together"),
+])
+def test_distortion_terms_are_checked_before_the_images_are_read(sessions, tmp_path, capsys,
+                                                                 terms, message):
+    _, robot, _ = sessions
+    code, out, err = run_cli(["calibrate", str(robot), "--distortion", terms, "--out",
+                              str(tmp_path / "x.yaml")], capsys)
+    assert code not in (0, None) and message in err
+    assert "corners" not in out  # no view's line: refused before any image was read
+    assert not (tmp_path / "x.yaml").exists()
