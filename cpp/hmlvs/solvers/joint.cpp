@@ -109,6 +109,7 @@ class JointProblem {
       : options_(o), hand_eye_(s.hand_from_camera), board_(s.base_from_board) {
     CheckInput(views, s, o);
     intrinsics_ = s.intrinsics;
+    classic_lens_ = ClassicLensHeld(o, intrinsics_);
     const double n = s.laser_plane.head<3>().norm();
     normal_ = s.laser_plane.head<3>() / n;
     offset_ = s.laser_plane[3] / n;
@@ -156,13 +157,13 @@ class JointProblem {
     const bool soft = SoftChain(o);
     if (o.chain && !soft) {
       if (nc > 0) {  // none in a laser-only view
-        AddBlock(NewChainCornerCost(v, wc, ClassicLensHeld(o, intrinsics_)),
+        AddBlock(NewChainCornerCost(v, wc, classic_lens_),
                  {intrinsics_.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
                   board_.t.data()},
                  nc);
       }
       if (o.laser && nl > 0) {
-        AddBlock(NewLaserCost(v, wl, true, ClassicLensHeld(o, intrinsics_)),
+        AddBlock(NewLaserCost(v, wl, true, classic_lens_),
                  {intrinsics_.data(), hand_eye_.q.data(), hand_eye_.t.data(), board_.q.data(),
                   board_.t.data(), normal_.data(), &offset_},
                  nl);
@@ -172,13 +173,13 @@ class JointProblem {
     // The view's own board pose: camera mode, or uncertain robot poses (tied to the chain).
     PoseBlocks& p = views_pose_[i];
     if (nc > 0) {  // none in a laser-only view
-      AddBlock(NewFreeCornerCost(v, wc, ClassicLensHeld(o, intrinsics_)),
+      AddBlock(NewFreeCornerCost(v, wc, classic_lens_),
                {intrinsics_.data(), p.q.data(), p.t.data()}, nc);
     }
     if (o.laser && nl > 0) {
       // The scale-free residual (LaserLineDistance): nothing else fixes this board's scale.
       const Eigen::VectorXd scales = ScalesAt(*v, intrinsics_.data(), p.Matrix(), normal_, offset_);
-      AddBlock(NewLaserCost(v, wl, false, ClassicLensHeld(o, intrinsics_), &scales),
+      AddBlock(NewLaserCost(v, wl, false, classic_lens_, &scales),
                {intrinsics_.data(), p.q.data(), p.t.data(), normal_.data(), &offset_}, nl);
     }
     if (soft) {
@@ -237,6 +238,7 @@ class JointProblem {
 
   JointOptions options_;
   IntrinsicsVector intrinsics_;
+  bool classic_lens_ = false;  // k4 to s4 held at 0 (ClassicLensHeld): every view's costs skip them
   Eigen::Vector3d normal_;
   double offset_ = 0.0;
   PoseBlocks hand_eye_, board_;
