@@ -2,7 +2,9 @@
 
 #include <ceres/manifold.h>
 #include <ceres/solver.h>
+#include <glog/logging.h>
 
+#include <algorithm>
 #include <stdexcept>
 
 namespace hmlvs::solvers {
@@ -39,6 +41,13 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
 SolveSummary SolveLm(ceres::Problem* problem, const StopRules& stop,
                      ceres::LinearSolverType linear_solver,
                      std::chrono::steady_clock::time_point start) {
+  // Ceres writes a step whose linear solve failed (one it retries with more damping) to stderr
+  // as a glog warning, even with SILENT logging; the summary says what matters.
+  static const bool quiet = [] {
+    FLAGS_minloglevel = std::max(FLAGS_minloglevel, static_cast<int>(google::GLOG_ERROR));
+    return true;
+  }();
+  (void)quiet;
   ceres::Solver::Options options;
   options.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
   options.linear_solver_type = linear_solver;
