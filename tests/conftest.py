@@ -127,3 +127,18 @@ def tree_digest(folder: Path) -> dict[str, str]:
         else:
             out[key] = "folder"
     return out
+
+
+def stripe_errors(session, sensor) -> np.ndarray:
+    """Every view's whole true stripe of a rendered general session (on the board and off
+    it) mapped through ``sensor`` against its true points (mm)."""
+    errs = []
+    for i in range(len(session)):
+        v = session.stripe_v[i]
+        ok = np.isfinite(v)
+        px = np.c_[np.flatnonzero(ok).astype(float), v[ok]]
+        poses = np.repeat(session.base_from_hand[i][None], len(px), 0)
+        want, a = session.sensor.points_in_base(px, poses, on_invalid="mask")
+        got, b = sensor.points_in_base(px, poses, on_invalid="mask")
+        errs.append(np.linalg.norm(got[a & b] - want[a & b], axis=1))
+    return np.concatenate(errs)

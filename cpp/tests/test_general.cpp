@@ -28,11 +28,12 @@ IntrinsicsVector Intrinsics() {
   return in;
 }
 
-// A wide lens of OpenCV's twelve terms: the rational model's denominator and the thin prism.
+// A wide lens of OpenCV's fourteen terms: the rational model's denominator, the thin prism and
+// a tilted (Scheimpflug) sensor, 3 and -2 degrees.
 IntrinsicsVector WideIntrinsics() {
   IntrinsicsVector in;
   in << 700, 705, 515, 380, 0.35, -0.12, 0.0006, -0.0004, 0.01, 0.6, -0.05, 0.02, 0.002, -0.001,
-      0.0015, 0.0008;
+      0.0015, 0.0008, 0.052, -0.035;
   return in;
 }
 
@@ -109,7 +110,7 @@ TEST(GeneralModel, UndistortInvertsProjection) {
   }
 }
 
-TEST(GeneralModel, UndistortInvertsAWideLensOfTwelveTerms) {
+TEST(GeneralModel, UndistortInvertsAWideLensOfFourteenTerms) {
   const IntrinsicsVector in = WideIntrinsics();
   for (double x = -0.7; x <= 0.7; x += 0.05) {
     for (double y = -0.55; y <= 0.55; y += 0.05) {
@@ -243,16 +244,18 @@ TEST(GeneralModel, JointJacobianOfEveryDistortionTermMatchesCentralDifferences) 
   JointState at = s.truth;
   at.intrinsics[kK4] += 0.05;  // off the solution
   at.intrinsics[kS2] += 0.001;
+  at.intrinsics[kTauY] += 0.01;
   JointOptions o;
-  o.fixed = {};  // all sixteen free: columns 0-15
+  o.fixed = {};  // all eighteen free: columns 0-17
   const JacobianCheck c(s.views, at, o);
-  ASSERT_EQ(c.names.size(), 31u);
+  ASSERT_EQ(c.names.size(), 33u);
   EXPECT_EQ(c.names[kK4], "k4");
   EXPECT_EQ(c.names[kS4], "s4");
+  EXPECT_EQ(c.names[kTauY], "tauy");
   c.ExpectIntrinsics();
 }
 
-TEST(GeneralModel, JointSolveFitsAWideLensOfTwelveTerms) {
+TEST(GeneralModel, JointSolveFitsAWideLensOfFourteenTerms) {
   const Scene s = MakeScene(7, WideIntrinsics());
   JointState start = s.truth;
   start.intrinsics.tail<kNumIntrinsics - 4>().setZero();  // no distortion at the start
@@ -280,7 +283,7 @@ TEST(GeneralModel, JointSolveFitsAWideLensOfTwelveTerms) {
   EXPECT_LT((r.state.laser_plane - s.truth.laser_plane).cwiseAbs().maxCoeff(), 1e-4);
 }
 
-// The corner costs of a five-term lens (classic_lens: k4 to s4 held at 0 and not read) against
+// The corner costs of a five-term lens (classic_lens: k4 to tauy held at 0 and not read) against
 // those of the whole lens: the same residuals and derivatives, bit for bit, but for the held
 // terms' columns, which are 0.
 TEST(GeneralModel, CornerCostsOfAFiveTermLensMatchTheFullAutodiff) {
@@ -298,8 +301,8 @@ TEST(GeneralModel, CornerCostsOfAFiveTermLensMatchTheFullAutodiff) {
     std::vector<const double*> blocks = {s.truth.intrinsics.data(), hc.q.data(), hc.t.data(),
                                          bb.q.data(), bb.t.data()};
     if (!chain) blocks = {s.truth.intrinsics.data(), cb.q.data(), cb.t.data()};
-    const std::vector<int> sizes =
-        chain ? std::vector<int>{16, 4, 3, 4, 3} : std::vector<int>{16, 4, 3};
+    const std::vector<int> sizes = chain ? std::vector<int>{kNumIntrinsics, 4, 3, 4, 3}
+                                         : std::vector<int>{kNumIntrinsics, 4, 3};
     std::vector<std::vector<double>> ja, jb;
     std::vector<double*> pa, pb;
     for (int size : sizes) {

@@ -5,7 +5,7 @@ towards the image's edges, and its verdict says so rather than passing a wrong c
 
 from __future__ import annotations
 
-from conftest import run_cli
+from conftest import run_cli, stripe_errors
 from hmlvs.data.calibration_file import load_calibration
 from hmlvs.geometry.board import Checkerboard
 from hmlvs.models.opencv import OpenCvSensor
@@ -32,21 +32,6 @@ def wide(tmp_path_factory):
     return s, out
 
 
-def _stripe_errors(s, sensor) -> np.ndarray:
-    """Every view's whole true stripe (on the board and off it) mapped through ``sensor``
-    against the true points (mm)."""
-    errs = []
-    for i in range(len(s)):
-        v = s.stripe_v[i]
-        ok = np.isfinite(v)
-        px = np.c_[np.flatnonzero(ok).astype(float), v[ok]]
-        poses = np.repeat(s.base_from_hand[i][None], len(px), 0)
-        want, a = s.sensor.points_in_base(px, poses, on_invalid="mask")
-        got, b = sensor.points_in_base(px, poses, on_invalid="mask")
-        errs.append(np.linalg.norm(got[a & b] - want[a & b], axis=1))
-    return np.concatenate(errs)
-
-
 def test_a_wide_lens_calibrates_with_the_rational_model(wide, tmp_path, capsys):
     s, session = wide
     out = tmp_path / "wide.yaml"
@@ -59,7 +44,7 @@ def test_a_wide_lens_calibrates_with_the_rational_model(wide, tmp_path, capsys):
     # measured: fx 450.01, fy 452.00, cx 517.51, cy 379.48
     np.testing.assert_allclose([cal.sensor.fx, cal.sensor.fy, cal.sensor.cx, cal.sensor.cy],
                                [450.0, 452.0, 517.5, 379.5], atol=0.1)
-    e = _stripe_errors(s, cal.sensor)
+    e = stripe_errors(s, cal.sensor)
     # measured: 0.30 mm at the 95th percentile over 14,133 stripe pixels
     assert np.percentile(e, 95) < 0.6
 
@@ -75,4 +60,4 @@ def test_the_five_term_lens_is_not_passed_on_a_wide_lens(wide, tmp_path, capsys)
     assert "calibrated on two halves of the views" in text
     # and the first reason names the cure (corners: 0.016 px with k4-k6, 0.039 px without)
     assert "FAIL lens_model" in text and "--distortion k1,k2,p1,p2,k3,k4,k5,k6" in text
-    assert np.percentile(_stripe_errors(s, load_calibration(out).sensor), 95) > 1.0
+    assert np.percentile(stripe_errors(s, load_calibration(out).sensor), 95) > 1.0

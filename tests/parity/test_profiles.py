@@ -89,3 +89,18 @@ def test_frames_without_a_stripe_are_their_numpy_composition(rendered, model):
         _assert_profile_is_the_oracle(
             got, ref.profile(sensor_model(sensor), frame, s.base_from_hand[0]))
         assert (got.status == PointStatus.NO_STRIPE).all()
+
+
+def test_a_tilted_sensor_s_profiles_are_their_numpy_composition(rendered):
+    """The Measurer keeps a tilted sensor's homography (OpenCV's taux, tauy) for its frames:
+    the same points as the sensor's own mapping, which differ from the upright sensor's."""
+    s, r = rendered
+    tilted = dataclasses.replace(s.sensor,
+                                 dist_coeffs=np.r_[s.sensor.dist_coeffs, np.zeros(7), 0.2, 0.03])
+    pose = s.base_from_hand[0]
+    got = hmlvs.Measurer(tilted).points(r.on[0], pose, r.off[0])
+    _assert_profile_is_the_oracle(got, ref.profile(sensor_model(tilted), r.on[0], pose, r.off[0]))
+    upright = hmlvs.Measurer(s.sensor).points(r.on[0], pose, r.off[0])
+    both = got.measured & upright.measured
+    assert both.sum() > 400
+    assert np.abs(got.points[both] - upright.points[both]).max() > 1.0

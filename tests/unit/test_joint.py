@@ -22,9 +22,9 @@ import pytest
 
 
 def _intrinsics(t) -> np.ndarray:
-    """The C++ core's 16 intrinsics: fx, fy, cx, cy and OpenCV's 12 distortion terms."""
+    """The C++ core's 18 intrinsics: fx, fy, cx, cy and OpenCV's 14 distortion terms."""
     k = t.camera_matrix
-    d = np.zeros(12)
+    d = np.zeros(14)
     d[: len(t.dist)] = t.dist
     return np.r_[k[0, 0], k[1, 1], k[0, 2], k[1, 2], d]
 

@@ -48,6 +48,7 @@ LaserSensor LaserSensor::OpenCv(const opencv::IntrinsicsVector& intrinsics,
   }
   LaserSensor s;
   s.intrinsics_ = intrinsics;
+  s.untilt_ = opencv::Untilt(intrinsics.data());
   s.unit_plane_ = opencv::UnitPlane(laser_plane);
   s.width_ = width;
   s.height_ = height;
@@ -63,7 +64,7 @@ bool LaserSensor::CameraPoint(double u, double v, double* point) const {
   }
   const bool inside = u >= -0.5 && u <= width_ - 0.5 && v >= -0.5 && v <= height_ - 0.5;
   const char* why = "";
-  return inside && opencv::LaserPoint(intrinsics_, unit_plane_, u, v, point, &why);
+  return inside && opencv::LaserPoint(intrinsics_, unit_plane_, u, v, point, &why, &untilt_);
 }
 
 FrameProfile EmptyProfile(Eigen::Index scan_lines) {

@@ -55,6 +55,7 @@ class LaserSensor {
   paper::Vector14d q_ = paper::Vector14d::Zero();
   double tan_theta_ = 0.0, cos_theta_ = 1.0, sin_theta_ = 0.0;
   opencv::IntrinsicsVector intrinsics_ = opencv::IntrinsicsVector::Zero();
+  opencv::Untilt untilt_{intrinsics_.data()};
   Eigen::Vector4d unit_plane_ = Eigen::Vector4d::Zero();
   double width_ = 0.0, height_ = 0.0;
   Eigen::Matrix4d hand_from_camera_ = Eigen::Matrix4d::Identity();

@@ -37,10 +37,9 @@ void DistortWithJacobian(const double* in, double x, double y, double* xd, doubl
   j[3] = radial + 2.0 * y * (y * dradial + dsy) + 6.0 * in[kP1] * y + 2.0 * in[kP2] * x;
 }
 
+// Newton's method on distort(x, y) = (mx, my) from (mx, my) itself.
 template <bool kWide>
-bool Undistort(const double* in, double u, double v, double* x, double* y, double* jacobian) {
-  const double mx = (u - in[kCx]) / in[kFx];
-  const double my = (v - in[kCy]) / in[kFy];
+bool Undistort(const double* in, double mx, double my, double* x, double* y, double* jacobian) {
   double px = mx, py = my;
   double j[4], xd, yd;
   bool converged = false;
@@ -72,12 +71,22 @@ bool Undistort(const double* in, double u, double v, double* x, double* y, doubl
 
 }  // namespace
 
+Untilt::Untilt(const double* in) : upright(in[kTauX] == 0.0 && in[kTauY] == 0.0) {
+  if (!upright) TiltHomography(in[kTauX], in[kTauY], true, h);
+}
+
 bool UndistortNormalized(const double* in, double u, double v, double* x, double* y,
-                         double* jacobian) {
-  for (int k = kNumClassicIntrinsics; k < kNumIntrinsics; ++k) {
-    if (in[k] != 0.0) return Undistort<true>(in, u, v, x, y, jacobian);
+                         double* jacobian, const Untilt* untilt) {
+  if (untilt == nullptr) {
+    const Untilt own(in);
+    return UndistortNormalized(in, u, v, x, y, jacobian, &own);
   }
-  return Undistort<false>(in, u, v, x, y, jacobian);
+  double mx, my;
+  DistortedTarget(in, untilt->upright ? nullptr : untilt->h, u, v, &mx, &my);
+  for (int k = kNumClassicIntrinsics; k < kTauX; ++k) {
+    if (in[k] != 0.0) return Undistort<true>(in, mx, my, x, y, jacobian);
+  }
+  return Undistort<false>(in, mx, my, x, y, jacobian);
 }
 
 void ValidateIntrinsics(const IntrinsicsVector& in) {
@@ -138,15 +147,17 @@ PixelsResult ProjectCameraPoints(const IntrinsicsVector& in, Points3Ref points) 
 PixelsResult UndistortPixels(const IntrinsicsVector& in, PixelsRef pixels) {
   ValidateIntrinsics(in);
   RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
+  const Untilt untilt(in.data());
   return MapToPixels(pixels.rows(), [&](Eigen::Index i, double* xy) {
-    return UndistortNormalized(in.data(), pixels(i, 0), pixels(i, 1), &xy[0], &xy[1]);
+    return UndistortNormalized(in.data(), pixels(i, 0), pixels(i, 1), &xy[0], &xy[1], nullptr,
+                               &untilt);
   });
 }
 
 bool LaserPoint(const IntrinsicsVector& in, const Eigen::Vector4d& plane, double u, double v,
-                double* point, const char** why) {
+                double* point, const char** why, const Untilt* untilt) {
   double x, y;
-  if (!UndistortNormalized(in.data(), u, v, &x, &y)) {
+  if (!UndistortNormalized(in.data(), u, v, &x, &y, nullptr, untilt)) {
     *why = "lies beyond the region where the lens distortion can be inverted";
     return false;
   }
@@ -175,13 +186,14 @@ PointsResult MapLaserPixels(const IntrinsicsVector& in, const Eigen::Vector4d& l
   ValidateIntrinsics(in);
   RequireFinite(pixels.data(), pixels.rows(), 2, "pixels");
   const Eigen::Vector4d plane = UnitPlane(laser_plane);
+  const Untilt untilt(in.data());
   PointsResult out;
   out.points.resize(pixels.rows(), 3);
   out.valid.resize(pixels.rows());
   for (Eigen::Index i = 0; i < pixels.rows(); ++i) {
     double p[3];
     const char* why = "";
-    if (LaserPoint(in, plane, pixels(i, 0), pixels(i, 1), p, &why)) {
+    if (LaserPoint(in, plane, pixels(i, 0), pixels(i, 1), p, &why, &untilt)) {
       out.points.row(i) = to_output(i, Eigen::Vector3d(p[0], p[1], p[2]));
       out.valid[i] = 1;
     } else {

@@ -1,11 +1,13 @@
 // The general sensor model (model "opencv", namespace hmlvs::opencv): OpenCV's pinhole camera
-// with its distortion (Brown-Conrady, the rational model's denominator and the thin prism), a
-// laser plane with three degrees of freedom and a hand-eye transform with any rotation.
+// with its distortion (Brown-Conrady, the rational model's denominator, the thin prism and the
+// tilted sensor), a laser plane with three degrees of freedom and a hand-eye transform with any
+// rotation.
 //
 // Units: mm and pixels; pixel centres at integer coordinates (u = column, v = row), as in
-// cv2.projectPoints. Intrinsics are 16 numbers [fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6,
-// s1, s2, s3, s4]: OpenCV's twelve distortion coefficients in its order (a lens of five terms
-// has the last seven 0). The laser plane is n . X + d = 0 in the camera frame, with n a unit
+// cv2.projectPoints. Intrinsics are 18 numbers [fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6,
+// s1, s2, s3, s4, taux, tauy]: OpenCV's fourteen distortion coefficients in its order, the last
+// two the tilted (Scheimpflug) sensor's angles in radians (a lens of five terms on an upright
+// sensor has the last nine 0). The laser plane is n . X + d = 0 in the camera frame, with n a unit
 // vector.
 //
 // As in paper.h, the single-point functions are templates on the scalar, so that one
@@ -19,6 +21,7 @@
 #include <cmath>
 #include <cstdint>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "hmlvs/geometry/geometry.h"
@@ -26,7 +29,7 @@
 
 namespace hmlvs::opencv {
 
-constexpr int kNumIntrinsics = 16;
+constexpr int kNumIntrinsics = 18;
 enum Intrinsic : int {
   kFx = 0,
   kFy,
@@ -43,11 +46,14 @@ enum Intrinsic : int {
   kS1,
   kS2,
   kS3,
-  kS4
+  kS4,
+  kTauX,
+  kTauY
 };
 /// The intrinsics' names, in order (OpenCV's).
 inline constexpr const char* kIntrinsicNames[kNumIntrinsics] = {
-    "fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2", "s3", "s4"};
+    "fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2",   "k3",
+    "k4", "k5", "k6", "s1", "s2", "s3", "s4", "taux", "tauy"};
 /// The first kNumClassicIntrinsics are the camera matrix and the five-term Brown-Conrady lens.
 constexpr int kNumClassicIntrinsics = 9;
 
@@ -73,32 +79,98 @@ void Distort(const T* in, const S& x, const S& y, T* xd, T* yd) {
   }
 }
 
-/// A camera-frame point to its pixel (cv2.projectPoints). Returns false for a point that is not
-/// in front of the camera (Z <= 0); the pixel is then meaningless.
-template <bool kWide = true, typename T>
-bool ProjectPoint(const T* in, const T* camera_point, T* pixel) {
-  const T x = camera_point[0] / camera_point[2];
-  const T y = camera_point[1] / camera_point[2];
-  T xd, yd;
-  Distort<kWide>(in, x, y, &xd, &yd);
-  pixel[0] = in[kFx] * xd + in[kCx];
-  pixel[1] = in[kFy] * yd + in[kCy];
-  return camera_point[2] > T(0.0);
-}
+/// The inverse of the tilted sensor's homography of some intrinsics (TiltHomography), computed
+/// once for many pixels: `upright` when taux = tauy = 0, with nothing to apply.
+struct Untilt {
+  explicit Untilt(const double* intrinsics);
+  bool upright = true;
+  double h[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+};
 
 /// Inverts the distortion of one pixel in plain doubles: the normalised point (x, y) whose
-/// distorted image is the pixel, by Newton's method from the pixel's own normalised position.
-/// Returns false when it does not converge to 1e-12 (the pixel lies beyond the distortion's
-/// invertible region) or the Jacobian is singular. `jacobian` (row-major 2x2, optional)
-/// receives d(xd, yd)/d(x, y) at the solution.
+/// distorted image is the pixel, by Newton's method from the pixel's own normalised position
+/// (DistortedTarget). Returns false when it does not converge to 1e-12 (the pixel lies beyond
+/// the distortion's invertible region) or the Jacobian is singular. `jacobian` (row-major 2x2,
+/// optional) receives d(xd, yd)/d(x, y) at the solution. `untilt`: the intrinsics' Untilt,
+/// computed here when not given.
 bool UndistortNormalized(const double* in, double u, double v, double* x, double* y,
-                         double* jacobian = nullptr);
+                         double* jacobian = nullptr, const Untilt* untilt = nullptr);
 
 /// The value of a scalar: a double itself, a Jet's real part.
 inline double ValueOf(double v) { return v; }
 template <typename S, int N>
 double ValueOf(const ceres::Jet<S, N>& v) {
   return v.a;
+}
+
+/// OpenCV's tilted sensor (computeTiltProjectionMatrix): with R = Ry(tauy) Rx(taux), the
+/// homography H = [[R22, 0, -R02], [0, R22, -R12], [0, 0, 1]] R takes a distorted point
+/// (xd, yd, 1) to the tilted sensor (its inverse, up to scale, R^T [[1, 0, R02], [0, 1, R12],
+/// [0, 0, R22]]). Writes H (or, with `inverse`, H^-1) row-major.
+template <typename T>
+void TiltHomography(const T& tau_x, const T& tau_y, bool inverse, T* h) {
+  using std::cos;
+  using std::sin;
+  const T cx = cos(tau_x), sx = sin(tau_x), cy = cos(tau_y), sy = sin(tau_y);
+  const T r[9] = {cy, sy * sx, -sy * cx, T(0.0), cx, sx, sy, -cy * sx, cy * cx};
+  for (int j = 0; j < 3; ++j) {
+    if (inverse) {
+      h[j] = r[j];
+      h[3 + j] = r[3 + j];
+      h[6 + j] = r[j] * r[2] + r[3 + j] * r[5] + r[6 + j] * r[8];
+    } else {
+      h[j] = r[8] * r[j] - r[2] * r[6 + j];
+      h[3 + j] = r[8] * r[3 + j] - r[5] * r[6 + j];
+      h[6 + j] = r[6 + j];
+    }
+  }
+  if (inverse) {  // the columns above are those of R^T Q: transpose them into rows
+    std::swap(h[1], h[3]);
+    std::swap(h[2], h[6]);
+    std::swap(h[5], h[7]);
+  }
+}
+
+/// (x, y) through the homography h (row-major 3x3), in place.
+template <typename T>
+void ApplyHomography(const T* h, T* x, T* y) {
+  const T w = h[6] * *x + h[7] * *y + h[8];
+  const T xo = (h[0] * *x + h[1] * *y + h[2]) / w;
+  *y = (h[3] * *x + h[4] * *y + h[5]) / w;
+  *x = xo;
+}
+
+/// A camera-frame point to its pixel (cv2.projectPoints). Returns false for a point that is not
+/// in front of the camera (Z <= 0); the pixel is then meaningless. Without kWide the terms
+/// beyond the five-term lens (k4 to tauy) are taken as 0 unread (Distort). `tilt`: the tilted
+/// sensor's homography (TiltHomography) when already computed for many points.
+template <bool kWide = true, typename T>
+bool ProjectPoint(const T* in, const T* camera_point, T* pixel, const T* tilt = nullptr) {
+  const T x = camera_point[0] / camera_point[2];
+  const T y = camera_point[1] / camera_point[2];
+  T xd, yd;
+  Distort<kWide>(in, x, y, &xd, &yd);
+  if constexpr (kWide) {
+    T h[9];
+    if (tilt == nullptr) {
+      TiltHomography(in[kTauX], in[kTauY], false, h);
+      tilt = h;
+    }
+    ApplyHomography(tilt, &xd, &yd);
+  }
+  pixel[0] = in[kFx] * xd + in[kCx];
+  pixel[1] = in[kFy] * yd + in[kCy];
+  return camera_point[2] > T(0.0);
+}
+
+/// The point the lens's distortion must reach for pixel (u, v): ((u - cx) / fx, (v - cy) / fy),
+/// taken back through `untilt`, the inverse of the tilted sensor's homography (TiltHomography;
+/// nullptr: an upright sensor, taux = tauy = 0).
+template <typename T>
+void DistortedTarget(const T* in, const T* untilt, double u, double v, T* mx, T* my) {
+  *mx = (T(u) - in[kCx]) / in[kFx];
+  *my = (T(v) - in[kCy]) / in[kFy];
+  if (untilt != nullptr) ApplyHomography(untilt, mx, my);
 }
 
 /// UndistortNormalized on any scalar: the Newton iteration in plain doubles, then, on a Jet,
@@ -114,10 +186,12 @@ bool UndistortPoint(const T* in, double u, double v, T* x, T* y) {
     *x = x0;
     *y = y0;
   } else {
-    T xd, yd;
+    T xd, yd, mx, my, untilt[9];
     Distort(in, x0, y0, &xd, &yd);
-    const T ex = xd - (T(u) - in[kCx]) / in[kFx];
-    const T ey = yd - (T(v) - in[kCy]) / in[kFy];
+    TiltHomography(in[kTauX], in[kTauY], true, untilt);
+    DistortedTarget(in, untilt, u, v, &mx, &my);
+    const T ex = xd - mx;
+    const T ey = yd - my;
     const double det = jd[0] * jd[3] - jd[1] * jd[2];
     *x = T(x0) - (jd[3] * ex - jd[1] * ey) / det;
     *y = T(y0) - (jd[0] * ey - jd[2] * ex) / det;
@@ -162,7 +236,7 @@ void CameraFromBoard(const T* hand_from_camera_q, const T* hand_from_camera_t,
 }
 
 // ---------------------------------------------------------------------------------------------
-// Batch evaluation on plain doubles (intrinsics as a 16-vector; see the top of the file).
+// Batch evaluation on plain doubles (intrinsics as an 18-vector; see the top of the file).
 
 /// Throws std::invalid_argument unless the intrinsics are finite with fx, fy > 0.
 void ValidateIntrinsics(const IntrinsicsVector& intrinsics);
@@ -181,9 +255,9 @@ Eigen::Vector4d UnitPlane(const Eigen::Vector4d& laser_plane);
 /// Stripe pixel (u, v) -> its camera-frame point on the laser plane `unit_plane` (UnitPlane):
 /// false, with the reason in `why`, when the pixel's undistortion fails or its ray meets the
 /// plane behind the camera, not at all or at a grazing angle (sine below kMinRaySine). The
-/// step of LaserPointsInCamera for one pixel.
+/// step of LaserPointsInCamera for one pixel. `untilt`: as in UndistortNormalized.
 bool LaserPoint(const IntrinsicsVector& intrinsics, const Eigen::Vector4d& unit_plane, double u,
-                double v, double* point, const char** why);
+                double v, double* point, const char** why, const Untilt* untilt = nullptr);
 
 /// Stripe pixels -> camera-frame points on the laser plane (a, b, c, d). A pixel whose ray
 /// meets the plane behind the camera (or not at all), or whose undistortion fails, is invalid;

@@ -23,8 +23,8 @@ Vector18d PointParams(const IntrinsicsVector& intrinsics, const Eigen::Vector4d&
                       const Eigen::Matrix4d& hand_from_camera) {
   if (!intrinsics.tail<kNumIntrinsics - kNumClassicIntrinsics>().isZero(0.0)) {
     throw std::invalid_argument(
-        "the point objective's lens has five distortion terms (k1, k2, p1, p2, k3); k4 to s4 "
-        "must be 0");
+        "the point objective's lens has five distortion terms (k1, k2, p1, p2, k3) on an upright "
+        "sensor; k4 to tauy must be 0");
   }
   Eigen::Vector4d p = laser_plane / laser_plane.head<3>().norm();
   if (p[3] > 0.0) p = -p;  // n . X = h with h = -d >= 0

@@ -238,7 +238,8 @@ class JointProblem {
 
   JointOptions options_;
   IntrinsicsVector intrinsics_;
-  bool classic_lens_ = false;  // k4 to s4 held at 0 (ClassicLensHeld): every view's costs skip them
+  bool classic_lens_ =
+      false;  // k4 to tauy held at 0 (ClassicLensHeld): every view's costs skip them
   Eigen::Vector3d normal_;
   double offset_ = 0.0;
   PoseBlocks hand_eye_, board_;
@@ -322,10 +323,12 @@ JointResiduals EvaluateJoint(const std::vector<JointView>& views, const JointSta
                         scales_at->laser_plane.head<3>(),
                         scales_at->laser_plane[3] / scales_at->laser_plane.head<3>().norm());
     }
+    const opencv::Untilt untilt(s.intrinsics.data());
     for (Eigen::Index k = 0; k < v.laser_pixels.rows(); ++k) {
       double x, y, jd[4], res;
-      const bool ok = LaserResidual(s.intrinsics.data(), nb.data(), ob, normal.data(), offset,
-                                    v.laser_pixels(k, 0), v.laser_pixels(k, 1), &x, &y, jd, &res);
+      const bool ok =
+          LaserResidual(s.intrinsics.data(), nb.data(), ob, normal.data(), offset,
+                        v.laser_pixels(k, 0), v.laser_pixels(k, 1), &x, &y, jd, &res, &untilt);
       if (ok && scales.size() > 0) {
         res = scales[k] *
               LaserLineDistance(s.intrinsics.data(), nb.data(), ob, normal.data(), offset, x, y);

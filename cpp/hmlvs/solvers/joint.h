@@ -65,7 +65,7 @@ struct JointOptions {
   double pose_sigma_t = 0.0;
   double pose_sigma_r = 0.0;
   /// intrinsics held at their initial values: by default the distortion terms beyond the
-  /// five-term lens (k4 to s4)
+  /// five-term lens (k4 to tauy)
   std::array<bool, opencv::kNumIntrinsics> fixed = ClassicLens();
   double corner_sigma = 0.1;  ///< pixels
   double laser_sigma = 0.05;  ///< mm

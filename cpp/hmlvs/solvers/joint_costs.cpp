@@ -23,10 +23,12 @@ template <bool kWide, typename T>
 bool Corners(const T* in, const Mat3<T>& r, const Vec3<T>& t, const JointView& view,
              double inv_sigma, T* residuals) {
   bool ok = true;
+  T tilt[9];  // the tilted sensor's homography, once for all corners (kWide only)
+  if constexpr (kWide) TiltHomography(in[kTauX], in[kTauY], false, tilt);
   for (Eigen::Index i = 0; i < view.corner_points.rows(); ++i) {
     const Vec3<T> p = r * view.corner_points.row(i).transpose().cast<T>() + t;
     T px[2];
-    ok = ProjectPoint<kWide>(in, p.data(), px) && ok;
+    ok = ProjectPoint<kWide>(in, p.data(), px, tilt) && ok;
     residuals[2 * i] = (px[0] - view.corner_pixels(i, 0)) * inv_sigma;
     residuals[2 * i + 1] = (px[1] - view.corner_pixels(i, 1)) * inv_sigma;
   }
@@ -101,23 +103,55 @@ struct FreeCorners {
   }
 };
 
+// Jets of fx, fy, cx, cy, taux, tauy (in that order), the unknowns the point the distortion
+// must reach for a pixel depends on (DistortedTarget).
+using J6 = ceres::Jet<double, 6>;
+constexpr int kTargetIntrinsics[6] = {kFx, kFy, kCx, kCy, kTauX, kTauY};
+
+// The inverse of the tilted sensor's homography (TiltHomography) as Jets of
+// kTargetIntrinsics, once for a view's pixels (TargetDerivatives).
+void UntiltJets(const double* in, J6* untilt) {
+  TiltHomography(J6(in[kTauX], 4), J6(in[kTauY], 5), true, untilt);
+}
+
+// d(mx, my)/d(fx, fy, cx, cy, taux, tauy) of the point the distortion must reach for pixel
+// (u, v) (DistortedTarget, through the tilted sensor's homography `untilt`, UntiltJets).
+void TargetDerivatives(const double* in, const J6* untilt, double u, double v, double* dmx,
+                       double* dmy) {
+  J6 jin[kNumIntrinsics];
+  for (int e = 0; e < 4; ++e) jin[kTargetIntrinsics[e]] = J6(in[kTargetIntrinsics[e]], e);
+  J6 mx, my;
+  DistortedTarget(jin, untilt, u, v, &mx, &my);
+  for (int e = 0; e < 6; ++e) {
+    dmx[e] = mx.v[e];
+    dmy[e] = my.v[e];
+  }
+}
+
 // One stripe pixel's row of d(residual)/d(intrinsics), times w, from the residual's derivatives
 // drdx, drdy with respect to the undistorted point (x, y) and the distortion's Jacobian jd
 // there (row-major 2x2), through the implicit function theorem (LaserCost). `classic`: the
-// terms k4 to s4 are held at 0 and their entries are 0.
-void IntrinsicsRow(const double* in, double u, double v, double x, double y, const double* jd,
-                   double drdx, double drdy, double w, bool classic, double* row) {
+// terms k4 to tauy are held at 0 and their entries are 0; otherwise `untilt` is UntiltJets'.
+void IntrinsicsRow(const double* in, const J6* untilt, double u, double v, double x, double y,
+                   const double* jd, double drdx, double drdy, double w, bool classic,
+                   double* row) {
   const double det = jd[0] * jd[3] - jd[1] * jd[2];
   // g = (dr/dx, dr/dy) Jd^-1, so that dr/din = -g (d distort/d in - d m/d in)
   const double g0 = (drdx * jd[3] - drdy * jd[2]) / det;
   const double g1 = (-drdx * jd[1] + drdy * jd[0]) / det;
   const double r2 = x * x + y * y, r4 = r2 * r2, r6 = r4 * r2;
-  const double mx = (u - in[kCx]) / in[kFx], my = (v - in[kCy]) / in[kFy];
-  row[kFx] = -g0 * (mx / in[kFx]) * w;  // -(g . (0 - dm/dfx)), dm_x/dfx = -mx/fx
-  row[kFy] = -g1 * (my / in[kFy]) * w;
-  row[kCx] = -g0 / in[kFx] * w;  // dm_x/dcx = -1/fx
-  row[kCy] = -g1 / in[kFy] * w;
-  // classic: k4 to s4 held at 0, their rows 0 (the five-term lens's rows alone)
+  if (classic) {  // m = ((u - cx) / fx, (v - cy) / fy)
+    const double mx = (u - in[kCx]) / in[kFx], my = (v - in[kCy]) / in[kFy];
+    row[kFx] = -g0 * (mx / in[kFx]) * w;  // -(g . (0 - dm/dfx)), dm_x/dfx = -mx/fx
+    row[kFy] = -g1 * (my / in[kFy]) * w;
+    row[kCx] = -g0 / in[kFx] * w;  // dm_x/dcx = -1/fx
+    row[kCy] = -g1 / in[kFy] * w;
+  } else {  // m through the tilted sensor's homography too
+    double dmx[6], dmy[6];
+    TargetDerivatives(in, untilt, u, v, dmx, dmy);
+    for (int e = 0; e < 6; ++e) row[kTargetIntrinsics[e]] = (g0 * dmx[e] + g1 * dmy[e]) * w;
+  }
+  // classic: k4 to tauy held at 0, their rows 0 (the five-term lens's rows alone)
   // radial = num / den: d/dk1..k3 = r^2n / den, d/dk4..k6 = -radial r^2n / den (times x, y)
   const double den = classic ? 1.0 : 1.0 + r2 * (in[kK4] + r2 * (in[kK5] + r2 * in[kK6]));
   const double gr = -(g0 * x + g1 * y) * w / den;
@@ -125,7 +159,7 @@ void IntrinsicsRow(const double* in, double u, double v, double x, double y, con
   row[kK2] = gr * r4;
   row[kK3] = gr * r6;
   if (classic) {
-    for (int k = kK4; k <= kS4; ++k) row[k] = 0.0;
+    for (int k = kK4; k <= kTauY; ++k) row[k] = 0.0;
   } else {
     const double radial = (1.0 + r2 * (in[kK1] + r2 * (in[kK2] + r2 * in[kK3]))) / den;
     row[kK4] = -gr * radial * r2;
@@ -204,12 +238,16 @@ class LaserCost final : public ceres::CostFunction {
     const double ob = obj.a;
     const double nn = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
     const double unit[3] = {n[0] / nn, n[1] / nn, n[2] / nn};
+    const Untilt untilt(in);
+    J6 untilt_jets[9];
+    if (!classic_ && jacobians != nullptr && jacobians[0] != nullptr) UntiltJets(in, untilt_jets);
     for (Eigen::Index i = 0; i < view_->laser_pixels.rows(); ++i) {
       const double u = view_->laser_pixels(i, 0), v = view_->laser_pixels(i, 1);
       double x, y, jd[4], res;
-      if (!LaserResidual(in, nb, ob, unit, d, u, v, &x, &y, jd, &res)) return false;
+      if (!LaserResidual(in, nb, ob, unit, d, u, v, &x, &y, jd, &res, &untilt)) return false;
       if (scales_.size() > 0) {
-        LineRow(in, nb, ob, n, nn, d, x, y, jd, u, v, i, nbj, obj, residuals, jacobians);
+        LineRow(in, untilt_jets, nb, ob, n, nn, d, x, y, jd, u, v, i, nbj, obj, residuals,
+                jacobians);
         continue;
       }
       residuals[i] = res * w_;
@@ -221,7 +259,7 @@ class LaserCost final : public ceres::CostFunction {
       const double drdx = -ob / nn * (n[0] * b - a * nb[0]) / (b * b);
       const double drdy = -ob / nn * (n[1] * b - a * nb[1]) / (b * b);
       if (jacobians[0] != nullptr) {
-        IntrinsicsRow(in, u, v, x, y, jd, drdx, drdy, w_, classic_,
+        IntrinsicsRow(in, untilt_jets, u, v, x, y, jd, drdx, drdy, w_, classic_,
                       jacobians[0] + i * kNumIntrinsics);
       }
       // dr/d(nb, ob)
@@ -248,9 +286,10 @@ class LaserCost final : public ceres::CostFunction {
   //   dR/dnb = -(d / ob) g, dR/dob = (d / ob^2) g . nb, dR/dd = -(g . nb) / ob,
   //   dR/dn = (g - (g . unit) unit) / |n|.
   template <typename J>
-  void LineRow(const double* in, const double* nb, double ob, const double* n, double nn, double d,
-               double x, double y, const double* jd, double u, double v, Eigen::Index i,
-               const Vec3<J>& nbj, const J& obj, double* residuals, double** jacobians) const {
+  void LineRow(const double* in, const J6* untilt, const double* nb, double ob, const double* n,
+               double nn, double d, double x, double y, const double* jd, double u, double v,
+               Eigen::Index i, const Vec3<J>& nbj, const J& obj, double* residuals,
+               double** jacobians) const {
     constexpr int kPoseBlocks = kChain ? 4 : 2;
     const double c = scales_[i] * w_;
     const double unit[3] = {n[0] / nn, n[1] / nn, n[2] / nn};
@@ -265,7 +304,7 @@ class LaserCost final : public ceres::CostFunction {
     const double n3 = big_n * big_n * big_n;
     if (jacobians[0] != nullptr) {
       double* row = jacobians[0] + i * kNumIntrinsics;
-      IntrinsicsRow(in, u, v, x, y, jd, big_n * m[0], big_n * m[1], c, classic_, row);
+      IntrinsicsRow(in, untilt, u, v, x, y, jd, big_n * m[0], big_n * m[1], c, classic_, row);
       row[kFx] += c * sv * n3 * ax * ax / in[kFx];
       row[kFy] += c * sv * n3 * ay * ay / in[kFy];
     }
@@ -306,7 +345,7 @@ class LaserCost final : public ceres::CostFunction {
   const JointView* view_;
   double w_;
   Eigen::VectorXd scales_;  // empty: the mm residual (LaserResidual)
-  bool classic_;            // k4 to s4 held at 0 (IntrinsicsRow)
+  bool classic_;            // k4 to tauy held at 0 (IntrinsicsRow)
 };
 
 }  // namespace
@@ -328,8 +367,9 @@ bool CornerResiduals(const double* intrinsics, const Eigen::Matrix3d& r, const E
 }
 
 bool LaserResidual(const double* in, const double* nb, double ob, const double* unit, double d,
-                   double u, double v, double* x, double* y, double* jd, double* residual) {
-  if (!UndistortNormalized(in, u, v, x, y, jd)) return false;
+                   double u, double v, double* x, double* y, double* jd, double* residual,
+                   const Untilt* untilt) {
+  if (!UndistortNormalized(in, u, v, x, y, jd, untilt)) return false;
   double point[3];
   if (!(RayPlanePoint(*x, *y, nb, ob, point) > 0.0)) return false;
   *residual = unit[0] * point[0] + unit[1] * point[1] + unit[2] * point[2] + d;
@@ -385,9 +425,10 @@ Eigen::VectorXd LaserScales(const double* in, const double* nb, double ob, const
   double m[3];
   for (int k = 0; k < 3; ++k) m[k] = unit[k] - d / ob * nb[k];
   const double inv_n = std::hypot(m[0] / in[kFx], m[1] / in[kFy]);
+  const Untilt untilt(in);
   for (Eigen::Index i = 0; i < pixels.rows(); ++i) {
     double x, y, jd[4];
-    if (!UndistortNormalized(in, pixels(i, 0), pixels(i, 1), &x, &y, jd)) continue;
+    if (!UndistortNormalized(in, pixels(i, 0), pixels(i, 1), &x, &y, jd, &untilt)) continue;
     const double depth = -ob / (nb[0] * x + nb[1] * y + nb[2]);
     if (depth > 0.0) out[i] = depth * inv_n;
   }

@@ -30,10 +30,10 @@ bool CornerResiduals(const double* intrinsics, const Eigen::Matrix3d& r, const E
 /// the board plane nb . X + ob = 0 from the laser plane unit . X + d = 0 (unit normal). x, y
 /// receive the undistorted normalised point and jd (row-major 2x2) the distortion's Jacobian
 /// there. Returns false when the pixel cannot be undistorted or its ray does not meet the board
-/// plane in front of the camera.
+/// plane in front of the camera. `untilt`: as in opencv::UndistortNormalized.
 bool LaserResidual(const double* intrinsics, const double* nb, double ob, const double* unit,
-                   double d, double u, double v, double* x, double* y, double* jd,
-                   double* residual);
+                   double d, double u, double v, double* x, double* y, double* jd, double* residual,
+                   const opencv::Untilt* untilt = nullptr);
 
 /// The scale-free laser residual of one stripe pixel with its ray (x, y, 1) undistorted:
 /// the pixel's distance (px, in the undistorted image) from the line where the laser plane
@@ -58,18 +58,18 @@ Eigen::VectorXd LaserScales(const double* intrinsics, const double* nb, double o
 Vector6d PoseError(const PoseBlocks& camera_from_board, const PoseBlocks& hand_from_camera,
                    const PoseBlocks& base_from_board, const Eigen::Matrix4d& base_from_hand);
 
-/// Chain mode: the corner residuals of a view over the blocks intrinsics (16),
+/// Chain mode: the corner residuals of a view over the blocks intrinsics (18),
 /// hand_from_camera (4, 3) and base_from_board (4, 3).
-/// `classic_lens`: the intrinsics beyond the five-term lens (k4 to s4) are held at 0, so they are
+/// `classic_lens`: the intrinsics beyond the five-term lens (k4 to tauy) are held at 0, so they are
 /// not read (their Jacobian columns are 0: fewer operations on the Jets).
 ceres::CostFunction* NewChainCornerCost(const JointView* view, double inv_sigma, bool classic_lens);
 
-/// A view with its own board pose: the corner residuals over the blocks intrinsics (16) and
+/// A view with its own board pose: the corner residuals over the blocks intrinsics (18) and
 /// camera_from_board (4, 3).
 /// `classic_lens`: as NewChainCornerCost.
 ceres::CostFunction* NewFreeCornerCost(const JointView* view, double inv_sigma, bool classic_lens);
 
-/// The laser residuals of a view (analytic Jacobian) over the blocks intrinsics (16), the board
+/// The laser residuals of a view (analytic Jacobian) over the blocks intrinsics (18), the board
 /// pose's blocks (chain: hand_from_camera (4, 3) and base_from_board (4, 3); else
 /// camera_from_board (4, 3)), the laser plane's normal (3) and offset (1).
 /// `scales` (views with their own board pose): the residuals are LaserLineDistance times these

@@ -46,6 +46,36 @@ def _cv_flags(distortion: Sequence[str]) -> int:
     return flags
 
 
+#: the tilted (Scheimpflug) sensor's angles. Zhang's start leaves them at 0 and
+#: :func:`corner_fit` frees them: OpenCV's CALIB_TILTED_MODEL took 1.14 s against 0.03 s for 20
+#: synthetic views (the fit here about 0.05 s), to the same corner RMS.
+TILT = ("taux", "tauy")
+
+
+def corner_fit(views: Sequence[ViewData], board: BoardSpec, intrinsics: np.ndarray,
+               camera_from_board: Sequence[np.ndarray], terms: Sequence[str]
+               ) -> tuple[np.ndarray, list[np.ndarray], float]:
+    """The corners alone, every view's board pose free (as ``cv2.calibrateCamera``), refined
+    by the C++ joint solve from ``intrinsics`` (the core's 18) and the views' poses with fx,
+    fy, cx, cy and the distortion ``terms`` free: the intrinsics, poses and RMS reprojection
+    error (px, per corner over both axes, as OpenCV's)."""
+    jv = [_core._JointView(np.eye(4), np.ascontiguousarray(np.asarray(
+        v.corner_pixels, float).reshape(-1, 2)), np.ascontiguousarray(board.points(
+            v.corner_index)), np.zeros((0, 2))) for v in views]
+    state = _core._JointState()
+    state.intrinsics = np.asarray(intrinsics, float)
+    state.camera_from_board = [np.asarray(p, float) for p in camera_from_board]
+    opts = _core._JointOptions()
+    opts.chain = False
+    opts.laser = False
+    opts.fixed = [False] * 4 + [name not in terms for name in DISTORTION_NAMES]
+    state = _core._solve_joint(jv, state, opts).state
+    corners = np.concatenate([c.reshape(-1, 2) for c in _core._evaluate_joint(jv, state,
+                                                                              opts)[0]])
+    rms = float(np.sqrt(np.mean(np.sum(corners ** 2, axis=1))))
+    return np.array(state.intrinsics), [np.array(p) for p in state.camera_from_board], rms
+
+
 def check_distortion(distortion: Iterable[str]) -> tuple[str, ...]:
     terms = tuple(distortion)
     bad = [t for t in terms if t not in DISTORTION_NAMES]
@@ -58,6 +88,9 @@ def check_distortion(distortion: Iterable[str]) -> tuple[str, ...]:
     if prism and len(prism) < 4:
         raise ValueError("the thin prism's terms s1, s2, s3 and s4 go together (as in OpenCV): "
                          "give all four or none")
+    if ("taux" in terms) != ("tauy" in terms):
+        raise ValueError("the tilted sensor's angles taux and tauy go together (as in OpenCV): "
+                         "give both or neither")
     return terms
 
 
@@ -65,8 +98,9 @@ def initial_intrinsics(views: Sequence[ViewData], board: BoardSpec, image_size: 
                        distortion: Sequence[str] = CLASSIC_DISTORTION
                        ) -> tuple[np.ndarray, list[np.ndarray], float]:
     """Zhang's method (``cv2.calibrateCamera``, with the rational and thin-prism models when
-    ``distortion`` names their terms): the 16 intrinsics of the C++ core, each view's
-    camera_from_board and the RMS reprojection error (px)."""
+    ``distortion`` names their terms; the tilted sensor's angles by :func:`corner_fit` from
+    there): the 18 intrinsics of the C++ core, each view's camera_from_board and the RMS
+    reprojection error (px)."""
 
     obj = [board.points(v.corner_index).astype(np.float32) for v in views]
     img = [np.asarray(v.corner_pixels, np.float32).reshape(-1, 1, 2) for v in views]
@@ -77,6 +111,8 @@ def initial_intrinsics(views: Sequence[ViewData], board: BoardSpec, image_size: 
     d[:n] = dist.ravel()[:n]
     intr = np.array([k[0, 0], k[1, 1], k[0, 2], k[1, 2], *d])
     poses = [make_transform(rotation_from_vector(r), t) for r, t in zip(rvecs, tvecs)]
+    if set(TILT) & set(distortion):
+        return corner_fit(views, board, intr, poses, distortion)
     return intr, poses, float(rms)
 
 

@@ -176,8 +176,9 @@ def calibrate(
     model: str = _MODEL_OPTION,
     distortion: str = typer.Option(
         ",".join(CLASSIC_DISTORTION), help="opencv model: the distortion terms to estimate "
-        "(the others stay 0), among OpenCV's k1,k2,p1,p2,k3,k4,k5,k6,s1,s2,s3,s4: e.g. k1,k2, "
-        "or k1,k2,p1,p2,k3,k4,k5,k6 (the rational model) for a wide lens."),
+        "(the others stay 0), among OpenCV's k1,k2,p1,p2,k3,k4,k5,k6,s1,s2,s3,s4,taux,tauy: e.g. "
+        "k1,k2, or k1,k2,p1,p2,k3,k4,k5,k6 (the rational model) for a wide lens, or "
+        "k1,k2,p1,p2,k3,taux,tauy for a tilted (Scheimpflug) sensor."),
     initial: Optional[Path] = _INITIAL_OPTION,
     bounds: Optional[Path] = _BOUNDS_OPTION,
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, no per-image "

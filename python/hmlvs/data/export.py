@@ -142,8 +142,9 @@ _ROS_MODELS = {5: "plumb_bob", 8: "rational_polynomial"}
 def _ros_text(s: OpenCvSensor, camera_name: str) -> str:
     n = s.dist_coeffs.size
     if n not in _ROS_MODELS:
-        raise ValueError("ROS camera_info has no distortion model for the thin prism (s1 to s4 "
-                         "are not all 0): export as opencv or json instead")
+        raise ValueError("ROS camera_info has no distortion model for the thin prism or the "
+                         "tilted sensor (s1 to tauy are not all 0): export as opencv or json "
+                         "instead")
     k = s.camera_matrix
     proj = np.hstack([k, np.zeros((3, 1))])
     doc = {

@@ -268,13 +268,15 @@ def joint_checks(result: Any, views: Sequence[Any], board: Any) -> list[Check]:
     corner_sets = [result.residuals[v.id]["corner_pixels"] for v in used
                    if v.id in result.residuals]
     chain = chain_of_joint(result, views, board)
-    checks = (chain_checks(chain) if chain is not None else
-              corner_checks(result.corner_rms_px, None, False))
+    # a lens the distortion terms cannot follow spoils every fit after it: its check comes
+    # first, so that the verdict's first reason is the cure
+    checks = lens_check(result, used, board)
+    checks += (chain_checks(chain) if chain is not None else
+               corner_checks(result.corner_rms_px, None, False))
     checks += laser_check(result, used, laser_sets)
     checks += coverage_checks(corner_sets, laser_sets, tuple(result.sensor.image_size))
     rots = [cb[:3, :3] for cb in (camera_from_board_of(result, v) for v in used)
             if cb is not None]
     checks.append(variety_check(rots))
-    checks += lens_check(result, used, board)
     checks.append(unknowns_check(result.rank, result.num_unknowns))
     return checks

@@ -23,7 +23,7 @@ import numpy as np
 
 from .._arrays import robust_sigma
 from ..calibration.joint import POSE_DISAGREEMENT
-from ..calibration.joint_setup import board_plane_points, initial_intrinsics
+from ..calibration.joint_setup import TILT, board_plane_points, corner_fit, initial_intrinsics
 from ..geometry.transforms import invert_transform, rotation_to_vector
 from ..models.opencv import DISTORTION_NAMES
 
@@ -67,13 +67,16 @@ PAPER_FIT_LIMIT_MM = 1.0
 #: held-out points may lie this many times farther than the fitted ones (noise alone: about
 #: 1.1 for the paper's data sizes); beyond it the calibration does not generalise
 HELD_OUT_RATIO = 2.0
-#: the general model's lens: the rational model's k4, k5, k6 added to the calibrated terms must
-#: not fit the corners (Zhang's method, every view's board pose free) better than this
-#: fraction of their RMS. Measured: 0.989-0.999 on every real session at hand (Blaser 640 and
-#: 1280, etna, light_stripe; OpenCV's left and right samples, tests/data, 0.989 and 0.998) and
-#: 0.99-1.0 on renders of a five-term lens; 0.43 on renders of a wide
-#: lens of the rational model, where the five-term lens fits the corners to 0.04 px and still
-#: maps the stripe 1.9 mm off at the 95th percentile (tests/e2e/test_wide_lens_images.py)
+#: the general model's lens: the rational model's k4, k5, k6 added to the calibrated terms, or
+#: the tilted sensor's taux, tauy, must not fit the corners (every view's board pose free)
+#: better than this fraction of their RMS. Measured with the rational terms: 0.989-0.999 on
+#: every real session at hand (Blaser 640 and 1280, etna, light_stripe; OpenCV's left and right
+#: samples, tests/data, 0.989 and 0.998), with the tilt 0.977-0.999 (Blaser 640 and 1280, etna,
+#: light_stripe; OpenCV's left sample 0.993), both 0.99-1.0 on renders of a five-term lens;
+#: 0.43 on renders of a wide lens of the rational model, where the five-term lens fits the
+#: corners to 0.04 px and still maps the stripe 1.9 mm off at the 95th percentile
+#: (tests/e2e/test_wide_lens_images.py), 0.16 on renders of a sensor tilted 11.5 degrees
+#: (tests/e2e/test_tilted_sensor_images.py)
 LENS_RATIO_MIN = 0.8
 
 __all__ = ["POSE_DISAGREEMENT"]
@@ -254,36 +257,54 @@ def variety_check(rotations: Sequence[np.ndarray]) -> Check:
         "board view in another direction too", kind="min")
 
 
-def lens_ratio(views: Sequence[Any], board: Any, image_size: tuple[int, int],
-               terms: Sequence[str]) -> tuple[float, float]:
+#: the lens models a calibration's terms are checked against (:func:`lens_check`): OpenCV's
+#: rational model (a wide lens) and its tilted sensor (the Scheimpflug arrangement)
+LENS_EXTENSIONS: dict[str, tuple[str, ...]] = {
+    "the rational model's k4, k5, k6": ("k4", "k5", "k6"),
+    "the tilted sensor's taux, tauy": TILT,
+}
+
+
+def lens_ratios(views: Sequence[Any], board: Any, image_size: tuple[int, int],
+                terms: Sequence[str]) -> tuple[float, dict[str, float]]:
     """Zhang's method (every view's board pose free) on the ``views``' corners with the
-    distortion ``terms`` and with OpenCV's rational terms k4, k5, k6 added: (RMS with them
-    added, RMS without), px."""
-    wider = (*terms, "k4", "k5", "k6")
-    now = initial_intrinsics(views, board, image_size, tuple(terms))[2]
-    return initial_intrinsics(views, board, image_size, wider)[2], now
+    distortion ``terms``: its RMS (px), and for each of :data:`LENS_EXTENSIONS` that ``terms``
+    lack, the RMS with its terms added."""
+    now = initial_intrinsics(views, board, image_size, tuple(terms))
+    out = {}
+    for name, extra in LENS_EXTENSIONS.items():
+        if set(extra) & set(terms):
+            continue
+        wider = (*terms, *extra)
+        out[name] = (corner_fit(views, board, now[0], now[1], wider)[2] if extra == TILT
+                     else initial_intrinsics(views, board, image_size, wider)[2])
+    return now[2], out
 
 
 def lens_check(result: Any, used: Sequence[Any], board: Any) -> list[Check]:
-    """Whether the calibrated distortion terms follow the lens: OpenCV's rational terms (k4,
-    k5, k6) added must not fit the corners of the ``used`` views markedly better
-    (:func:`lens_ratio`, :data:`LENS_RATIO_MIN`). None of it (an empty list) when the
-    calibration has them already, estimated no distortion term or has fewer than 3 views with
-    corners."""
+    """Whether the calibrated distortion terms follow the lens: no lens model of
+    :data:`LENS_EXTENSIONS` added may fit the corners of the ``used`` views markedly better
+    (:func:`lens_ratios`, :data:`LENS_RATIO_MIN`). None of it (an empty list) when the
+    calibration has them all already, estimated no distortion term or has fewer than 3 views
+    with corners."""
     terms = tuple(n for n in DISTORTION_NAMES if n in result.names)
     views = [v for v in used if len(v.corner_index) >= 6]
-    if not terms or any(t in terms for t in ("k4", "k5", "k6")) or len(views) < 3:
+    if not terms or len(views) < 3:
         return []
-    rational, now = lens_ratio(views, board, tuple(result.sensor.image_size), terms)
+    now, wider = lens_ratios(views, board, tuple(result.sensor.image_size), terms)
+    if not wider:
+        return []
+    best = min(wider, key=wider.__getitem__)
+    cure = ",".join(n for n in DISTORTION_NAMES if n in terms or n in LENS_EXTENSIONS[best])
     return [make_check(
-        "lens_model", rational / max(now, 1e-12), LENS_RATIO_MIN, "",
-        "OpenCV's rational terms (k4, k5, k6) fit the corners of real lenses 0.989-0.999 times "
-        f"as well as the terms calibrated; below {LENS_RATIO_MIN:g} the lens bends in a way "
-        "they cannot follow, and the other parameters absorb it",
+        "lens_model", wider[best] / max(now, 1e-12), LENS_RATIO_MIN, "",
+        "OpenCV's rational terms (k4, k5, k6) or tilted sensor (taux, tauy) fit the corners of "
+        "real lenses 0.98-1.0 times as well as the terms calibrated; below "
+        f"{LENS_RATIO_MIN:g} the lens bends in a way they cannot follow, and the other "
+        "parameters absorb it",
         f"the lens bends more than its distortion terms ({', '.join(terms)}) follow: with "
-        f"the rational model's k4, k5, k6 the corners fit {rational:.3f} px RMS against "
-        f"{now:.3f} px (each view's board pose free): calibrate with --distortion "
-        f"{','.join((*terms, 'k4', 'k5', 'k6'))}", kind="min")]
+        f"{best} the corners fit {wider[best]:.3f} px RMS against {now:.3f} px (each view's "
+        f"board pose free): calibrate with --distortion {cure}", kind="min")]
 
 
 def unknowns_check(determined: int, total: int) -> Check:

@@ -21,6 +21,7 @@ from .. import _core
 from ..calibration.joint import consistent_numbering, initial_intrinsics
 from ..geometry.board import BoardSpec
 from ..geometry.transforms import invert_transform, rotation_to_quaternion
+from ..models.opencv import CLASSIC_DISTORTION
 from .checks import CORNER_RMS_LIMIT_PX, POSE_DISAGREEMENT
 
 
@@ -78,11 +79,12 @@ class _Obs:
     """The observations the hypotheses are tried on: Zhang's intrinsics and free board
     poses, the corners and the robot poses of the views with corners and poses."""
 
-    def __init__(self, views: Sequence[Any], board: BoardSpec, image_size: tuple[int, int]):
+    def __init__(self, views: Sequence[Any], board: BoardSpec, image_size: tuple[int, int],
+                 distortion: Sequence[str]):
         self.views = [v for v in views if len(v.corner_index) >= 6
                       and v.base_from_hand is not None]
         self.board = board
-        intr, poses, rms = initial_intrinsics(self.views, board, image_size)
+        intr, poses, rms = initial_intrinsics(self.views, board, image_size, distortion)
         self.k = np.array([[intr[0], 0, intr[2]], [0, intr[1], intr[3]], [0, 0, 1.0]])
         self.dist = intr[4:]
         self.cams = poses
@@ -207,8 +209,10 @@ def _split_views(obs: _Obs, bfh: list[np.ndarray], flips: list[bool | None], sca
     return bad, fit
 
 
-def find_mistake(views: Sequence[Any], board: Any, image_size: tuple[int, int]) -> Mistake:
-    """Try the usual mistakes on the observations and name the one that explains them.
+def find_mistake(views: Sequence[Any], board: Any, image_size: tuple[int, int],
+                 distortion: Sequence[str] = CLASSIC_DISTORTION) -> Mistake:
+    """Try the usual mistakes on the observations and name the one that explains them, with
+    the lens of the ``distortion`` terms.
 
     Each hypothesis on the robot poses (as given, inverted, either quaternion order read as
     the other) is fitted with the board's scale free (a one-dimensional search: a wrong
@@ -217,7 +221,7 @@ def find_mistake(views: Sequence[Any], board: Any, image_size: tuple[int, int]) 
     the mistake when it is as good as a correct calibration's and the poses as given are
     not; else views whose board pose disagrees with the rest are looked for."""
     board = BoardSpec.of(board)
-    obs = _Obs(views, board, image_size)
+    obs = _Obs(views, board, image_size, tuple(distortion))
     free = obs.free_rms
     n = len(obs.views)
     if n < 3:

@@ -25,9 +25,11 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..geometry.board import BoardSpec
+from ..models.opencv import DISTORTION_NAMES
 from .chain import chain_checks, chain_of_joint, chain_of_paper, joint_checks, pose_error_mm
 from .checks import (
     CROSS_VALIDATION_LIMIT,
+    LENS_EXTENSIONS,
     Check,
     as_float,
     coverage_checks,
@@ -186,7 +188,13 @@ def judge_joint(result: Any, views: Sequence[Any], board: Any, *,
     def mistake() -> str | None:
         if not mistakes or result.mode != "chain":
             return None
-        return find_mistake(views, board, size).sentence
+        # the calibration's lens; one its terms cannot follow (lens_model) would make good
+        # data look wrong, so then the lens models that check tries are added
+        terms = {n for n in result.names if n in DISTORTION_NAMES}
+        if any(c.name == "lens_model" and not c.ok for c in checks):
+            terms.update(*LENS_EXTENSIONS.values())
+        return find_mistake(views, board, size,
+                            tuple(n for n in DISTORTION_NAMES if n in terms)).sentence
 
     v = _finish(checks, model, refit, mistake, size)
     if not map_sigma:

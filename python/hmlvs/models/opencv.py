@@ -3,8 +3,9 @@ distortion, a laser plane with 3 degrees of freedom, a hand-eye transform with a
 and, optionally, the board's pose in the robot base.
 
 Conventions are OpenCV's (``cv2.projectPoints``): pixel centres at integers, distortion
-coefficients ``(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2, s3, s4]]])``: Brown-Conrady, the
-rational model's denominator (wide lenses) and the thin prism. Lengths in mm. The laser plane
+coefficients ``(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2, s3, s4[, taux, tauy]]]])``:
+Brown-Conrady, the rational model's denominator (wide lenses), the thin prism and the tilted
+(Scheimpflug) sensor's two angles (radians). Lengths in mm. The laser plane
 is ``a x + b y + c z + d = 0`` in the camera frame with ``(a, b, c)`` a unit normal pointing
 away from the camera's centre (``d < 0``: the camera centre is on the negative side).
 """
@@ -23,23 +24,23 @@ from .base import OnInvalid, check_on_invalid
 
 #: OpenCV's distortion coefficients, in its order (the C++ core's, after fx, fy, cx, cy)
 DISTORTION_NAMES: tuple[str, ...] = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6", "s1", "s2",
-                                     "s3", "s4")
+                                     "s3", "s4", "taux", "tauy")
 #: the five-term Brown-Conrady lens: the terms a calibration estimates unless told otherwise
 CLASSIC_DISTORTION: tuple[str, ...] = DISTORTION_NAMES[:5]
 INTRINSIC_NAMES: tuple[str, ...] = ("fx", "fy", "cx", "cy", *DISTORTION_NAMES)
-#: the numbers of distortion coefficients OpenCV takes (without the tilted sensor's two)
-_DIST_LENGTHS = (4, 5, 8, 12)
+#: the numbers of distortion coefficients OpenCV takes
+_DIST_LENGTHS = (4, 5, 8, 12, 14)
 
 
 def stored_distortion(coefficients: Any) -> np.ndarray:
-    """Distortion coefficients as a sensor holds them: the shortest of OpenCV's lengths 5, 8
-    and 12 that keeps every non-zero term (so that a five-term lens stays five numbers in
+    """Distortion coefficients as a sensor holds them: the shortest of OpenCV's lengths 5, 8,
+    12 and 14 that keeps every non-zero term (so that a five-term lens stays five numbers in
     files and in every OpenCV call). Raises ``ValueError`` for another count or a value that
     is not finite."""
     given = np.array(coefficients, dtype=float).ravel()
     if given.size not in (0, *_DIST_LENGTHS):
-        raise ValueError("dist_coeffs must hold 4, 5, 8 or 12 numbers (OpenCV's k1, k2, p1, "
-                         "p2[, k3[, k4, k5, k6[, s1, s2, s3, s4]]]), got "
+        raise ValueError("dist_coeffs must hold 4, 5, 8, 12 or 14 numbers (OpenCV's k1, k2, "
+                         "p1, p2[, k3[, k4, k5, k6[, s1, s2, s3, s4[, taux, tauy]]]]), got "
                          f"{given.size}")
     full = np.zeros(len(DISTORTION_NAMES))
     full[: given.size] = given
@@ -88,8 +89,8 @@ class OpenCvSensor:
     """A calibrated general sensor.
 
     camera_matrix : 3x3 ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` (pixels)
-    dist_coeffs : OpenCV's ``(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2, s3, s4]]])``, held as
-        5, 8 or 12 numbers (:func:`stored_distortion`)
+    dist_coeffs : OpenCV's ``(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2, s3, s4[, taux,
+        tauy]]]])``, held as 5, 8, 12 or 14 numbers (:func:`stored_distortion`)
     image_size : ``(width, height)`` in pixels
     laser_plane : ``(a, b, c, d)``, camera frame, unit normal, ``d`` in mm (see module doc)
     hand_from_camera : 4x4 transform (mm)
@@ -150,8 +151,8 @@ class OpenCvSensor:
         return float(self.camera_matrix[1, 2])
 
     def intrinsics_vector(self) -> np.ndarray:
-        """[fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4], the C++ core's
-        order (the terms the sensor does not hold are 0)."""
+        """[fx, fy, cx, cy, k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4, taux, tauy], the
+        C++ core's order (the terms the sensor does not hold are 0)."""
         v = np.zeros(4 + len(DISTORTION_NAMES))
         v[:4] = (self.fx, self.fy, self.cx, self.cy)
         v[4: 4 + self.dist_coeffs.size] = self.dist_coeffs
@@ -215,7 +216,7 @@ class OpenCvSensor:
 
     def intrinsics(self) -> dict[str, float]:
         """fx, fy, cx, cy and the distortion terms the sensor holds (k1, k2, p1, p2, k3, and
-        k4 ... s4 when not all 0) by name."""
+        k4 ... tauy when not all 0) by name."""
         values = (self.fx, self.fy, self.cx, self.cy, *self.dist_coeffs.tolist())
         return dict(zip(INTRINSIC_NAMES, (float(v) for v in values)))
 
