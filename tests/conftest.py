@@ -142,3 +142,27 @@ def stripe_errors(session, sensor) -> np.ndarray:
         got, b = sensor.points_in_base(px, poses, on_invalid="mask")
         errs.append(np.linalg.norm(got[a & b] - want[a & b], axis=1))
     return np.concatenate(errs)
+
+
+def assert_lens_matches_opencv(sensor, span: float, seed: int) -> None:
+    """A general sensor's projection and undistortion against OpenCV's own
+    (``cv2.projectPoints``, ``cv2.undistortPoints``) for points up to ``span`` times their
+    depth off the axis and pixels over the whole image."""
+    import cv2
+
+    k, dist = sensor.camera_matrix, sensor.dist_coeffs
+    w, h = sensor.image_size
+    rng = np.random.default_rng(seed)
+    pts = np.c_[rng.uniform(-span, span, (400, 2)) * 400, np.full(400, 400.0)]
+    ours, valid = sensor.project(pts)
+    ref = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), k, dist)[0][:, 0]
+    assert valid.all() and np.abs(ours - ref).max() < 1e-9
+    # pixels -> normalised points: OpenCV's iteration to its own tolerance; ours is exact
+    px = np.c_[rng.uniform(0, w - 1, 300), rng.uniform(0, h - 1, 300)]
+    und, ok = sensor.undistort(px)
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
+    ref = cv2.undistortPoints(px.reshape(-1, 1, 2), k, dist, None, None, None, crit)[:, 0]
+    assert ok.all() and np.abs(und - ref).max() < 1e-7
+    back = cv2.projectPoints(np.c_[und, np.ones(len(und))], np.zeros(3), np.zeros(3), k,
+                             dist)[0][:, 0]
+    assert np.abs(back - px).max() < 1e-9

@@ -4,6 +4,7 @@ projection, undistortion and calibration, checked against OpenCV itself."""
 
 from __future__ import annotations
 
+from conftest import assert_lens_matches_opencv
 import cv2
 from hmlvs.calibration.joint import calibrate_joint
 from hmlvs.calibration.joint_setup import check_distortion, corner_fit, initial_intrinsics
@@ -30,21 +31,7 @@ def _sensor(dist) -> OpenCvSensor:
 
 @pytest.mark.parametrize("dist", [TILTED, ALL14], ids=["tilted", "all_fourteen"])
 def test_projection_and_undistortion_match_opencv(dist):
-    s = _sensor(dist)
-    rng = np.random.default_rng(5)
-    pts = np.c_[rng.uniform(-0.4, 0.4, (400, 2)) * 400, np.full(400, 400.0)]
-    ours, valid = s.project(pts)
-    ref = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), K, dist)[0][:, 0]
-    assert valid.all() and np.abs(ours - ref).max() < 1e-9
-    # pixels -> normalised points: OpenCV's iteration to its own tolerance; ours is exact
-    px = np.c_[rng.uniform(0, 1023, 300), rng.uniform(0, 767, 300)]
-    und, ok = s.undistort(px)
-    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
-    ref = cv2.undistortPoints(px.reshape(-1, 1, 2), K, dist, None, None, None, crit)[:, 0]
-    assert ok.all() and np.abs(und - ref).max() < 1e-7
-    back = cv2.projectPoints(np.c_[und, np.ones(len(und))], np.zeros(3), np.zeros(3), K,
-                             dist)[0][:, 0]
-    assert np.abs(back - px).max() < 1e-9
+    assert_lens_matches_opencv(_sensor(dist), 0.4, 5)
 
 
 def test_a_tilted_sensor_is_held_and_exported_as_opencv_s_fourteen():
