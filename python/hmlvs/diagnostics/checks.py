@@ -23,7 +23,7 @@ import numpy as np
 
 from .._arrays import robust_sigma
 from ..calibration.joint import POSE_DISAGREEMENT
-from ..calibration.joint_setup import TILT, board_plane_points, corner_fit, initial_intrinsics
+from ..calibration.joint_setup import TILT, board_plane_points, initial_intrinsics
 from ..geometry.transforms import invert_transform, rotation_to_vector
 from ..models.opencv import DISTORTION_NAMES
 
@@ -270,15 +270,9 @@ def lens_ratios(views: Sequence[Any], board: Any, image_size: tuple[int, int],
     """Zhang's method (every view's board pose free) on the ``views``' corners with the
     distortion ``terms``: its RMS (px), and for each of :data:`LENS_EXTENSIONS` that ``terms``
     lack, the RMS with its terms added."""
-    now = initial_intrinsics(views, board, image_size, tuple(terms))
-    out = {}
-    for name, extra in LENS_EXTENSIONS.items():
-        if set(extra) & set(terms):
-            continue
-        wider = (*terms, *extra)
-        out[name] = (corner_fit(views, board, now[0], now[1], wider)[2] if extra == TILT
-                     else initial_intrinsics(views, board, image_size, wider)[2])
-    return now[2], out
+    now = initial_intrinsics(views, board, image_size, tuple(terms))[2]
+    return now, {name: initial_intrinsics(views, board, image_size, (*terms, *extra))[2]
+                 for name, extra in LENS_EXTENSIONS.items() if not set(extra) & set(terms)}
 
 
 def lens_check(result: Any, used: Sequence[Any], board: Any) -> list[Check]:
