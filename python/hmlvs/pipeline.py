@@ -131,7 +131,8 @@ def _joint(views: list[ViewData], board: BoardSpec, size: tuple[int, int],
     from .diagnostics.mistakes import explaining
     from .diagnostics.verdict import judge_joint, require_check
 
-    with explaining(views, board, size):  # a failure led by the likely mistake
+    # a failure led by the likely cause
+    with explaining(views, board, size, options.get("distortion", CLASSIC_DISTORTION)):
         result = calibrate_joint(views, board, size, test=test, **options)
     cal = Calibration.from_joint(result, robot=robot,
                                  blur_var=next((r.blur_var for r in reports if r.ok), None))

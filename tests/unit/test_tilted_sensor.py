@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from conftest import assert_lens_matches_opencv
 import cv2
+import hmlvs
 from hmlvs.calibration.joint import calibrate_joint
 from hmlvs.calibration.joint_setup import check_distortion, corner_fit, initial_intrinsics
 from hmlvs.data.export import export_text
@@ -79,6 +80,21 @@ def test_the_tilt_s_start_survives_zhang_s_running_off():
     assert initial_intrinsics(views, board, (1024, 768))[0][0] > 2000
     intr, _, rms = initial_intrinsics(views, board, (1024, 768), TILT_TERMS)
     assert rms < 0.15 and abs(intr[0] - 1100) < 33, (rms, intr[:4])
+
+
+def test_a_calibration_the_tilt_makes_fail_names_the_tilt_first():
+    """The same session calibrated with the five-term lens: the robot chain cannot be set up
+    (Zhang's poses, 4.1 px RMS, fit no robot motion), and the error says why first. Before,
+    it said only that the images disagree with their robot poses."""
+    t = default_truth()
+    truth = Truth(K, TILTED, t.hand_from_camera, t.base_from_board, t.plane)
+    views, board, _, _ = synthetic_views(27, n_views=20, truth=truth)
+    with pytest.raises(ValueError) as e:
+        hmlvs.calibrate(views, model="opencv", board=board, image_size=(1024, 768))
+    first, rest = str(e.value).split("\n", 1)
+    assert first.startswith("likely cause: the lens bends more than its distortion terms")
+    assert "--distortion k1,k2,p1,p2,k3,taux,tauy" in first
+    assert "the images disagree with their robot poses" in rest
 
 
 def test_a_tilted_sensor_is_calibrated_with_its_angles():

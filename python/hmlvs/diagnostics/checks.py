@@ -276,16 +276,23 @@ def lens_ratios(views: Sequence[Any], board: Any, image_size: tuple[int, int],
 
 
 def lens_check(result: Any, used: Sequence[Any], board: Any) -> list[Check]:
-    """Whether the calibrated distortion terms follow the lens: no lens model of
-    :data:`LENS_EXTENSIONS` added may fit the corners of the ``used`` views markedly better
-    (:func:`lens_ratios`, :data:`LENS_RATIO_MIN`). None of it (an empty list) when the
-    calibration has them all already, estimated no distortion term or has fewer than 3 views
-    with corners."""
+    """Whether a calibration's distortion terms follow the lens (:func:`lens_terms_check` on
+    the ``used`` views)."""
     terms = tuple(n for n in DISTORTION_NAMES if n in result.names)
-    views = [v for v in used if len(v.corner_index) >= 6]
+    return lens_terms_check(used, board, tuple(result.sensor.image_size), terms)
+
+
+def lens_terms_check(views: Sequence[Any], board: Any, image_size: tuple[int, int],
+                     terms: Sequence[str]) -> list[Check]:
+    """Whether the distortion ``terms`` follow the lens: no lens model of
+    :data:`LENS_EXTENSIONS` added may fit the corners of the ``views`` markedly better
+    (:func:`lens_ratios`, :data:`LENS_RATIO_MIN`). None of it (an empty list) when ``terms``
+    hold them all already, or no distortion term, or fewer than 3 views have corners."""
+    terms = tuple(terms)
+    views = [v for v in views if len(v.corner_index) >= 6]
     if not terms or len(views) < 3:
         return []
-    now, wider = lens_ratios(views, board, tuple(result.sensor.image_size), terms)
+    now, wider = lens_ratios(views, board, image_size, terms)
     if not wider:
         return []
     best = min(wider, key=wider.__getitem__)

@@ -22,7 +22,7 @@ from ..calibration.joint import consistent_numbering, initial_intrinsics
 from ..geometry.board import BoardSpec
 from ..geometry.transforms import invert_transform, rotation_to_quaternion
 from ..models.opencv import CLASSIC_DISTORTION
-from .checks import CORNER_RMS_LIMIT_PX, POSE_DISAGREEMENT
+from .checks import CORNER_RMS_LIMIT_PX, POSE_DISAGREEMENT, lens_terms_check
 
 
 def _quat_xyzw(r: np.ndarray) -> np.ndarray:
@@ -328,14 +328,22 @@ def _rms_over(fit: ChainFit, ids: list[str]) -> float:
 
 
 def explain_failure(error: str, views: Sequence[Any], board: Any,
-                    image_size: tuple[int, int]) -> str:
-    """The likely mistake (:func:`find_mistake`) when one explains the views, with
-    ``error`` (why a calibration with robot poses could not be made, e.g. a solve run off
-    to a negative focal length under wrong poses) after it; else ``error`` as it is."""
+                    image_size: tuple[int, int],
+                    distortion: Sequence[str] = CLASSIC_DISTORTION) -> str:
+    """The likely cause when one explains the views, with ``error`` (why a calibration could
+    not be made, e.g. a solve run off to a negative focal length under wrong poses) after
+    it: a lens the ``distortion`` terms cannot follow (:func:`lens_terms_check`), else the
+    likely mistake (:func:`find_mistake`); else ``error`` as it is."""
+    try:
+        lens = lens_terms_check(views, BoardSpec.of(board), image_size, distortion)
+    except ValueError:
+        lens = []
+    if lens and not lens[0].ok:  # a lens the terms cannot follow spoils every fit after it
+        return f"likely cause: {lens[0].problem}\n(the calibration failed: {error})"
     if not any(v.base_from_hand is not None for v in views):
         return error
     try:
-        sentence = find_mistake(views, board, image_size).sentence
+        sentence = find_mistake(views, board, image_size, distortion).sentence
     except ValueError:
         return error
     if sentence is None or not sentence.startswith("likely mistake"):
@@ -344,10 +352,13 @@ def explain_failure(error: str, views: Sequence[Any], board: Any,
 
 
 @contextmanager
-def explaining(views: Sequence[Any], board: Any, image_size: tuple[int, int]) -> Iterator[None]:
-    """A calibration from ``views`` inside: a ``ValueError`` it raises comes out led by the
-    likely mistake when one explains the views (:func:`explain_failure`)."""
+def explaining(views: Sequence[Any], board: Any, image_size: tuple[int, int],
+               distortion: Sequence[str] = CLASSIC_DISTORTION) -> Iterator[None]:
+    """A calibration from ``views`` with the lens of the ``distortion`` terms inside: a
+    ``ValueError`` it raises comes out led by the likely cause when one explains the views
+    (:func:`explain_failure`)."""
     try:
         yield
     except ValueError as e:
-        raise ValueError(explain_failure(str(e), views, board, image_size)) from None
+        raise ValueError(explain_failure(str(e), views, board, image_size,
+                                         distortion)) from None
