@@ -5,8 +5,9 @@ Compares, on the same data and machine in the same run:
   * hmlvs' modern LM (Ceres) against scipy.optimize.least_squares (method="lm"),
   * model evaluation of 1e6 points from Python,
 and runs the C++ benchmark executable (kernel rate, PSO on 1 and all threads, LM solves), the
-stripe extraction benchmark (bench_stripe.py) and the joint calibration of the general sensor
-against vision-calibration (bench_joint.py; that library is optional).
+stripe extraction benchmark (bench_stripe.py), the joint calibration of the general sensor
+against vision-calibration (bench_joint.py; that library is optional) and a tilted sensor's
+camera against vision-calibration's Scheimpflug intrinsics (bench_tilt.py).
 """
 
 from __future__ import annotations
@@ -401,6 +402,8 @@ def main() -> None:
 
     joint_lines = section("bench_joint.py", args.joint,
                           "joint calibration against vision-calibration", min(args.reps, 3))
+    tilt_lines = section("bench_tilt.py", args.joint,
+                         "tilted sensor's camera against vision-calibration", 1)
     image_lines = section("bench_images.py", args.images,
                           "image path: stripes, boards, a whole session", max(args.reps, 5))
 
@@ -431,6 +434,8 @@ def main() -> None:
         *stripe_lines,
         "",
         *joint_lines,
+        "",
+        *tilt_lines,
         "",
         *image_lines,
         "",
