@@ -172,6 +172,19 @@ def test_each_usual_mistake_is_untrustworthy_with_its_cause_named(rendered, mist
     assert v.likely_mistake == v.reasons[0]
 
 
+def test_a_held_camera_s_mistakes_are_looked_for_with_its_lens(rendered):
+    """A robot session calibrated with the camera and plane of an earlier calibration held (as
+    from a bench session): the search for the usual mistakes uses the held camera's lens (the
+    five terms), not a pinhole, and still names the moved views."""
+    _, _, views, board, size = rendered
+    held = calibrate_joint(views, board, size).sensor
+    vs = _with_poses(views, _moved)
+    v = judge_joint(calibrate_joint(vs, board, size, camera=held), vs, board, map_sigma=False,
+                    cross_validate=False)
+    assert not v.trustworthy
+    assert "view(s) v001, v005, v008 put the board elsewhere" in v.reasons[0], v.reasons
+
+
 def test_the_verdict_round_trips_and_old_files_load_without_one(rendered, tmp_path):
     _, _, views, board, size = rendered
     r = calibrate_joint(views, board, size)

@@ -25,7 +25,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..geometry.board import BoardSpec
-from ..models.opencv import DISTORTION_NAMES
+from ..models.opencv import CLASSIC_DISTORTION, DISTORTION_NAMES
 from .chain import chain_checks, chain_of_joint, chain_of_paper, joint_checks, pose_error_mm
 from .checks import (
     CROSS_VALIDATION_LIMIT,
@@ -188,9 +188,12 @@ def judge_joint(result: Any, views: Sequence[Any], board: Any, *,
     def mistake() -> str | None:
         if not mistakes or result.mode != "chain":
             return None
-        # the calibration's lens; one its terms cannot follow (lens_model) would make good
-        # data look wrong, so then the lens models that check tries are added
-        terms = {n for n in result.names if n in DISTORTION_NAMES}
+        # the calibration's lens (a held camera's: the five terms and those it holds not 0);
+        # one its terms cannot follow (lens_model) would make good data look wrong, so then
+        # the lens models that check tries are added
+        terms = ({n for n in result.names if n in DISTORTION_NAMES}
+                 or {*CLASSIC_DISTORTION, *(n for n, d in zip(DISTORTION_NAMES,
+                                                             result.sensor.dist_coeffs) if d)})
         if any(c.name == "lens_model" and not c.ok for c in checks):
             terms.update(*LENS_EXTENSIONS.values())
         return find_mistake(views, board, size,
