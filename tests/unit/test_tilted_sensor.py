@@ -123,6 +123,8 @@ def test_a_tilted_sensor_is_calibrated_with_its_angles():
         # over seeds 0-3, cy 293-362 px against 384)
         assert abs(tau[0] - 0.25) < 0.1 and abs(tau[1] - 0.1) < 0.02, tau
         assert "taux" in fits[7][2].summary()
+        if seed:
+            continue  # the lens checks (four more corner fits each) on seed 0 alone
         (check,) = lens_check(fits[5][2], views, board)
         assert not check.ok and check.value < LENS_RATIO_MIN
         assert "--distortion k1,k2,p1,p2,k3,taux,tauy" in check.problem
