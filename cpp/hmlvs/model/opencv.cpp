@@ -139,8 +139,16 @@ PixelsResult MapToPixels(Eigen::Index rows, PixelOf pixel_of) {
 PixelsResult ProjectCameraPoints(const IntrinsicsVector& in, Points3Ref points) {
   ValidateIntrinsics(in);
   RequireFinite(points.data(), points.rows(), 3, "camera points");
+  // a five-term lens on an upright sensor reads none of the other terms (as UndistortNormalized)
+  if (in.tail<kNumIntrinsics - kNumClassicIntrinsics>().isZero(0.0)) {
+    return MapToPixels(points.rows(), [&](Eigen::Index i, double* px) {
+      return ProjectPoint<false>(in.data(), points.row(i).data(), px);
+    });
+  }
+  double tilt[9];  // once for all points
+  TiltHomography(in[kTauX], in[kTauY], false, tilt);
   return MapToPixels(points.rows(), [&](Eigen::Index i, double* px) {
-    return ProjectPoint(in.data(), points.row(i).data(), px);
+    return ProjectPoint(in.data(), points.row(i).data(), px, tilt);
   });
 }
 

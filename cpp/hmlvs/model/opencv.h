@@ -21,7 +21,6 @@
 #include <cmath>
 #include <cstdint>
 #include <type_traits>
-#include <utility>
 #include <vector>
 
 #include "hmlvs/geometry/geometry.h"
@@ -114,20 +113,15 @@ void TiltHomography(const T& tau_x, const T& tau_y, bool inverse, T* h) {
   const T cx = cos(tau_x), sx = sin(tau_x), cy = cos(tau_y), sy = sin(tau_y);
   const T r[9] = {cy, sy * sx, -sy * cx, T(0.0), cx, sx, sy, -cy * sx, cy * cx};
   for (int j = 0; j < 3; ++j) {
-    if (inverse) {
-      h[j] = r[j];
-      h[3 + j] = r[3 + j];
-      h[6 + j] = r[j] * r[2] + r[3 + j] * r[5] + r[6 + j] * r[8];
+    if (inverse) {  // row j of R^T Q: column j of R, then its dot with (R02, R12, R22)
+      h[3 * j] = r[j];
+      h[3 * j + 1] = r[3 + j];
+      h[3 * j + 2] = r[j] * r[2] + r[3 + j] * r[5] + r[6 + j] * r[8];
     } else {
       h[j] = r[8] * r[j] - r[2] * r[6 + j];
       h[3 + j] = r[8] * r[3 + j] - r[5] * r[6 + j];
       h[6 + j] = r[6 + j];
     }
-  }
-  if (inverse) {  // the columns above are those of R^T Q: transpose them into rows
-    std::swap(h[1], h[3]);
-    std::swap(h[2], h[6]);
-    std::swap(h[5], h[7]);
   }
 }
 
